@@ -1,0 +1,39 @@
+# The README's commands. `make demo` and `make test` work on a fresh clone.
+SHELL := /bin/bash
+VENV := $(CURDIR)/.venv
+PY := $(VENV)/bin/python
+PYTHON ?= python3
+export CARGO_TERM_COLOR ?= never
+
+.PHONY: setup demo test test-rust test-python bench clean
+
+# One shared set-up: a virtualenv with pinned dependencies, the Rust
+# extension built in release mode and the package installed (editable), so
+# that afterwards the CLI is .venv/bin/scattertrack.
+setup: $(VENV)/.deps-installed
+	VIRTUAL_ENV=$(VENV) PATH=$(VENV)/bin:$$PATH $(VENV)/bin/maturin develop --release -m python/Cargo.toml -q
+	@test -x $(VENV)/bin/scattertrack
+
+$(VENV)/.deps-installed: requirements-dev.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q -r requirements-dev.txt
+	touch $@
+
+demo: setup
+	$(VENV)/bin/scattertrack demo --out out/demo
+
+test: setup test-rust test-python
+
+test-rust:
+	cargo test -p scattertrack-core --release -q
+
+test-python:
+	$(PY) -m pytest -q python/tests docs
+
+bench: setup
+	cargo bench -p scattertrack-core --bench glac -- --quick
+	$(PY) bench/run.py
+
+clean:
+	rm -rf target out $(VENV) python/scattertrack/*.so

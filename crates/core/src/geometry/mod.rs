@@ -1,0 +1,22 @@
+//! Distances and the intersections of the loci that a phase defines:
+//! spheres (monostatic, 3D), circles (monostatic, tag in a plane), and a
+//! least-squares multilateration that refines a rough fix.
+//!
+//! Contract: pure functions on `nalgebra` vectors, metres in and out; a
+//! degenerate configuration returns no point rather than a NaN.
+
+mod circle;
+mod multilateration;
+mod sphere;
+
+pub use circle::circle_intersections;
+pub use multilateration::{multilaterate, Multilateration};
+pub use sphere::sphere_intersections;
+
+use nalgebra::Vector3;
+
+/// Euclidean distance |p − a| (m).
+#[inline]
+pub fn distance(p: &Vector3<f64>, a: &Vector3<f64>) -> f64 {
+    (p - a).norm()
+}

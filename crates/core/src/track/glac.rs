@@ -1,0 +1,729 @@
+//! GLAC: HMM over candidate trajectories, one EKF each, updated by a single
+//! phase reading (Wang, Chen, Gong, "Mobility Improves Accuracy", sec. 3).
+//!
+//! * Each hypothesis (candidate trajectory) carries an EKF on
+//!   x = [p, v] (eq. 3, constant velocity) and a log-likelihood.
+//! * A reading φ from antenna a on carrier f constrains the range to
+//!   d₀ + n·s (s = λ/2, λ/4 mod π). Nearest-neighbour pruning (eq. 9): each
+//!   hypothesis takes the candidate nearest its predicted range, so the
+//!   number of hypotheses never grows.
+//! * The initial hypotheses come from initial state pruning (sec. 3.2.2,
+//!   [`super::initial`]) with likelihood L₀ (eq. 10).
+//! * Likelihoods propagate per reading (eqs. 11–13) and are normalised over
+//!   hypotheses after every reading; the best one is reported.
+//! * Quick stop: hypotheses whose normalised likelihood falls below l_th
+//!   are removed. Recovery: a reading that would change the velocity by
+//!   more than 3σ_v is replaced by the prediction. The velocity change is
+//!   Δv = K_v ν, linear in the innovation ν, so its 3σ test is the 3σ test
+//!   of ν against √S; that is how it is computed.
+//! * Region constraint: hypotheses that leave the region are removed (this
+//!   is what rejects mirror solutions of coplanar antennas).
+//! * Re-initialisation when every hypothesis has lost lock (too many
+//!   consecutive gated readings) or the tag goes unread for `reinit_gap_s`.
+//!
+//! Variants (sec. 5.2.2–5.2.3): no velocity model ([`MotionModel::RandomWalk`]),
+//! synchronous 4-read handling ([`Inference::Synchronous`]) and naive,
+//! unpruned inference ([`Inference::Naive`]).
+
+use nalgebra::{Matrix3, Vector3};
+
+use super::candidates::nearest_candidate;
+use super::initial::{initial_covariance, initial_hypotheses, InitialState};
+use super::{Estimate, Measurement, Tracker, TrackerStats};
+use crate::error::{Error, Result};
+use crate::filter::{apply_scalar, innovation, log_gaussian, predict, update_position};
+use crate::geometry::multilaterate;
+use crate::model::{range, MotionModel, StateMatrix, StateVector, Transition};
+use crate::scene::{Scene, SPEED_OF_LIGHT};
+
+/// How hypotheses are expanded per reading.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Inference {
+    /// Nearest-neighbour pruning + quick stop (GLAC's fast inference).
+    Fast,
+    /// Every hypothesis branches on every candidate distance in range:
+    /// exponential growth, capped at `max_hypotheses` (sec. 5.2.3).
+    Naive,
+    /// Every group of reads covering all antennas is trilaterated into a
+    /// position and used as one synchronous measurement (sec. 5.2.2).
+    Synchronous,
+}
+
+/// The per-reading likelihood factor.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Likelihood {
+    /// p(z | z_{1:k−1}) = N(ν; 0, S): the EKF's marginal likelihood of the
+    /// reading under the predicted state (the exact HMM forward factor under
+    /// linearisation).
+    Innovation,
+    /// The paper's eqs. 12–13 literally: F(d_{k+1}; z*, R) at the updated
+    /// state times F(θ_{k+1}; Aθ_k, Q).
+    Paper,
+}
+
+/// Parameters of GLAC and its variants. Units are SI.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GlacParams {
+    pub inference: Inference,
+    pub likelihood: Likelihood,
+    /// Motion model (eq. 3) and its process noise.
+    pub motion: MotionModel,
+    /// 1-sigma phase noise, radians; `None` takes the scene's prior.
+    pub phase_noise_rad: Option<f64>,
+    /// Collect at least this long before initialising, seconds.
+    pub init_window_s: f64,
+    /// Give up waiting for every antenna after this long, seconds.
+    pub init_max_window_s: f64,
+    pub initial: InitialState,
+    /// Initial 1-sigma position uncertainty of a hypothesis, metres.
+    pub init_position_sigma_m: f64,
+    /// Initial 1-sigma velocity uncertainty, m/s.
+    pub init_velocity_sigma_m_s: f64,
+    /// Quick-stop threshold l_th on normalised likelihood.
+    pub quick_stop: f64,
+    /// Recovery gate, in sigmas (the paper's 3σ_v).
+    pub gate_sigmas: f64,
+    /// A hypothesis that gates this many readings in a row has lost lock.
+    pub max_consecutive_outliers: u32,
+    /// Start over when a tag has not been read for this long, seconds.
+    pub reinit_gap_s: f64,
+    /// Hypotheses further than this outside the region are removed, metres.
+    pub region_margin_m: f64,
+    /// Hypotheses closer than this (position) are merged, metres.
+    pub merge_distance_m: f64,
+    /// Cap on live hypotheses (bounds naive inference's memory).
+    pub max_hypotheses: usize,
+}
+
+impl Default for GlacParams {
+    fn default() -> Self {
+        Self {
+            inference: Inference::Fast,
+            likelihood: Likelihood::Innovation,
+            motion: MotionModel::ConstantVelocity { q: 0.05 },
+            phase_noise_rad: None,
+            init_window_s: 0.3,
+            init_max_window_s: 1.0,
+            initial: InitialState::default(),
+            init_position_sigma_m: 0.01,
+            init_velocity_sigma_m_s: 0.1,
+            quick_stop: 1e-6,
+            gate_sigmas: 3.0,
+            max_consecutive_outliers: 8,
+            reinit_gap_s: 1.0,
+            region_margin_m: 0.05,
+            merge_distance_m: 0.002,
+            max_hypotheses: 200_000,
+        }
+    }
+}
+
+impl GlacParams {
+    /// Switches to the no-velocity variant (sec. 5.2.2, scheme 2): position
+    /// random walk whose diffusion matches what the constant-velocity model
+    /// would allow over a typical speed (q_rw = v² · τ with v = 0.3 m/s,
+    /// τ = 0.1 s) unless already a random walk.
+    pub fn motion_model_no_velocity(&mut self) {
+        if self.motion.has_velocity() {
+            self.motion = MotionModel::RandomWalk { q: 0.3 * 0.3 * 0.1 };
+        }
+    }
+
+    fn validate(&self) -> Result<()> {
+        let positive = [
+            ("init_window_s", self.init_window_s),
+            ("init_max_window_s", self.init_max_window_s),
+            ("init_position_sigma_m", self.init_position_sigma_m),
+            ("init_velocity_sigma_m_s", self.init_velocity_sigma_m_s),
+            ("gate_sigmas", self.gate_sigmas),
+            ("reinit_gap_s", self.reinit_gap_s),
+        ];
+        for (name, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err(Error::Parameter { name: name.into(), reason: format!("must be positive, got {v}") });
+            }
+        }
+        if !(0.0..1.0).contains(&self.quick_stop) {
+            return Err(Error::Parameter { name: "quick_stop".into(), reason: "must be in [0, 1)".into() });
+        }
+        let q = match self.motion {
+            MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
+        };
+        if !(q > 0.0 && q.is_finite()) {
+            return Err(Error::Parameter { name: "q".into(), reason: format!("process noise must be positive, got {q}") });
+        }
+        if self.max_hypotheses == 0 {
+            return Err(Error::Parameter { name: "max_hypotheses".into(), reason: "must be at least 1".into() });
+        }
+        Ok(())
+    }
+}
+
+/// Candidate trajectories as flat arrays (struct of arrays): hypothesis
+/// `i` is `(x[i], p[i], log_likelihood[i], outliers[i])`.
+#[derive(Debug, Clone, Default)]
+struct Hypotheses {
+    x: Vec<StateVector>,
+    p: Vec<StateMatrix>,
+    log_likelihood: Vec<f64>,
+    /// Consecutive gated readings.
+    outliers: Vec<u32>,
+}
+
+impl Hypotheses {
+    fn len(&self) -> usize {
+        self.x.len()
+    }
+
+    fn clear(&mut self) {
+        self.x.clear();
+        self.p.clear();
+        self.log_likelihood.clear();
+        self.outliers.clear();
+    }
+
+    fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
+        self.x.push(x);
+        self.p.push(p);
+        self.log_likelihood.push(log_likelihood);
+        self.outliers.push(0);
+    }
+
+    /// Keeps the hypotheses for which `keep(i)` holds, in order.
+    fn retain(&mut self, keep: impl Fn(usize) -> bool) {
+        let mut w = 0;
+        for r in 0..self.len() {
+            if keep(r) {
+                self.x.swap(w, r);
+                self.p.swap(w, r);
+                self.log_likelihood.swap(w, r);
+                self.outliers.swap(w, r);
+                w += 1;
+            }
+        }
+        self.x.truncate(w);
+        self.p.truncate(w);
+        self.log_likelihood.truncate(w);
+        self.outliers.truncate(w);
+    }
+
+    /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp) and
+    /// returns the index of the best.
+    fn normalise(&mut self) -> usize {
+        let (best, max) = self
+            .log_likelihood
+            .iter()
+            .enumerate()
+            .fold((0, f64::NEG_INFINITY), |acc, (i, &l)| if l > acc.1 { (i, l) } else { acc });
+        let sum: f64 = self.log_likelihood.iter().map(|l| (l - max).exp()).sum();
+        let log_norm = max + sum.ln();
+        for l in &mut self.log_likelihood {
+            *l -= log_norm;
+        }
+        best
+    }
+}
+
+/// What the tracker is doing.
+#[derive(Debug, Clone, PartialEq, Eq)]
+enum Phase {
+    /// Collecting reads for initial state pruning.
+    Initialising,
+    /// Hypotheses are live.
+    Tracking,
+}
+
+/// The GLAC tracker for one tag.
+pub struct Glac {
+    scene: Scene,
+    params: GlacParams,
+    /// Moving axes: 2 (tag in the plane z = plane_z) or 3.
+    axes: usize,
+    phase: Phase,
+    buffer: Vec<Measurement>,
+    hypotheses: Hypotheses,
+    /// Scratch for naive branching.
+    scratch: Hypotheses,
+    /// Time of the hypotheses' states, seconds.
+    time_s: f64,
+    /// Time of the last accepted measurement, seconds.
+    last_time_s: f64,
+    /// Synchronous variant: reads collected towards one group.
+    group: Vec<Measurement>,
+    /// Antennas a synchronous group must cover (those that read during init).
+    group_antennas: Vec<bool>,
+    stats: TrackerStats,
+}
+
+impl Glac {
+    pub fn new(scene: Scene, params: GlacParams) -> Result<Self> {
+        params.validate()?;
+        let axes = scene.dimensions;
+        Ok(Self {
+            scene,
+            params,
+            axes,
+            phase: Phase::Initialising,
+            buffer: Vec::new(),
+            hypotheses: Hypotheses::default(),
+            scratch: Hypotheses::default(),
+            time_s: f64::NEG_INFINITY,
+            last_time_s: f64::NEG_INFINITY,
+            group: Vec::new(),
+            group_antennas: Vec::new(),
+            stats: TrackerStats::default(),
+        })
+    }
+
+    pub fn params(&self) -> &GlacParams {
+        &self.params
+    }
+
+    /// Live hypotheses.
+    pub fn hypothesis_count(&self) -> usize {
+        self.hypotheses.len()
+    }
+
+    /// Positions (m) and normalised log-likelihoods of all live hypotheses,
+    /// for plots like the paper's Fig. 5.
+    pub fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
+        (0..self.hypotheses.len())
+            .map(|i| {
+                let x = &self.hypotheses.x[i];
+                ([x[0], x[1], x[2]], self.hypotheses.log_likelihood[i])
+            })
+            .collect()
+    }
+
+    fn phase_noise(&self) -> f64 {
+        self.params.phase_noise_rad.unwrap_or(self.scene.phase_noise_rad)
+    }
+
+    /// Range noise variance R (m²) for a carrier: σ_d = σ_φ λ / 4π
+    /// (round trip: the phase turns 4π per wavelength of range).
+    #[inline]
+    fn range_variance(&self, frequency_hz: f64) -> f64 {
+        let sigma = self.phase_noise() * SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * frequency_hz);
+        sigma * sigma
+    }
+
+    fn restart(&mut self) {
+        self.phase = Phase::Initialising;
+        self.hypotheses.clear();
+        self.group.clear();
+        self.stats.reinitialisations += 1;
+    }
+
+    /// Initial state pruning over the buffer; on success the hypotheses
+    /// start at t_x and the buffered reads after t_x are replayed through
+    /// them (all at or before the current read: still causal).
+    fn try_initialise(&mut self) -> bool {
+        let (first, last) = match (self.buffer.first(), self.buffer.last()) {
+            (Some(f), Some(l)) => (f.time_s, l.time_s),
+            _ => return false,
+        };
+        let span = last - first;
+        if span < self.params.init_window_s {
+            return false;
+        }
+        // Wait (up to init_max_window_s) until every antenna heard so far has
+        // two reads: more antennas make far fewer surviving candidates.
+        let mut counts = vec![0usize; self.scene.antennas.len()];
+        for m in &self.buffer {
+            counts[m.antenna] += 1;
+        }
+        let all_twice = counts.iter().all(|&c| c == 0 || c >= 2);
+        if !all_twice && span < self.params.init_max_window_s {
+            return false;
+        }
+        let f = self.buffer[0].frequency_hz;
+        let range_sigma = self.range_variance(f).sqrt();
+        let with_velocity = self.params.motion.has_velocity();
+        let Some((t_x, initial)) =
+            initial_hypotheses(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity)
+        else {
+            // Slide the window: keep only the newest init_max_window_s.
+            let keep_from = last - self.params.init_max_window_s;
+            self.buffer.retain(|m| m.time_s >= keep_from);
+            return false;
+        };
+        let v_sigma = if with_velocity { self.params.init_velocity_sigma_m_s } else { 0.0 };
+        let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
+        self.hypotheses.clear();
+        for h in &initial {
+            let mut x = h.state;
+            if self.axes == 2 {
+                x[2] = self.scene.plane_z;
+                x[5] = 0.0;
+            }
+            self.hypotheses.push(x, p0, h.log_likelihood);
+        }
+        self.hypotheses.normalise();
+        self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
+        self.time_s = t_x;
+        self.group_antennas = counts.iter().map(|&c| c >= 2).collect();
+        self.group.clear();
+        self.phase = Phase::Tracking;
+        let replay: Vec<Measurement> = self.buffer.iter().copied().filter(|m| m.time_s > t_x).collect();
+        self.buffer.clear();
+        for m in &replay {
+            self.track(m);
+            if self.phase != Phase::Tracking {
+                return false;
+            }
+        }
+        true
+    }
+
+    /// One reading through every hypothesis (fast or naive inference), or
+    /// into the current group (synchronous).
+    fn track(&mut self, m: &Measurement) {
+        match self.params.inference {
+            Inference::Fast => self.step_fast(m),
+            Inference::Naive => self.step_naive(m),
+            Inference::Synchronous => self.step_synchronous(m),
+        }
+    }
+
+    /// Fast inference: nearest-neighbour pruning (eq. 9), EKF update
+    /// (eqs. 5–8), 3σ recovery, likelihood propagation (eqs. 11–13),
+    /// normalisation, quick stop, region constraint.
+    fn step_fast(&mut self, m: &Measurement) {
+        let dt = (m.time_s - self.time_s).max(0.0);
+        let transition = self.params.motion.transition(dt, self.axes);
+        let antenna = self.scene.antennas[m.antenna].position;
+        let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
+        let spacing = self.scene.candidate_spacing(m.frequency_hz);
+        let r = self.range_variance(m.frequency_hz);
+        let gate2 = self.params.gate_sigmas * self.params.gate_sigmas;
+        // Log-likelihood charged for a gated reading: the density at the
+        // gate, so a hypothesis cannot gain by rejecting data.
+        let h = &mut self.hypotheses;
+        for i in 0..h.len() {
+            let (x, p) = (&mut h.x[i], &mut h.p[i]);
+            let x_prior = *x;
+            predict(x, p, &transition);
+            let (d, jac) = range(x, &antenna, self.axes, true);
+            let jac = jac.unwrap();
+            let z = nearest_candidate(residue, spacing, d);
+            let (u, b) = innovation(p, z, d, &jac, r);
+            let accepted = u.innovation * u.innovation <= gate2 * u.variance;
+            let log_l = if accepted {
+                h.outliers[i] = 0;
+                apply_scalar(x, p, &u, &b);
+                match self.params.likelihood {
+                    Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
+                    Likelihood::Paper => {
+                        let d_post = range(x, &antenna, self.axes, false).0;
+                        log_gaussian(d_post - z, r) + transition_log_density(x, &x_prior, &transition)
+                    }
+                }
+            } else {
+                h.outliers[i] += 1;
+                -0.5 * (gate2 + (2.0 * std::f64::consts::PI * u.variance).ln())
+            };
+            h.log_likelihood[i] += log_l;
+        }
+        self.stats.filter_updates += h.len() as u64;
+        self.time_s = m.time_s;
+        self.prune();
+    }
+
+    /// Naive inference: every hypothesis branches into one child per
+    /// candidate distance the region allows (no nearest-neighbour pruning,
+    /// no quick stop). Growth is O(nᵏ); the cap keeps the best
+    /// `max_hypotheses` so that memory stays bounded.
+    fn step_naive(&mut self, m: &Measurement) {
+        let dt = (m.time_s - self.time_s).max(0.0);
+        let transition = self.params.motion.transition(dt, self.axes);
+        let antenna = self.scene.antennas[m.antenna].position;
+        let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
+        let spacing = self.scene.candidate_spacing(m.frequency_hz);
+        let (lo, hi) = self.scene.distance_bounds(m.antenna);
+        let r = self.range_variance(m.frequency_hz);
+        let n_lo = ((lo - residue) / spacing).floor().max(0.0) as i64;
+        let n_hi = ((hi - residue) / spacing).ceil() as i64;
+        self.scratch.clear();
+        let h = &mut self.hypotheses;
+        for i in 0..h.len() {
+            let (mut x, mut p) = (h.x[i], h.p[i]);
+            predict(&mut x, &mut p, &transition);
+            let (d, jac) = range(&x, &antenna, self.axes, true);
+            let jac = jac.unwrap();
+            for n in n_lo..=n_hi {
+                let z = residue + n as f64 * spacing;
+                let (u, b) = innovation(&p, z, d, &jac, r);
+                let (mut xc, mut pc) = (x, p);
+                apply_scalar(&mut xc, &mut pc, &u, &b);
+                self.scratch.push(xc, pc, h.log_likelihood[i] + log_gaussian(u.innovation, u.variance));
+            }
+        }
+        self.stats.filter_updates += self.scratch.len() as u64;
+        std::mem::swap(&mut self.hypotheses, &mut self.scratch);
+        let cap = self.params.max_hypotheses;
+        if self.hypotheses.len() > cap {
+            let mut order: Vec<f64> = self.hypotheses.log_likelihood.clone();
+            let k = order.len() - cap;
+            order.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
+            let threshold = order[k];
+            let mut kept = 0usize;
+            let ll = self.hypotheses.log_likelihood.clone();
+            // Keep at most `cap` at or above the threshold (ties broken by order).
+            let keep: Vec<bool> = ll
+                .iter()
+                .map(|&l| {
+                    let k = l >= threshold && kept < cap;
+                    if k {
+                        kept += 1;
+                    }
+                    k
+                })
+                .collect();
+            self.hypotheses.retain(|i| keep[i]);
+        }
+        self.time_s = m.time_s;
+        self.hypotheses.normalise();
+        self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
+    }
+
+    /// Synchronous handling (sec. 5.2.2, scheme 3): reads are grouped until
+    /// every antenna has been read once; the group is then treated as four
+    /// simultaneous readings at the last read's time. Each hypothesis picks
+    /// per antenna the candidate nearest its predicted range, trilaterates
+    /// them into a position z with covariance σ_d² (JᵀJ)⁻¹, and updates with
+    /// H = [I 0]; the likelihood is Πᵢ p(zᵢ* | θ).
+    fn step_synchronous(&mut self, m: &Measurement) {
+        if let Some(prev) = self.group.iter().position(|g| g.antenna == m.antenna) {
+            // A second read of one antenna before the group is complete:
+            // the newest read of that antenna replaces the older one.
+            self.group.remove(prev);
+        }
+        self.group.push(*m);
+        let complete = self
+            .group_antennas
+            .iter()
+            .enumerate()
+            .all(|(a, &needed)| !needed || self.group.iter().any(|g| g.antenna == a));
+        if !complete {
+            return;
+        }
+        let group = std::mem::take(&mut self.group);
+        let dt = (m.time_s - self.time_s).max(0.0);
+        let transition = self.params.motion.transition(dt, self.axes);
+        let anchors: Vec<Vector3<f64>> = group.iter().map(|g| self.scene.antennas[g.antenna].position).collect();
+        let residues: Vec<(f64, f64)> = group
+            .iter()
+            .map(|g| (self.scene.distance_residue(g.antenna, g.frequency_hz, g.phase_rad), self.scene.candidate_spacing(g.frequency_hz)))
+            .collect();
+        let r = self.range_variance(m.frequency_hz);
+        let gate2 = self.params.gate_sigmas * self.params.gate_sigmas * self.axes as f64;
+        let mut distances = vec![0.0; group.len()];
+        let h = &mut self.hypotheses;
+        for i in 0..h.len() {
+            let (x, p) = (&mut h.x[i], &mut h.p[i]);
+            predict(x, p, &transition);
+            let predicted = Vector3::new(x[0], x[1], x[2]);
+            for (k, a) in anchors.iter().enumerate() {
+                distances[k] = nearest_candidate(residues[k].0, residues[k].1, (predicted - a).norm());
+            }
+            let fix = multilaterate(&anchors, &distances, predicted, self.axes, 5);
+            let mut log_l = -0.5 * (gate2 + group.len() as f64 * (2.0 * std::f64::consts::PI * r).ln());
+            if let Some(fix) = fix.and_then(|f| f.normal.try_inverse().map(|inv| (f, inv))) {
+                let (fix, normal_inv) = fix;
+                let mut r_pos: Matrix3<f64> = normal_inv * r;
+                if self.axes == 2 {
+                    r_pos[(2, 2)] = r; // z is pinned by P = 0; any R works
+                }
+                let (mut xc, mut pc) = (*x, *p);
+                if let Some((nu, s)) = update_position(&mut xc, &mut pc, &fix.position, &r_pos) {
+                    let d2 = s.try_inverse().map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[(0, 0)]);
+                    if d2 <= gate2 {
+                        *x = xc;
+                        *p = pc;
+                        h.outliers[i] = 0;
+                        let post = Vector3::new(x[0], x[1], x[2]);
+                        log_l = anchors
+                            .iter()
+                            .zip(&distances)
+                            .map(|(a, &z)| log_gaussian((post - a).norm() - z, r))
+                            .sum();
+                    } else {
+                        h.outliers[i] += 1;
+                    }
+                } else {
+                    h.outliers[i] += 1;
+                }
+            } else {
+                h.outliers[i] += 1;
+            }
+            h.log_likelihood[i] += log_l;
+        }
+        self.stats.filter_updates += h.len() as u64;
+        self.time_s = m.time_s;
+        self.prune();
+    }
+
+    /// Normalise (eqs. 11–13 are defined up to a constant), then quick stop,
+    /// the region constraint, loss of lock and merging of hypotheses that
+    /// converged onto one trajectory.
+    fn prune(&mut self) {
+        let h = &mut self.hypotheses;
+        if h.len() == 0 {
+            return;
+        }
+        h.normalise();
+        let log_threshold = if self.params.quick_stop > 0.0 { self.params.quick_stop.ln() } else { f64::NEG_INFINITY };
+        let margin = self.params.region_margin_m;
+        let max_out = self.params.max_consecutive_outliers;
+        let (region, axes) = (self.scene.region.clone(), self.axes);
+        let alive: Vec<bool> = (0..h.len())
+            .map(|i| {
+                let x = &h.x[i];
+                let inside = region.as_ref().is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
+                h.log_likelihood[i] >= log_threshold && inside && h.outliers[i] < max_out && x.iter().all(|v| v.is_finite())
+            })
+            .collect();
+        h.retain(|i| alive[i]);
+        if h.len() > 1 && h.len() <= 64 && self.params.merge_distance_m > 0.0 {
+            // Nearest-neighbour pruning makes neighbouring hypotheses pick
+            // the same candidates and collapse onto one trajectory; keep
+            // the likelier of any pair that coincides. Only when few are
+            // left, so the O(n²) check stays cheap.
+            let md2 = self.params.merge_distance_m * self.params.merge_distance_m;
+            let n = h.len();
+            let mut keep = vec![true; n];
+            for i in 0..n {
+                if !keep[i] {
+                    continue;
+                }
+                for j in i + 1..n {
+                    if keep[j] {
+                        let dp = (h.x[i] - h.x[j]).fixed_rows::<3>(0).norm_squared();
+                        if dp < md2 {
+                            if h.log_likelihood[i] >= h.log_likelihood[j] {
+                                keep[j] = false;
+                            } else {
+                                keep[i] = false;
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+            h.retain(|i| keep[i]);
+        }
+        if h.len() > 0 {
+            h.normalise();
+        }
+        self.stats.max_hypotheses = self.stats.max_hypotheses.max(h.len() as u64);
+    }
+
+    fn best_estimate(&self, time_s: f64) -> Option<Estimate> {
+        let h = &self.hypotheses;
+        let best = (0..h.len()).max_by(|&a, &b| h.log_likelihood[a].total_cmp(&h.log_likelihood[b]))?;
+        let x = &h.x[best];
+        let velocity =
+            if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
+        Some(Estimate {
+            time_s,
+            position: [x[0], x[1], x[2]],
+            velocity,
+            covariance: Estimate::covariance_from(&h.p[best]),
+            hypotheses: h.len(),
+            weight: h.log_likelihood[best].exp(),
+        })
+    }
+
+    /// Whether the reported hypothesis gated the latest reading.
+    fn best_gated_last(&self) -> bool {
+        let h = &self.hypotheses;
+        (0..h.len())
+            .max_by(|&a, &b| h.log_likelihood[a].total_cmp(&h.log_likelihood[b]))
+            .is_some_and(|b| h.outliers[b] > 0)
+    }
+}
+
+/// log F(θ_{k+1}; Aθ_k, Q) (eq. 13) for the block-diagonal Q of the motion
+/// models: per axis a 2×2 block [[Qpp, Qpv], [Qpv, Qvv]] (or a scalar Qpp
+/// without velocity), inverted in closed form.
+fn transition_log_density(x: &StateVector, x_prior: &StateVector, t: &Transition) -> f64 {
+    let mut predicted = *x_prior;
+    let mut scratch = StateMatrix::zeros();
+    t.propagate(&mut predicted, &mut scratch);
+    let dx = x - predicted;
+    let [pp, pv, vv] = t.q_blocks;
+    let mut log_density = 0.0;
+    for i in 0..t.axes {
+        if t.with_velocity {
+            let det = pp * vv - pv * pv;
+            if det <= 0.0 {
+                continue;
+            }
+            let (a, b) = (dx[i], dx[i + 3]);
+            let maha = (vv * a * a - 2.0 * pv * a * b + pp * b * b) / det;
+            log_density += -0.5 * (maha + (4.0 * std::f64::consts::PI * std::f64::consts::PI * det).ln());
+        } else if pp > 0.0 {
+            log_density += log_gaussian(dx[i], pp);
+        }
+    }
+    log_density
+}
+
+impl Tracker for Glac {
+    fn step(&mut self, m: &Measurement) -> Option<Estimate> {
+        self.stats.measurements += 1;
+        let valid = m.antenna < self.scene.antennas.len()
+            && m.time_s.is_finite()
+            && m.frequency_hz.is_finite()
+            && m.frequency_hz > 0.0
+            && m.phase_rad.is_finite();
+        if !valid {
+            self.stats.invalid += 1;
+            return None;
+        }
+        if m.time_s < self.last_time_s {
+            self.stats.out_of_order += 1;
+            return None;
+        }
+        if self.phase == Phase::Tracking && m.time_s - self.last_time_s > self.params.reinit_gap_s {
+            self.restart();
+        }
+        self.last_time_s = m.time_s;
+        if self.phase == Phase::Initialising {
+            self.stats.initialising += 1;
+            self.buffer.push(*m);
+            if !self.try_initialise() {
+                return None;
+            }
+            return self.best_estimate(m.time_s);
+        }
+        self.track(m);
+        if self.hypotheses.len() == 0 {
+            // Every hypothesis lost lock: start over from this read.
+            self.restart();
+            self.buffer.push(*m);
+            self.stats.initialising += 1;
+            return None;
+        }
+        if self.params.inference != Inference::Naive && self.best_gated_last() {
+            self.stats.outliers += 1;
+        }
+        if self.params.inference == Inference::Synchronous && !self.group.is_empty() {
+            return None; // no new estimate until the group completes
+        }
+        self.best_estimate(m.time_s)
+    }
+
+    fn stats(&self) -> TrackerStats {
+        self.stats
+    }
+
+    fn reset(&mut self) {
+        self.phase = Phase::Initialising;
+        self.buffer.clear();
+        self.hypotheses.clear();
+        self.group.clear();
+        self.time_s = f64::NEG_INFINITY;
+        self.last_time_s = f64::NEG_INFINITY;
+    }
+}

@@ -1,0 +1,428 @@
+//! GLAC initial state pruning (sec. 3.2.2): a handful of initial positions
+//! and velocities from the first fraction of a second of asynchronous reads.
+//!
+//! 1. Synchronise: per antenna, two reads around a common reference time
+//!    t_x are unwrapped and interpolated to t_x. Unwrapping is done in the
+//!    distance domain, candidate by candidate (the second read's candidate
+//!    nearest the first's), so reads on different hop channels, whose
+//!    wavelengths differ by up to 3 %, unwrap correctly.
+//! 2. Trilaterate: every combination of candidate spheres (3D) or circles
+//!    (2D) of a well-conditioned antenna triple gives intersection points.
+//!    2D follows the paper: of the six pairwise circle intersections, the
+//!    closest three make a triangle whose centroid is the estimate, and a
+//!    triangle with perimeter above D_th is dropped. 3D has no triangle:
+//!    three spheres meet in two mirror points (the region keeps one);
+//!    the analogue of the perimeter test is the residual test below.
+//! 3. Every point is refined by least squares against the nearest candidate
+//!    of every antenna and kept only if each range residual is below
+//!    `residual_threshold_m` and it lies in the region.
+//! 4. Velocity: the interpolated phase slope of antenna i is the projected
+//!    velocity |Vᵢ| = Δφᵢ λ / (4π Δt) = eᵢ · V; least squares over antennas.
+//! 5. Likelihood (eq. 10): L₀ = Πᵢ F(dᵢ; zᵢ*, R₀).
+
+use nalgebra::{Matrix3, Vector2, Vector3};
+
+use super::candidates::nearest_candidate;
+use super::Measurement;
+use crate::filter::log_gaussian;
+use crate::geometry::{circle_intersections, multilaterate, sphere_intersections};
+use crate::model::{StateMatrix, StateVector};
+use crate::scene::Scene;
+
+/// Settings of the initial state search.
+#[derive(Debug, Clone, PartialEq)]
+pub struct InitialState {
+    /// Perimeter threshold D_th for 2D triangles, metres.
+    pub perimeter_threshold_m: f64,
+    /// Largest range residual a kept position may have at any antenna, metres.
+    pub residual_threshold_m: f64,
+    /// Extra 1-sigma range error from interpolation, metres (adds to R₀).
+    pub interpolation_sigma_m: f64,
+    /// How far outside the region a position may lie, metres.
+    pub region_margin_m: f64,
+    /// Positions closer than this are merged (the better one kept), metres.
+    pub merge_distance_m: f64,
+    /// At most this many hypotheses (best likelihood first).
+    pub max_hypotheses: usize,
+}
+
+impl Default for InitialState {
+    fn default() -> Self {
+        Self {
+            perimeter_threshold_m: 0.06,
+            residual_threshold_m: 0.015,
+            interpolation_sigma_m: 0.004,
+            region_margin_m: 0.05,
+            merge_distance_m: 0.01,
+            max_hypotheses: 2000,
+        }
+    }
+}
+
+/// One initial candidate trajectory.
+#[derive(Debug, Clone)]
+pub struct InitialHypothesis {
+    /// [p, v] at the reference time (m, m/s).
+    pub state: StateVector,
+    /// log L₀ (eq. 10), unnormalised.
+    pub log_likelihood: f64,
+    /// Worst range residual at any antenna, metres.
+    pub max_residual_m: f64,
+}
+
+/// One antenna's synchronised candidate: distance and range rate at t_x.
+#[derive(Debug, Clone, Copy)]
+struct Candidate {
+    distance: f64,
+    range_rate: f64,
+}
+
+struct AntennaCandidates {
+    /// Sorted by distance.
+    candidates: Vec<Candidate>,
+}
+
+impl AntennaCandidates {
+    fn nearest(&self, d: f64) -> Candidate {
+        let i = self.candidates.partition_point(|c| c.distance < d);
+        let mut best = self.candidates[i.min(self.candidates.len() - 1)];
+        if i > 0 && (self.candidates[i - 1].distance - d).abs() < (best.distance - d).abs() {
+            best = self.candidates[i - 1];
+        }
+        best
+    }
+}
+
+/// The reference time t_x and the initial hypotheses there, or `None`
+/// when the reads do not yet allow it (fewer than three antennas with two
+/// reads each, or no position survives).
+///
+/// `reads` must be time-ordered. `range_sigma_m` is the 1-sigma range noise
+/// implied by the phase noise (σ_φ λ / 4π). `with_velocity == false` gives
+/// zero velocities (the no-velocity variant).
+pub fn initial_hypotheses(
+    scene: &Scene,
+    reads: &[Measurement],
+    settings: &InitialState,
+    range_sigma_m: f64,
+    with_velocity: bool,
+) -> Option<(f64, Vec<InitialHypothesis>)> {
+    let n_antennas = scene.antennas.len();
+    let mut per_antenna: Vec<Vec<&Measurement>> = vec![Vec::new(); n_antennas];
+    for m in reads {
+        per_antenna[m.antenna].push(m);
+    }
+    let usable: Vec<usize> = (0..n_antennas).filter(|&a| per_antenna[a].len() >= 2).collect();
+    if usable.len() < 3 {
+        return None;
+    }
+    // t_x: the latest time at which every usable antenna has been read, so
+    // the hypotheses start as late (as close to "now") as possible and one
+    // antenna's value at t_x is a reading, not an interpolation.
+    let t_x = usable.iter().map(|&a| per_antenna[a].last().unwrap().time_s).fold(f64::INFINITY, f64::min);
+
+    let axes = scene.dimensions;
+    let lists: Vec<AntennaCandidates> =
+        usable.iter().map(|&a| synchronise(scene, a, &per_antenna[a], t_x, settings.region_margin_m)).collect();
+    if lists.iter().any(|l| l.candidates.is_empty()) {
+        return None;
+    }
+
+    let anchors: Vec<Vector3<f64>> = usable.iter().map(|&a| scene.antennas[a].position).collect();
+    let triple = best_triple(&anchors, axes)?;
+    let tolerance = settings.residual_threshold_m;
+    let mut points: Vec<Vector3<f64>> = Vec::new();
+    let (l0, l1, l2) = (&lists[triple[0]], &lists[triple[1]], &lists[triple[2]]);
+    let (a0, a1, a2) = (anchors[triple[0]], anchors[triple[1]], anchors[triple[2]]);
+    let in_region = |p: &Vector3<f64>| {
+        scene.region.as_ref().is_none_or(|r| r.contains(p, settings.region_margin_m, axes))
+    };
+    for c0 in &l0.candidates {
+        for c1 in &l1.candidates {
+            if (c0.distance - c1.distance).abs() > (a0 - a1).norm() + tolerance {
+                continue; // spheres cannot meet: skip the inner loop early
+            }
+            for c2 in &l2.candidates {
+                if axes == 3 {
+                    if let Some(pair) =
+                        sphere_intersections(&a0, c0.distance, &a1, c1.distance, &a2, c2.distance, tolerance)
+                    {
+                        points.extend(pair.into_iter().filter(in_region));
+                    }
+                } else if let Some(p) = perimeter_centroid(
+                    [a0, a1, a2],
+                    [c0.distance, c1.distance, c2.distance],
+                    scene.plane_z,
+                    settings.perimeter_threshold_m,
+                    tolerance,
+                ) {
+                    if in_region(&p) {
+                        points.push(p);
+                    }
+                }
+            }
+        }
+    }
+
+    let r0 = range_sigma_m * range_sigma_m + settings.interpolation_sigma_m.powi(2);
+    let mut hypotheses: Vec<InitialHypothesis> = Vec::new();
+    let mut distances = vec![0.0; lists.len()];
+    let mut rates = vec![0.0; lists.len()];
+    for start in points {
+        let mut p = start;
+        // Two rounds of "pick nearest candidates, then least squares": the
+        // first pick is made at the rough intersection, the second at the
+        // refined position.
+        let mut ok = true;
+        for _ in 0..2 {
+            for (k, list) in lists.iter().enumerate() {
+                let c = list.nearest((p - anchors[k]).norm());
+                distances[k] = c.distance;
+                rates[k] = c.range_rate;
+            }
+            match multilaterate(&anchors, &distances, p, axes, 6) {
+                Some(fix) => p = fix.position,
+                None => {
+                    ok = false;
+                    break;
+                }
+            }
+        }
+        if !ok || !in_region(&p) {
+            continue;
+        }
+        let mut log_likelihood = 0.0;
+        let mut max_residual: f64 = 0.0;
+        for (k, list) in lists.iter().enumerate() {
+            let d = (p - anchors[k]).norm();
+            let c = list.nearest(d);
+            distances[k] = c.distance;
+            rates[k] = c.range_rate;
+            max_residual = max_residual.max((d - c.distance).abs());
+            log_likelihood += log_gaussian(d - c.distance, r0);
+        }
+        if max_residual > settings.residual_threshold_m {
+            continue;
+        }
+        let velocity = if with_velocity { projected_velocity(&p, &anchors, &rates, axes) } else { Vector3::zeros() };
+        let mut state = StateVector::zeros();
+        state.fixed_rows_mut::<3>(0).copy_from(&p);
+        state.fixed_rows_mut::<3>(3).copy_from(&velocity);
+        hypotheses.push(InitialHypothesis { state, log_likelihood, max_residual_m: max_residual });
+    }
+
+    // Best first, then merge near-duplicates (the same fix reached from
+    // several intersection points).
+    hypotheses.sort_by(|a, b| b.log_likelihood.total_cmp(&a.log_likelihood));
+    let mut kept: Vec<InitialHypothesis> = Vec::new();
+    for h in hypotheses {
+        let p = h.state.fixed_rows::<3>(0);
+        if kept.iter().all(|k| (k.state.fixed_rows::<3>(0) - p).norm() > settings.merge_distance_m) {
+            kept.push(h);
+            if kept.len() >= settings.max_hypotheses {
+                break;
+            }
+        }
+    }
+    if kept.is_empty() {
+        None
+    } else {
+        Some((t_x, kept))
+    }
+}
+
+/// Initial covariance: position σ_p and velocity σ_v on the moving axes,
+/// zero on the fixed ones (z in 2D; velocity without a velocity model).
+pub fn initial_covariance(axes: usize, position_sigma: f64, velocity_sigma: f64) -> StateMatrix {
+    let mut p = StateMatrix::zeros();
+    for i in 0..axes {
+        p[(i, i)] = position_sigma * position_sigma;
+        p[(i + 3, i + 3)] = velocity_sigma * velocity_sigma;
+    }
+    p
+}
+
+/// Candidate (distance, range rate) pairs of one antenna at t_x.
+///
+/// The two reads nearest t_x that bracket it (or the last two, when t_x
+/// is this antenna's last read) are unwrapped candidate by candidate:
+/// for each candidate of the first read, the second read's nearest
+/// candidate (the tag moves far less than λ/4 between two reads of one
+/// antenna). Linear interpolation to t_x gives the distance, and the slope
+/// gives the projected velocity Δd/Δt = Δφ λ / (4π Δt).
+fn synchronise(scene: &Scene, antenna: usize, reads: &[&Measurement], t_x: f64, margin: f64) -> AntennaCandidates {
+    let after = reads.iter().position(|m| m.time_s > t_x).unwrap_or(reads.len());
+    let (ia, ib) = if after == 0 {
+        (0, 1)
+    } else if after >= reads.len() {
+        (reads.len() - 2, reads.len() - 1)
+    } else {
+        (after - 1, after)
+    };
+    let (ra, rb) = (reads[ia], reads[ib]);
+    let (res_a, s_a) = (scene.distance_residue(antenna, ra.frequency_hz, ra.phase_rad), scene.candidate_spacing(ra.frequency_hz));
+    let (res_b, s_b) = (scene.distance_residue(antenna, rb.frequency_hz, rb.phase_rad), scene.candidate_spacing(rb.frequency_hz));
+    let (lo, hi) = scene.distance_bounds(antenna);
+    let (lo, hi) = ((lo - margin).max(0.0), hi + margin);
+    let dt = (rb.time_s - ra.time_s).max(1e-6);
+    let alpha = (t_x - ra.time_s) / dt;
+    let n_lo = ((lo - res_a) / s_a).floor().max(0.0) as i64;
+    let n_hi = ((hi - res_a) / s_a).ceil() as i64 + 1;
+    let mut candidates = Vec::with_capacity((n_hi - n_lo + 1).max(0) as usize);
+    for n in n_lo..=n_hi {
+        let d_a = res_a + n as f64 * s_a;
+        let d_b = nearest_candidate(res_b, s_b, d_a);
+        let distance = d_a + alpha * (d_b - d_a);
+        if distance >= lo && distance <= hi {
+            candidates.push(Candidate { distance, range_rate: (d_b - d_a) / dt });
+        }
+    }
+    candidates.sort_by(|a, b| a.distance.total_cmp(&b.distance));
+    AntennaCandidates { candidates }
+}
+
+/// The antenna triple with the best geometry: the largest triangle (3D:
+/// sphere intersections are well defined; collinear triples only give a
+/// circle). In 2D any triple works (circles meet in points), but a large
+/// triangle still conditions the fix best.
+fn best_triple(anchors: &[Vector3<f64>], axes: usize) -> Option<[usize; 3]> {
+    let mut best: Option<([usize; 3], f64)> = None;
+    let n = anchors.len();
+    for i in 0..n {
+        for j in i + 1..n {
+            for k in j + 1..n {
+                let area = 0.5 * (anchors[j] - anchors[i]).cross(&(anchors[k] - anchors[i])).norm();
+                if best.is_none_or(|(_, a)| area > a) {
+                    best = Some(([i, j, k], area));
+                }
+            }
+        }
+    }
+    match best {
+        Some((t, area)) if area > 1e-6 || axes == 2 => Some(t),
+        _ => None,
+    }
+}
+
+/// 2D trilateration of the paper (Fig. 4a): the three circle pairs give up
+/// to six points; the triangle with one point from each pair and the
+/// smallest perimeter is kept if its perimeter is below `threshold` (D_th),
+/// and its centroid is the estimate. Circles live in the plane z = plane_z:
+/// a sphere of radius d about an antenna at height h cuts it in a circle of
+/// radius √(d² − (plane_z − h)²).
+fn perimeter_centroid(
+    anchors: [Vector3<f64>; 3],
+    distances: [f64; 3],
+    plane_z: f64,
+    threshold: f64,
+    tolerance: f64,
+) -> Option<Vector3<f64>> {
+    let mut centres = [Vector2::zeros(); 3];
+    let mut radii = [0.0; 3];
+    for k in 0..3 {
+        let dz = plane_z - anchors[k].z;
+        let r2 = distances[k] * distances[k] - dz * dz;
+        if r2 < 0.0 {
+            return None;
+        }
+        centres[k] = Vector2::new(anchors[k].x, anchors[k].y);
+        radii[k] = r2.sqrt();
+    }
+    let pair = |i: usize, j: usize| circle_intersections(&centres[i], radii[i], &centres[j], radii[j], tolerance);
+    let (p01, p12, p02) = (pair(0, 1)?, pair(1, 2)?, pair(0, 2)?);
+    let mut best: Option<(f64, Vector2<f64>)> = None;
+    for a in &p01 {
+        for b in &p12 {
+            for c in &p02 {
+                let perimeter = (a - b).norm() + (b - c).norm() + (c - a).norm();
+                if best.is_none_or(|(p, _)| perimeter < p) {
+                    best = Some((perimeter, (a + b + c) / 3.0));
+                }
+            }
+        }
+    }
+    let (perimeter, centroid) = best?;
+    (perimeter <= threshold).then(|| Vector3::new(centroid.x, centroid.y, plane_z))
+}
+
+/// Least-squares velocity from projected velocities: eᵢ · V = ṙᵢ with eᵢ
+/// the unit vector from antenna i to the tag (Fig. 4b). 2D solves for
+/// (vx, vy) only. Returns zero when the geometry is singular.
+fn projected_velocity(p: &Vector3<f64>, anchors: &[Vector3<f64>], rates: &[f64], axes: usize) -> Vector3<f64> {
+    let mut ata = Matrix3::<f64>::zeros();
+    let mut atb = Vector3::<f64>::zeros();
+    for (a, &rate) in anchors.iter().zip(rates) {
+        let mut e = (p - a).normalize();
+        if axes == 2 {
+            e.z = 0.0;
+        }
+        ata += e * e.transpose();
+        atb += e * rate;
+    }
+    if axes == 2 {
+        ata[(2, 2)] = 1.0;
+    }
+    ata.try_inverse().map_or(Vector3::zeros(), |inv| inv * atb)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Antenna, Region};
+
+    fn scene(dimensions: usize) -> Scene {
+        let pos = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]];
+        let antennas = pos
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.7 * i as f64 })
+            .collect();
+        let region = if dimensions == 3 {
+            Region { min: Vector3::new(-0.5, -0.5, 0.05), max: Vector3::new(1.5, 1.5, 1.5) }
+        } else {
+            Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) }
+        };
+        Scene::new(dimensions, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+    }
+
+    fn reads_for(scene: &Scene, p0: Vector3<f64>, v: Vector3<f64>, n: usize) -> Vec<Measurement> {
+        (0..n)
+            .map(|k| {
+                let t = 0.033 * k as f64;
+                let a = k % scene.antennas.len();
+                let d = (p0 + v * t - scene.antennas[a].position).norm();
+                let f = 915.25e6;
+                Measurement { time_s: t, antenna: a, frequency_hz: f, phase_rad: scene.ideal_phase(a, f, d) }
+            })
+            .collect()
+    }
+
+    #[test]
+    fn noiseless_reads_contain_the_truth_3d_and_2d() {
+        for (dims, p0, v) in [
+            (3, Vector3::new(0.36, 0.5, 0.71), Vector3::new(0.1, -0.05, 0.08)),
+            (2, Vector3::new(0.6, 0.3, 0.0), Vector3::new(0.3, 0.2, 0.0)),
+        ] {
+            let scene = scene(dims);
+            let reads = reads_for(&scene, p0, v, 12);
+            let (t_x, hyps) = initial_hypotheses(&scene, &reads, &InitialState::default(), 0.0026, true).unwrap();
+            let truth = p0 + v * t_x;
+            let best = hyps
+                .iter()
+                .map(|h| ((h.state.fixed_rows::<3>(0) - truth).norm(), h))
+                .min_by(|a, b| a.0.total_cmp(&b.0))
+                .unwrap();
+            assert!(best.0 < 0.01, "{dims}D: nearest initial position {} m off ({} hypotheses)", best.0, hyps.len());
+            let dv = (best.1.state.fixed_rows::<3>(3) - v).norm();
+            assert!(dv < 0.05, "{dims}D: velocity {dv} m/s off");
+        }
+    }
+
+    #[test]
+    fn waits_for_three_antennas() {
+        let scene = scene(3);
+        let reads = reads_for(&scene, Vector3::new(0.4, 0.4, 0.6), Vector3::zeros(), 12);
+        let two: Vec<Measurement> = reads.into_iter().filter(|m| m.antenna < 2).collect();
+        assert!(initial_hypotheses(&scene, &two, &InitialState::default(), 0.0026, true).is_none());
+    }
+}

@@ -1,0 +1,47 @@
+"""Readers and writers of the public formats (FORMATS.md sections 1-4).
+
+Contract: every reader validates and raises :class:`FormatError` naming the
+file, the 1-based line and the column for a malformed file; rows it declines
+(duplicates) are counted in the returned object's ``skipped`` report, never
+dropped silently; rows out of time order are sorted (and counted in
+``reordered``). Writers produce files the readers (and outside programs)
+accept.
+"""
+
+from scattertrack.io.types import (
+    Antenna,
+    ChannelOffset,
+    FormatError,
+    Reader,
+    Reads,
+    Region,
+    Scene,
+    SkipReport,
+    Track,
+    Truth,
+)
+from scattertrack.io.reads import read_reads, write_reads
+from scattertrack.io.scene import read_scene, write_scene
+from scattertrack.io.track import read_track, write_track
+from scattertrack.io.truth import read_truth, write_truth
+
+__all__ = [
+    "Antenna",
+    "ChannelOffset",
+    "FormatError",
+    "Reader",
+    "Reads",
+    "Region",
+    "Scene",
+    "SkipReport",
+    "Track",
+    "Truth",
+    "read_reads",
+    "read_scene",
+    "read_track",
+    "read_truth",
+    "write_reads",
+    "write_scene",
+    "write_track",
+    "write_truth",
+]

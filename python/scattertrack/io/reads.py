@@ -1,0 +1,183 @@
+"""Tag reads, ``reads.csv`` (FORMATS.md section 2).
+
+One row per phase reading: ``time_s`` (seconds), ``epc`` (tag id),
+``antenna`` (port id from the scene), ``frequency_hz`` (carrier, hertz),
+``phase_rad`` (radians in [0, P)), and optionally ``rssi_dbm`` (dBm) and
+``doppler_hz`` (hertz).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scattertrack.io.csvutil import (
+    CsvReader,
+    format_fixed,
+    repeated_cells,
+    require_finite,
+    text_column,
+    write_columns,
+)
+from scattertrack.io.types import Reads, Scene, SkipReport
+
+REQUIRED = ["time_s", "epc", "antenna", "frequency_hz", "phase_rad"]
+OPTIONAL = ["rssi_dbm", "doppler_hz"]
+
+PHASE_TOLERANCE_RAD = 1e-9
+"""Phases this far outside [0, P), radians, are rounding noise: accepted and wrapped."""
+
+KEY_COLUMNS = REQUIRED
+"""Columns that make two rows the same read (rssi and doppler may differ)."""
+
+DUPLICATE = "duplicate row"
+"""The SkipReport reason for a read identical to an earlier one."""
+
+
+def read_reads(path, scene: Scene | None = None) -> Reads:
+    """Read and validate a ``reads.csv``; rows come back stably sorted by time.
+
+    With a ``scene``, antenna ids must be ones it defines and phases must lie
+    in [0, P) for its reader's period P (radians); without one, P = 2*pi.
+    Exact duplicates of an earlier read are skipped and counted under
+    ``"duplicate row"``; rows out of time order are counted in ``reordered``.
+    Raises :class:`FormatError` (file, line, column) for a malformed file.
+    """
+    period = scene.reader.period_rad if scene is not None else 2.0 * math.pi
+    antenna_ids = np.array([a.id for a in scene.antennas], dtype=np.int64) if scene else None
+    parts = []
+    lines = []
+    with CsvReader(path, REQUIRED, OPTIONAL) as reader:
+        for chunk in reader.chunks():
+            part = _parse_chunk(chunk, period, antenna_ids)
+            chunk.raise_first_problem()
+            parts.append(part)
+            lines.append(chunk.line_numbers())
+    columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    return _finish(columns, np.concatenate(lines))
+
+
+def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None) -> dict:
+    """Convert and check one chunk's columns; problems are recorded in the chunk."""
+    time = chunk.floats("time_s")
+    epc = chunk.texts("epc")
+    antenna = chunk.integers("antenna")
+    if antenna_ids is not None:
+        chunk.flag("antenna", ~np.isin(antenna, antenna_ids), "antenna {value} is not in the scene")
+    frequency = chunk.floats("frequency_hz")
+    chunk.flag("frequency_hz", frequency <= 0.0, "frequency must be positive: {value}")
+    phase = chunk.floats("phase_rad")
+    outside = (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
+    chunk.flag("phase_rad", outside, f"phase outside [0, {period:.6f}): {{value}}")
+    # Within the tolerance: fold rounding noise back into [0, P).
+    phase = np.where(phase >= period, phase - period, phase)
+    phase = np.where(phase < 0.0, 0.0, phase)
+    optional = {}
+    for name in OPTIONAL:
+        if chunk.has(name):
+            optional[name] = chunk.floats(name, allow_empty=True)
+        else:
+            optional[name] = np.full(len(chunk), math.nan)
+    return {
+        "time_s": time,
+        "epc": np.array(epc, dtype=str),
+        "antenna": antenna,
+        "frequency_hz": frequency,
+        "phase_rad": phase,
+        **optional,
+    }
+
+
+def _finish(columns: dict, lines: np.ndarray) -> Reads:
+    """Skip exact duplicates, count out-of-order rows and sort stably by time."""
+    skipped = SkipReport()
+    duplicate = _duplicates(columns)
+    for i in np.flatnonzero(duplicate).tolist():
+        skipped.add(DUPLICATE, int(lines[i]))
+    if duplicate.any():
+        columns = {name: values[~duplicate] for name, values in columns.items()}
+    time = columns["time_s"]
+    # A row is out of order when an earlier row has a later time.
+    latest_before = np.maximum.accumulate(time)
+    reordered = int(np.count_nonzero(time[1:] < latest_before[:-1]))
+    if reordered:
+        order = np.argsort(time, kind="stable")
+        columns = {name: values[order] for name, values in columns.items()}
+    return Reads(
+        time_s=columns["time_s"],
+        epc=columns["epc"],
+        antenna=columns["antenna"],
+        frequency_hz=columns["frequency_hz"],
+        phase_rad=columns["phase_rad"],
+        rssi_dbm=columns["rssi_dbm"],
+        doppler_hz=columns["doppler_hz"],
+        skipped=skipped,
+        reordered=reordered,
+    )
+
+
+def _duplicates(columns: dict) -> np.ndarray:
+    """Mask of rows equal to an earlier row in time, epc, antenna, frequency and phase.
+
+    Duplicates share their time, and distinct reads rarely do, so only rows
+    whose time occurs more than once are compared in full (cheap for big files).
+    """
+    time = columns["time_s"]
+    order = np.argsort(time, kind="stable")
+    same_as_next = time[order][1:] == time[order][:-1]
+    shares_time = np.zeros(len(time), dtype=bool)
+    shares_time[order[1:][same_as_next]] = True
+    shares_time[order[:-1][same_as_next]] = True
+    duplicate = np.zeros(len(time), dtype=bool)
+    seen = set()
+    for i in np.flatnonzero(shares_time).tolist():  # in file order: the first copy is kept
+        key = tuple(columns[name][i].item() for name in KEY_COLUMNS)
+        if key in seen:
+            duplicate[i] = True
+        else:
+            seen.add(key)
+    return duplicate
+
+
+def write_reads(path, reads: Reads) -> None:
+    """Write ``reads`` as ``reads.csv``.
+
+    Time (seconds) and phase (radians) with 6 decimals, frequency (hertz) in
+    full, RSSI (dBm) and Doppler (hertz) with 2 decimals; the optional columns
+    only when some value is finite, with an empty cell for nan.
+    """
+    for name in ("time_s", "frequency_hz", "phase_rad"):
+        require_finite(path, name, getattr(reads, name))
+    header = list(REQUIRED)
+    columns = [
+        format_fixed(reads.time_s, 6),
+        text_column(reads.epc),
+        repeated_cells(np.asarray(reads.antenna, dtype=np.int64), str),
+        repeated_cells(np.asarray(reads.frequency_hz, dtype=np.float64), repr),
+        _phase_cells(reads.phase_rad),
+    ]
+    for name in OPTIONAL:
+        values = np.asarray(getattr(reads, name), dtype=np.float64)
+        if np.isfinite(values).any():
+            require_finite(path, name, values[~np.isnan(values)])
+            header.append(name)
+            columns.append(format_fixed(values, 2, empty_nan=True))
+    write_columns(path, header, columns)
+
+
+def _phase_cells(phase_rad: np.ndarray) -> list[str]:
+    """Phases with 6 decimals, never rounded up onto the period.
+
+    A phase just below pi or 2*pi would round up to a value at or above the
+    period, which readers reject; such values are truncated instead (the
+    error stays below 1e-6 rad either way).
+    """
+    phase = np.asarray(phase_rad, dtype=np.float64)
+    cells = format_fixed(phase, 6)
+    for period in (math.pi, 2.0 * math.pi):
+        near = (phase < period) & (phase > period - 1e-6)
+        for i in np.flatnonzero(near).tolist():
+            if float(cells[i]) >= period:
+                cells[i] = "%.6f" % (math.floor(phase[i] * 1e6) / 1e6)
+    return cells

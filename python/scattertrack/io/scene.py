@@ -1,0 +1,390 @@
+"""Scenes, ``scene.toml`` (FORMATS.md section 1).
+
+A scene describes the hardware: the reader (kind, phase sign and period),
+its antennas (ids, positions in metres, calibrated phase offsets in
+radians), an optional region where tags can be (metres) and optional
+per-channel phase offsets (hertz, radians).
+
+Errors name the key path as the "column" (``antennas[2].position``, list
+indices 0-based as in ``Scene.antennas``) and the 1-based line where that key
+is written, found by scanning the text (tomllib does not report positions).
+"""
+
+from __future__ import annotations
+
+import datetime
+import math
+import re
+import tomllib
+from pathlib import Path
+
+import numpy as np
+
+from scattertrack.io.types import (
+    Antenna,
+    ChannelOffset,
+    FormatError,
+    Reader,
+    Region,
+    Scene,
+)
+
+READER_KINDS = ("cots", "sdr-helper", "lora-backscatter")
+KINDS_WITH_ANTENNAS = ("cots", "sdr-helper")
+"""Reader kinds whose phase model needs antenna positions."""
+ROLES = ("txrx", "tx", "rx")
+PERIODS = ("2pi", "pi")
+KNOWN_TOP_LEVEL = ("name", "dimensions", "plane_z", "reader", "antennas", "region", "channel_offsets")
+
+
+def read_scene(path) -> Scene:
+    """Read and validate a ``scene.toml``.
+
+    Unknown top-level keys and tables are kept in ``Scene.extra``; unknown
+    keys inside the known tables are ignored. Without a ``name``, the scene
+    is named after the folder that holds the file. Raises :class:`FormatError`
+    with the key path as the column and the line where the key is written.
+    """
+    try:
+        text = Path(path).read_bytes().decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise FormatError(path, None, None, f"not UTF-8 text: {error}") from None
+    try:
+        document = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as error:
+        raise _syntax_error(path, text, error) from None
+    return _SceneChecker(path, text).scene(document)
+
+
+def _syntax_error(path, text: str, error: tomllib.TOMLDecodeError) -> FormatError:
+    """A FormatError at the line and column tomllib's message gives."""
+    message = str(error)
+    found = re.search(r"\(at line (\d+), column (\d+)\)$", message)
+    if found:
+        line, column = int(found.group(1)), found.group(2)
+        message = message[: found.start()].rstrip()
+    else:
+        # "(at end of document)": the fault is at the last line.
+        line, column = max(1, len(text.splitlines())), None
+        message = re.sub(r"\s*\(at end of document\)$", "", message) + " (at end of document)"
+    return FormatError(path, line, column, f"TOML syntax error: {message}")
+
+
+# --- locating keys in the text ----------------------------------------------
+
+_ARRAY_HEADER = re.compile(r"^\s*\[\[\s*([^\[\]]+?)\s*\]\]\s*(#.*)?$")
+_TABLE_HEADER = re.compile(r"^\s*\[\s*([^\[\]]+?)\s*\]\s*(#.*)?$")
+_TABLE_NAME = re.compile(r"^[A-Za-z0-9_\-.\"' ]+$")
+
+
+def _sections(text: str) -> list[tuple[str, int, int, int]]:
+    """Tables of the text as (name, header line, first body line, end line), 1-based.
+
+    The top level is the section named "" with header line 0. An array of
+    tables gives one section per ``[[name]]`` header.
+    """
+    lines = text.split("\n")
+    sections = []
+    name, header = "", 0
+    for number, line in enumerate(lines, start=1):
+        found = _ARRAY_HEADER.match(line) or _TABLE_HEADER.match(line)
+        if found and _TABLE_NAME.match(found.group(1)):
+            sections.append((name, header, header + 1, number))
+            name = re.sub(r"\s*\.\s*", ".", found.group(1).replace('"', "").replace("'", ""))
+            header = number
+    sections.append((name, header, header + 1, len(lines) + 1))
+    return sections
+
+
+def _line_of_key(text: str, key_path: str) -> int | None:
+    """Best-effort 1-based line where ``key_path`` (e.g. ``antennas[2].position``) is written.
+
+    A missing key inside a table gives the table's header line; a key that
+    cannot be found at all gives None.
+    """
+    found = re.fullmatch(r"([^.\[]+)(?:\[(\d+)\])?(?:\.(.+))?", key_path)
+    if not found:
+        return None
+    first, index, rest = found.group(1), found.group(2), found.group(3)
+    lines = text.split("\n")
+    sections = _sections(text)
+    # A top-level key: "dimensions".
+    if index is None and rest is None:
+        line = _find_assignment(lines, sections[0], first)
+        if line is not None:
+            return line
+        tables = [s for s in sections if s[0] == first]
+        return tables[0][1] if tables else None
+    # A key in a table or in the N-th table of an array: "reader.kind", "antennas[2].id".
+    tables = [s for s in sections if s[0] == first]
+    if index is not None:
+        tables = tables[int(index) : int(index) + 1]
+    if tables:
+        if rest is None:
+            return tables[0][1]
+        line = _find_assignment(lines, tables[0], rest.split(".")[0])
+        return line if line is not None else tables[0][1]
+    # Written inline or dotted at the top level: "reader = {...}", "reader.kind = ...".
+    return _find_assignment(lines, sections[0], first)
+
+
+def _find_assignment(lines: list[str], section, key: str) -> int | None:
+    """Line of ``key = ...`` (or ``key.sub = ...``) within one section, or None."""
+    _, _, first_body, end = section
+    pattern = re.compile(r"^\s*[\"']?" + re.escape(key) + r"[\"']?\s*[=.]")
+    for number in range(first_body, end):
+        if pattern.match(lines[number - 1]):
+            return number
+    return None
+
+
+# --- validation -------------------------------------------------------------
+
+
+_NO_DEFAULT = object()
+"""Marks a key that has no default."""
+
+
+def _parent(key_path: str) -> str:
+    """The table holding a key: "antennas[2]" for "antennas[2].position"."""
+    return key_path.rsplit(".", 1)[0]
+
+
+def _is_number(value) -> bool:
+    """An int or float TOML value (bool is an int in Python, but not a number here)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+class _SceneChecker:
+    """Validates a parsed document and builds the Scene; knows the text for line numbers."""
+
+    def __init__(self, path, text: str):
+        self.path = path
+        self.text = text
+
+    def fail(self, key_path: str, message: str, near: str | None = None) -> FormatError:
+        """An error at ``key_path``; ``near`` gives the line when that key is absent."""
+        line = _line_of_key(self.text, key_path)
+        if line is None and near is not None:
+            line = _line_of_key(self.text, near)
+        return FormatError(self.path, line, key_path, message)
+
+    def number(self, table: dict, key: str, key_path: str, default=_NO_DEFAULT) -> float | None:
+        """A finite number (int or float) from ``table[key]``, or ``default`` if absent."""
+        if key not in table:
+            if default is _NO_DEFAULT:
+                raise self.fail(key_path, "missing required key", near=_parent(key_path))
+            return default
+        value = table[key]
+        if not _is_number(value) or not math.isfinite(value):
+            raise self.fail(key_path, f"expected a finite number, found {value!r}")
+        return float(value)
+
+    def vector3(self, table: dict, key: str, key_path: str) -> np.ndarray:
+        """Three finite numbers from ``table[key]``, metres."""
+        if key not in table:
+            raise self.fail(key_path, "missing required key", near=_parent(key_path))
+        value = table[key]
+        if (
+            not isinstance(value, list)
+            or len(value) != 3
+            or not all(_is_number(v) and math.isfinite(v) for v in value)
+        ):
+            raise self.fail(key_path, f"expected 3 finite numbers, found {value!r}")
+        return np.array(value, dtype=np.float64)
+
+    def choice(self, table: dict, key: str, key_path: str, allowed, default=_NO_DEFAULT):
+        """``table[key]`` if it is one of ``allowed`` (type included: 1.0 is not 1)."""
+        if key not in table:
+            if default is _NO_DEFAULT:
+                raise self.fail(key_path, "missing required key", near=_parent(key_path))
+            return default
+        value = table[key]
+        if not any(type(value) is type(a) and value == a for a in allowed):
+            options = ", ".join(repr(a) for a in allowed)
+            raise self.fail(key_path, f"expected one of {options}, found {value!r}")
+        return value
+
+    def table(self, document: dict, key: str) -> dict:
+        value = document[key]
+        if not isinstance(value, dict):
+            raise self.fail(key, f"expected a table, found {value!r}")
+        return value
+
+    def array_of_tables(self, document: dict, key: str) -> list[dict]:
+        value = document.get(key, [])
+        if not isinstance(value, list) or not all(isinstance(v, dict) for v in value):
+            raise self.fail(key, f"expected an array of tables ([[{key}]]), found {value!r}")
+        return value
+
+    def scene(self, document: dict) -> Scene:
+        name = document.get("name", Path(self.path).resolve().parent.name)
+        if not isinstance(name, str):
+            raise self.fail("name", f"expected a string, found {name!r}")
+        dimensions = self.choice(document, "dimensions", "dimensions", (2, 3))
+        plane_z = self.number(document, "plane_z", "plane_z", default=None)
+        if dimensions == 2 and plane_z is None:
+            raise self.fail("plane_z", "required when dimensions = 2", near="dimensions")
+        if "reader" not in document:
+            raise self.fail("reader", "missing required table [reader]")
+        reader = self.reader(self.table(document, "reader"))
+        antennas = self.antennas(document, reader.kind)
+        region = self.region(self.table(document, "region")) if "region" in document else None
+        channel_offsets = self.channel_offsets(document)
+        extra = {k: v for k, v in document.items() if k not in KNOWN_TOP_LEVEL}
+        return Scene(
+            name=name,
+            dimensions=dimensions,
+            reader=reader,
+            antennas=antennas,
+            plane_z=plane_z,
+            region=region,
+            channel_offsets=channel_offsets,
+            extra=extra,
+        )
+
+    def reader(self, table: dict) -> Reader:
+        kind = self.choice(table, "kind", "reader.kind", READER_KINDS)
+        phase_sign = self.choice(table, "phase_sign", "reader.phase_sign", (1, -1), 1)
+        phase_period = self.choice(table, "phase_period", "reader.phase_period", PERIODS, "2pi")
+        noise = self.number(table, "phase_noise_rad", "reader.phase_noise_rad", default=None)
+        if noise is not None and noise <= 0.0:
+            raise self.fail("reader.phase_noise_rad", f"must be positive, found {noise!r}")
+        return Reader(kind, phase_sign, phase_period, noise)
+
+    def antennas(self, document: dict, kind: str) -> list[Antenna]:
+        tables = self.array_of_tables(document, "antennas")
+        if not tables and kind in KINDS_WITH_ANTENNAS:
+            raise self.fail(
+                "antennas", f"a {kind!r} scene needs [[antennas]]", near="reader.kind"
+            )
+        antennas = []
+        for i, table in enumerate(tables):
+            where = f"antennas[{i}]"
+            antenna_id = table.get("id")
+            if antenna_id is None:
+                raise self.fail(f"{where}.id", "missing required key", near=where)
+            if not isinstance(antenna_id, int) or isinstance(antenna_id, bool):
+                raise self.fail(f"{where}.id", f"expected an integer, found {antenna_id!r}")
+            if any(a.id == antenna_id for a in antennas):
+                raise self.fail(f"{where}.id", f"antenna id {antenna_id} is used twice")
+            antennas.append(
+                Antenna(
+                    id=antenna_id,
+                    position=self.vector3(table, "position", f"{where}.position"),
+                    phase_offset_rad=self.number(
+                        table, "phase_offset_rad", f"{where}.phase_offset_rad", default=0.0
+                    ),
+                    role=self.choice(table, "role", f"{where}.role", ROLES, "txrx"),
+                )
+            )
+        return antennas
+
+    def region(self, table: dict) -> Region:
+        low = self.vector3(table, "min", "region.min")
+        high = self.vector3(table, "max", "region.max")
+        if not (low < high).all():
+            raise self.fail("region.max", f"must exceed region.min on every axis: {low} vs {high}")
+        return Region(low, high)
+
+    def channel_offsets(self, document: dict) -> list[ChannelOffset]:
+        offsets = []
+        for i, table in enumerate(self.array_of_tables(document, "channel_offsets")):
+            where = f"channel_offsets[{i}]"
+            frequency = self.number(table, "frequency_hz", f"{where}.frequency_hz")
+            if frequency <= 0.0:
+                raise self.fail(f"{where}.frequency_hz", f"must be positive, found {frequency!r}")
+            offset = self.number(table, "phase_offset_rad", f"{where}.phase_offset_rad")
+            offsets.append(ChannelOffset(frequency, offset))
+        return offsets
+
+
+# --- writing ----------------------------------------------------------------
+
+_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
+_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+
+
+def _toml_key(key: str) -> str:
+    return key if _BARE_KEY.match(key) else _toml_string(key)
+
+
+def _toml_string(value: str) -> str:
+    """A TOML basic string, escaping quotes, backslashes and control characters."""
+    out = []
+    for char in value:
+        if char in _ESCAPES:
+            out.append(_ESCAPES[char])
+        elif ord(char) < 0x20 or ord(char) == 0x7F:
+            out.append(f"\\u{ord(char):04x}")
+        else:
+            out.append(char)
+    return '"' + "".join(out) + '"'
+
+
+def _toml_value(value) -> str:
+    """One value in TOML syntax; floats with repr() so they read back exactly."""
+    if isinstance(value, np.generic):
+        value = value.item()
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int):
+        return str(value)
+    if isinstance(value, float):
+        return repr(value)  # "0.1", "1e-05", "nan", "inf" are all valid TOML floats
+    if isinstance(value, str):
+        return _toml_string(value)
+    if isinstance(value, (datetime.datetime, datetime.date, datetime.time)):
+        return value.isoformat()
+    if isinstance(value, (list, tuple, np.ndarray)):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
+    raise TypeError(f"cannot write {value!r} ({type(value).__name__}) to TOML")
+
+
+def _vector(values) -> str:
+    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
+
+
+def write_scene(path, scene: Scene) -> None:
+    """Write ``scene`` as TOML that :func:`read_scene` reads back to an equal Scene.
+
+    Extra top-level values are written after the known keys; extra tables
+    each as their own ``[table]`` (nested values inline).
+    """
+    lines = [f"name = {_toml_string(scene.name)}", f"dimensions = {int(scene.dimensions)}"]
+    if scene.plane_z is not None:
+        lines.append(f"plane_z = {float(scene.plane_z)!r}")
+    extra_tables = {k: v for k, v in scene.extra.items() if isinstance(v, dict)}
+    for key, value in scene.extra.items():
+        if key not in extra_tables:
+            lines.append(f"{_toml_key(key)} = {_toml_value(value)}")
+
+    reader = scene.reader
+    lines += ["", "[reader]", f"kind = {_toml_string(reader.kind)}"]
+    lines.append(f"phase_sign = {int(reader.phase_sign)}")
+    lines.append(f"phase_period = {_toml_string(reader.phase_period)}")
+    if reader.phase_noise_rad is not None:
+        lines.append(f"phase_noise_rad = {float(reader.phase_noise_rad)!r}")
+
+    for antenna in scene.antennas:
+        lines += ["", "[[antennas]]", f"id = {int(antenna.id)}"]
+        lines.append(f"position = {_vector(antenna.position)}")
+        lines.append(f"phase_offset_rad = {float(antenna.phase_offset_rad)!r}")
+        lines.append(f"role = {_toml_string(antenna.role)}")
+
+    if scene.region is not None:
+        lines += ["", "[region]", f"min = {_vector(scene.region.min)}"]
+        lines.append(f"max = {_vector(scene.region.max)}")
+
+    for offset in scene.channel_offsets:
+        lines += ["", "[[channel_offsets]]"]
+        lines.append(f"frequency_hz = {float(offset.frequency_hz)!r}")
+        lines.append(f"phase_offset_rad = {float(offset.phase_offset_rad)!r}")
+
+    for key, table in extra_tables.items():
+        lines += ["", f"[{_toml_key(key)}]"]
+        lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
+
+    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

@@ -1,0 +1,220 @@
+"""In-memory forms of the public formats (``FORMATS.md`` sections 1-4).
+
+Plain dataclasses and columnar numpy arrays: one array per column, one row
+per index. Readers in :mod:`scattertrack.io` build them from files and
+validate them; writers turn them back into files. Nothing here does I/O.
+
+Units are SI: metres, seconds, radians, hertz, dBm.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+SPEED_OF_LIGHT = 299_792_458.0
+"""Speed of light in vacuum, m/s (FORMATS.md section 1: lambda = c / f)."""
+
+
+class FormatError(ValueError):
+    """A file that breaks its format.
+
+    ``path``, ``line`` (1-based, ``None`` when the whole file is at fault) and
+    ``column`` (the column name for CSV, the key for TOML, ``None`` if not
+    applicable) locate the fault; ``str(error)`` reads
+    ``"reads.csv:12: column 'phase_rad': not a finite number: 'nan'"``.
+    """
+
+    def __init__(self, path, line: int | None, column: str | None, message: str):
+        self.path = str(path)
+        self.line = line
+        self.column = column
+        self.message = message
+        where = self.path if line is None else f"{self.path}:{line}"
+        col = f" column '{column}':" if column is not None else ""
+        super().__init__(f"{where}:{col} {message}")
+
+
+@dataclass
+class Antenna:
+    """One reader or helper antenna port."""
+
+    id: int
+    """Port number as the reader reports it."""
+    position: np.ndarray
+    """Phase centre in the world frame, metres, shape (3,)."""
+    phase_offset_rad: float = 0.0
+    """Calibrated cable/port phase offset, radians."""
+    role: str = "txrx"
+    """"txrx" (monostatic), "tx" or "rx" (bistatic helper)."""
+
+
+@dataclass
+class Reader:
+    kind: str = "cots"
+    """"cots", "sdr-helper" or "lora-backscatter"."""
+    phase_sign: int = 1
+    """+1: phase grows with distance; -1: it shrinks."""
+    phase_period: str = "2pi"
+    """"2pi", or "pi" for readers that report phase mod pi."""
+    phase_noise_rad: float | None = None
+    """Optional 1-sigma phase noise prior for filters, radians."""
+
+    @property
+    def period_rad(self) -> float:
+        """The phase period P in radians: 2*pi or pi."""
+        return np.pi if self.phase_period == "pi" else 2.0 * np.pi
+
+
+@dataclass
+class Region:
+    """Axis-aligned box where tags can be, metres."""
+
+    min: np.ndarray
+    max: np.ndarray
+
+
+@dataclass
+class ChannelOffset:
+    frequency_hz: float
+    phase_offset_rad: float
+
+
+@dataclass
+class Scene:
+    """A hardware set-up (``scene.toml``)."""
+
+    name: str
+    dimensions: int
+    """2 (tag moves in the plane z = plane_z) or 3."""
+    reader: Reader
+    antennas: list[Antenna]
+    plane_z: float | None = None
+    """Height of the motion plane, metres; required when dimensions == 2."""
+    region: Region | None = None
+    channel_offsets: list[ChannelOffset] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+    """Unknown top-level tables/keys, kept so that a round trip loses nothing."""
+
+    def antenna_index(self, antenna_id: int) -> int:
+        """Index into ``antennas`` of the antenna with this port id (KeyError if none)."""
+        for i, a in enumerate(self.antennas):
+            if a.id == antenna_id:
+                return i
+        raise KeyError(antenna_id)
+
+    def channel_offset(self, frequency_hz: float) -> float:
+        """Calibrated offset of the channel matched within 1 kHz; 0 if none (FORMATS.md 1)."""
+        for c in self.channel_offsets:
+            if abs(c.frequency_hz - frequency_hz) <= 1e3:
+                return c.phase_offset_rad
+        return 0.0
+
+    @staticmethod
+    def load(path) -> "Scene":
+        """Read and validate a ``scene.toml`` (see :func:`scattertrack.io.read_scene`)."""
+        from scattertrack.io.scene import read_scene
+
+        return read_scene(path)
+
+    def save(self, path) -> None:
+        from scattertrack.io.scene import write_scene
+
+        write_scene(path, self)
+
+
+@dataclass
+class SkipReport:
+    """Rows a reader or tracker declined, counted by reason (never silent)."""
+
+    counts: dict[str, int] = field(default_factory=dict)
+    examples: dict[str, list[int]] = field(default_factory=dict)
+    """Up to a few 1-based file line numbers per reason, for messages."""
+
+    def add(self, reason: str, line: int | None = None, n: int = 1) -> None:
+        self.counts[reason] = self.counts.get(reason, 0) + n
+        if line is not None:
+            ex = self.examples.setdefault(reason, [])
+            if len(ex) < 5:
+                ex.append(line)
+
+    @property
+    def total(self) -> int:
+        return sum(self.counts.values())
+
+    def summary(self) -> str:
+        if not self.counts:
+            return "no rows skipped"
+        parts = []
+        for reason, n in sorted(self.counts.items()):
+            ex = self.examples.get(reason)
+            lines = f" (lines {', '.join(map(str, ex))}{', ...' if n > len(ex) else ''})" if ex else ""
+            parts.append(f"{n} {reason}{lines}")
+        return "skipped " + "; ".join(parts)
+
+
+@dataclass
+class Reads:
+    """Tag reads (``reads.csv``), columnar, sorted by time (stable)."""
+
+    time_s: np.ndarray  # float64
+    epc: np.ndarray  # str (numpy unicode)
+    antenna: np.ndarray  # int64, antenna id as in the scene
+    frequency_hz: np.ndarray  # float64
+    phase_rad: np.ndarray  # float64 in [0, P)
+    rssi_dbm: np.ndarray  # float64, nan where absent
+    doppler_hz: np.ndarray  # float64, nan where absent
+    skipped: SkipReport = field(default_factory=SkipReport)
+    reordered: int = 0
+    """How many rows were out of time order in the file (sorted, not dropped)."""
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+    def select(self, mask_or_index) -> "Reads":
+        """A new Reads with the rows picked by a boolean mask or index array."""
+        return Reads(
+            self.time_s[mask_or_index],
+            self.epc[mask_or_index],
+            self.antenna[mask_or_index],
+            self.frequency_hz[mask_or_index],
+            self.phase_rad[mask_or_index],
+            self.rssi_dbm[mask_or_index],
+            self.doppler_hz[mask_or_index],
+        )
+
+    def epcs(self) -> list[str]:
+        """Distinct tags in order of first appearance."""
+        _, first = np.unique(self.epc, return_index=True)
+        return [str(self.epc[i]) for i in sorted(first)]
+
+
+@dataclass
+class Truth:
+    """Ground truth (``truth.csv``); velocity columns are nan when absent."""
+
+    time_s: np.ndarray
+    epc: np.ndarray
+    position: np.ndarray  # (n, 3) metres
+    velocity: np.ndarray  # (n, 3) m/s, nan where absent
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+
+@dataclass
+class Track:
+    """Tracker output (``track.csv``)."""
+
+    time_s: np.ndarray
+    epc: np.ndarray
+    position: np.ndarray  # (n, 3) metres
+    velocity: np.ndarray  # (n, 3) m/s, nan if the method has none
+    sigma: np.ndarray | None = None  # (n, 3) 1-sigma position, metres
+    orientation: np.ndarray | None = None  # (n, 4) qw, qx, qy, qz
+    skipped: SkipReport = field(default_factory=SkipReport)
+    """Reads the tracker declined (outliers, duplicates...), by reason."""
+
+    def __len__(self) -> int:
+        return len(self.time_s)

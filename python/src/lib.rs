@@ -1,0 +1,330 @@
+//! Thin PyO3 bindings over `scattertrack-core`: argument conversion and
+//! nothing else. Type stubs: `python/scattertrack/_core.pyi`.
+
+use nalgebra::Vector3;
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+use scattertrack_core::engine::Engine as CoreEngine;
+use scattertrack_core::model::MotionModel;
+use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Scene};
+use scattertrack_core::track::{self, Estimate, GlacParams, Inference, Likelihood, Measurement, TrackerStats};
+
+fn value_error(e: impl std::fmt::Display) -> PyErr {
+    PyValueError::new_err(e.to_string())
+}
+
+/// Builds a core scene from plain arrays (the Python `Scene` is converted
+/// in `scattertrack.track`).
+#[allow(clippy::too_many_arguments)]
+fn make_scene(
+    dimensions: usize,
+    plane_z: f64,
+    phase_sign: f64,
+    phase_period: f64,
+    phase_noise_rad: f64,
+    antenna_positions: PyReadonlyArray2<f64>,
+    antenna_offsets: PyReadonlyArray1<f64>,
+    region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
+    channel_frequencies: PyReadonlyArray1<f64>,
+    channel_offsets: PyReadonlyArray1<f64>,
+) -> PyResult<Scene> {
+    let pos = antenna_positions.as_array();
+    let off = antenna_offsets.as_array();
+    if pos.ncols() != 3 || pos.nrows() != off.len() {
+        return Err(value_error("antenna_positions must be (n, 3) and antenna_offsets (n,)"));
+    }
+    let antennas = (0..pos.nrows())
+        .map(|i| Antenna { id: i as i64, position: Vector3::new(pos[(i, 0)], pos[(i, 1)], pos[(i, 2)]), phase_offset_rad: off[i] })
+        .collect();
+    let region = match region {
+        Some((lo, hi)) => {
+            let (lo, hi) = (lo.as_array(), hi.as_array());
+            if lo.len() != 3 || hi.len() != 3 {
+                return Err(value_error("region bounds must have 3 entries"));
+            }
+            Some(Region { min: Vector3::new(lo[0], lo[1], lo[2]), max: Vector3::new(hi[0], hi[1], hi[2]) })
+        }
+        None => None,
+    };
+    let (cf, co) = (channel_frequencies.as_array(), channel_offsets.as_array());
+    if cf.len() != co.len() {
+        return Err(value_error("channel_frequencies and channel_offsets differ in length"));
+    }
+    let channels = cf.iter().zip(co.iter()).map(|(&f, &o)| ChannelOffset { frequency_hz: f, phase_offset_rad: o }).collect();
+    Scene::new(dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antennas, region, channels).map_err(value_error)
+}
+
+/// Reads GLAC parameters from a dict of names → numbers/strings; unknown
+/// names are an error (a typo must not be ignored silently).
+fn make_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
+    let mut p = GlacParams::default();
+    let Some(params) = params else { return Ok(p) };
+    for (key, value) in params.iter() {
+        let key: String = key.extract()?;
+        let f = || -> PyResult<f64> { value.extract::<f64>() };
+        match key.as_str() {
+            "q" => {
+                p.motion = match p.motion {
+                    MotionModel::ConstantVelocity { .. } => MotionModel::ConstantVelocity { q: f()? },
+                    MotionModel::RandomWalk { .. } => MotionModel::RandomWalk { q: f()? },
+                }
+            }
+            "motion" => {
+                let q = match p.motion {
+                    MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
+                };
+                p.motion = match value.extract::<String>()?.as_str() {
+                    "constant-velocity" => MotionModel::ConstantVelocity { q },
+                    "random-walk" => MotionModel::RandomWalk { q },
+                    other => return Err(value_error(format!("motion must be constant-velocity or random-walk, got {other}"))),
+                }
+            }
+            "inference" => {
+                p.inference = match value.extract::<String>()?.as_str() {
+                    "fast" => Inference::Fast,
+                    "naive" => Inference::Naive,
+                    "synchronous" => Inference::Synchronous,
+                    other => return Err(value_error(format!("inference must be fast, naive or synchronous, got {other}"))),
+                }
+            }
+            "likelihood" => {
+                p.likelihood = match value.extract::<String>()?.as_str() {
+                    "innovation" => Likelihood::Innovation,
+                    "paper" => Likelihood::Paper,
+                    other => return Err(value_error(format!("likelihood must be innovation or paper, got {other}"))),
+                }
+            }
+            "phase_noise_rad" => p.phase_noise_rad = Some(f()?),
+            "init_window_s" => p.init_window_s = f()?,
+            "init_max_window_s" => p.init_max_window_s = f()?,
+            "init_position_sigma_m" => p.init_position_sigma_m = f()?,
+            "init_velocity_sigma_m_s" => p.init_velocity_sigma_m_s = f()?,
+            "quick_stop" => p.quick_stop = f()?,
+            "gate_sigmas" => p.gate_sigmas = f()?,
+            "max_consecutive_outliers" => p.max_consecutive_outliers = value.extract()?,
+            "reinit_gap_s" => p.reinit_gap_s = f()?,
+            "region_margin_m" => p.region_margin_m = f()?,
+            "merge_distance_m" => p.merge_distance_m = f()?,
+            "max_hypotheses" => p.max_hypotheses = value.extract()?,
+            "perimeter_threshold_m" => p.initial.perimeter_threshold_m = f()?,
+            "residual_threshold_m" => p.initial.residual_threshold_m = f()?,
+            "interpolation_sigma_m" => p.initial.interpolation_sigma_m = f()?,
+            "init_max_hypotheses" => p.initial.max_hypotheses = value.extract()?,
+            other => return Err(PyKeyError::new_err(format!("unknown GLAC parameter '{other}'"))),
+        }
+    }
+    Ok(p)
+}
+
+fn stats_dict<'py>(py: Python<'py>, s: &TrackerStats) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("measurements", s.measurements)?;
+    d.set_item("out_of_order", s.out_of_order)?;
+    d.set_item("invalid", s.invalid)?;
+    d.set_item("outliers", s.outliers)?;
+    d.set_item("initialising", s.initialising)?;
+    d.set_item("reinitialisations", s.reinitialisations)?;
+    d.set_item("max_hypotheses", s.max_hypotheses)?;
+    d.set_item("filter_updates", s.filter_updates)?;
+    Ok(d)
+}
+
+/// Columnar estimates: `row` is the index of the input row that produced each.
+#[derive(Default)]
+struct Columns {
+    row: Vec<i64>,
+    time_s: Vec<f64>,
+    position: Vec<f64>,
+    velocity: Vec<f64>,
+    covariance: Vec<f64>,
+    hypotheses: Vec<i64>,
+    weight: Vec<f64>,
+}
+
+impl Columns {
+    fn push(&mut self, row: usize, e: &Estimate) {
+        self.row.push(row as i64);
+        self.time_s.push(e.time_s);
+        self.position.extend_from_slice(&e.position);
+        self.velocity.extend_from_slice(&e.velocity);
+        self.covariance.extend_from_slice(&e.covariance);
+        self.hypotheses.push(e.hypotheses as i64);
+        self.weight.push(e.weight);
+    }
+
+    fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+        let n = self.row.len();
+        let d = PyDict::new(py);
+        d.set_item("row", self.row.into_pyarray(py))?;
+        d.set_item("time_s", self.time_s.into_pyarray(py))?;
+        let reshape = |v: Vec<f64>, k: usize| -> PyResult<Bound<'_, PyArray2<f64>>> {
+            v.into_pyarray(py).reshape([n, k]).map_err(value_error)
+        };
+        d.set_item("position", reshape(self.position, 3)?)?;
+        d.set_item("velocity", reshape(self.velocity, 3)?)?;
+        d.set_item("covariance", reshape(self.covariance, 36)?)?;
+        d.set_item("hypotheses", self.hypotheses.into_pyarray(py))?;
+        d.set_item("weight", self.weight.into_pyarray(py))?;
+        Ok(d)
+    }
+}
+
+fn estimate_tuple(e: Estimate) -> (f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64) {
+    (e.time_s, e.position, e.velocity, e.covariance.to_vec(), e.hypotheses, e.weight)
+}
+
+/// Many tags, one tracker each (a thin wrapper over `engine::Engine`).
+#[pyclass(module = "scattertrack._core")]
+struct Engine {
+    inner: CoreEngine,
+    antennas: usize,
+}
+
+#[pymethods]
+impl Engine {
+    #[new]
+    #[pyo3(signature = (dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions,
+        antenna_offsets, region, channel_frequencies, channel_offsets, method, params=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        dimensions: usize,
+        plane_z: f64,
+        phase_sign: f64,
+        phase_period: f64,
+        phase_noise_rad: f64,
+        antenna_positions: PyReadonlyArray2<f64>,
+        antenna_offsets: PyReadonlyArray1<f64>,
+        region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
+        channel_frequencies: PyReadonlyArray1<f64>,
+        channel_offsets: PyReadonlyArray1<f64>,
+        method: &str,
+        params: Option<&Bound<'_, PyDict>>,
+    ) -> PyResult<Self> {
+        let scene = make_scene(
+            dimensions,
+            plane_z,
+            phase_sign,
+            phase_period,
+            phase_noise_rad,
+            antenna_positions,
+            antenna_offsets,
+            region,
+            channel_frequencies,
+            channel_offsets,
+        )?;
+        let antennas = scene.antennas.len();
+        let inner = CoreEngine::new(scene, method, make_params(params)?).map_err(value_error)?;
+        Ok(Self { inner, antennas })
+    }
+
+    /// One measurement of tag `tag` → `None` or
+    /// `(time_s, position, velocity, covariance[36], hypotheses, weight)`.
+    fn step(
+        &mut self,
+        tag: usize,
+        time_s: f64,
+        antenna: usize,
+        frequency_hz: f64,
+        phase_rad: f64,
+    ) -> Option<(f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64)> {
+        let m = Measurement { time_s, antenna, frequency_hz, phase_rad };
+        self.inner.step(tag, &m).map(estimate_tuple)
+    }
+
+    /// Runs time-ordered columns through `step` (the GIL is released) and
+    /// returns the estimates as columns, with `row` the producing input row.
+    fn run<'py>(
+        &mut self,
+        py: Python<'py>,
+        tag: PyReadonlyArray1<i64>,
+        time_s: PyReadonlyArray1<f64>,
+        antenna: PyReadonlyArray1<i64>,
+        frequency_hz: PyReadonlyArray1<f64>,
+        phase_rad: PyReadonlyArray1<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (tag, t, a, f, ph) =
+            (tag.as_array(), time_s.as_array(), antenna.as_array(), frequency_hz.as_array(), phase_rad.as_array());
+        let n = t.len();
+        if [tag.len(), a.len(), f.len(), ph.len()].iter().any(|&l| l != n) {
+            return Err(value_error("all columns must have the same length"));
+        }
+        if let Some(bad) = a.iter().position(|&x| x < 0 || x as usize >= self.antennas) {
+            return Err(value_error(format!("row {bad}: antenna index {} out of range", a[bad])));
+        }
+        if tag.iter().any(|&x| x < 0) {
+            return Err(value_error("tag indices must be non-negative"));
+        }
+        let (tag, t, a, f, ph) = (tag.to_vec(), t.to_vec(), a.to_vec(), f.to_vec(), ph.to_vec());
+        let inner = &mut self.inner;
+        let columns = py.detach(move || {
+            let mut c = Columns::default();
+            for i in 0..n {
+                let m = Measurement { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] };
+                if let Some(e) = inner.step(tag[i] as usize, &m) {
+                    c.push(i, &e);
+                }
+            }
+            c
+        });
+        columns.into_dict(py)
+    }
+
+    /// Counters of tag `tag`.
+    fn stats<'py>(&self, py: Python<'py>, tag: usize) -> PyResult<Bound<'py, PyDict>> {
+        stats_dict(py, &self.inner.stats(tag))
+    }
+
+    /// (count, mean_ns, max_ns) of `step` calls so far.
+    fn latency(&self) -> (u64, f64, u64) {
+        let l = self.inner.latency();
+        (l.count, l.mean_ns(), l.max_ns)
+    }
+}
+
+/// Registered method names.
+#[pyfunction]
+fn methods() -> Vec<&'static str> {
+    track::METHODS.to_vec()
+}
+
+/// Default GLAC parameters as a dict (the names `Engine` accepts).
+#[pyfunction]
+fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
+    let p = GlacParams::default();
+    let d = PyDict::new(py);
+    let q = match p.motion {
+        MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
+    };
+    d.set_item("q", q)?;
+    d.set_item("motion", "constant-velocity")?;
+    d.set_item("inference", "fast")?;
+    d.set_item("likelihood", "innovation")?;
+    d.set_item("init_window_s", p.init_window_s)?;
+    d.set_item("init_max_window_s", p.init_max_window_s)?;
+    d.set_item("init_position_sigma_m", p.init_position_sigma_m)?;
+    d.set_item("init_velocity_sigma_m_s", p.init_velocity_sigma_m_s)?;
+    d.set_item("quick_stop", p.quick_stop)?;
+    d.set_item("gate_sigmas", p.gate_sigmas)?;
+    d.set_item("max_consecutive_outliers", p.max_consecutive_outliers)?;
+    d.set_item("reinit_gap_s", p.reinit_gap_s)?;
+    d.set_item("region_margin_m", p.region_margin_m)?;
+    d.set_item("merge_distance_m", p.merge_distance_m)?;
+    d.set_item("max_hypotheses", p.max_hypotheses)?;
+    d.set_item("perimeter_threshold_m", p.initial.perimeter_threshold_m)?;
+    d.set_item("residual_threshold_m", p.initial.residual_threshold_m)?;
+    d.set_item("interpolation_sigma_m", p.initial.interpolation_sigma_m)?;
+    d.set_item("init_max_hypotheses", p.initial.max_hypotheses)?;
+    Ok(d)
+}
+
+#[pymodule]
+fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<Engine>()?;
+    m.add_function(wrap_pyfunction!(methods, m)?)?;
+    m.add_function(wrap_pyfunction!(default_params, m)?)?;
+    Ok(())
+}
+
