@@ -13,9 +13,14 @@ Sub-packages, one role each: ``io`` (public formats), ``sim`` (simulators),
 ``cli`` (the ``scattertrack`` command).
 """
 
+# Defined before the sub-packages are imported: they read it (simulation records).
+__version__ = "0.1.0"
+
 from scattertrack import io
 from scattertrack.io.types import FormatError, Reads, Scene, Track, Truth
 
-__version__ = "0.1.0"
+# After io: sim, track and eval build on its types. eval imports matplotlib
+# only when a figure is drawn, so these imports stay cheap.
+from scattertrack import eval, sim, track  # noqa: E402
 
-__all__ = ["io", "FormatError", "Reads", "Scene", "Track", "Truth", "__version__"]
+__all__ = ["eval", "io", "sim", "track", "FormatError", "Reads", "Scene", "Track", "Truth", "__version__"]

@@ -39,6 +39,8 @@ class Engine:
     ) -> dict[str, np.ndarray]:
         """Columns row, time_s, position (n,3), velocity (n,3), covariance (n,36), hypotheses, weight."""
     def stats(self, tag: int) -> dict[str, int]: ...
+    def hypotheses(self, tag: int) -> list[tuple[list[float], float]]:
+        """Live hypotheses: (position m, normalised log-likelihood)."""
     def latency(self) -> tuple[int, float, int]:
         """(count, mean_ns, max_ns) of step calls."""
 

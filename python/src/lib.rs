@@ -109,6 +109,8 @@ fn make_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
             "region_margin_m" => p.region_margin_m = f()?,
             "merge_distance_m" => p.merge_distance_m = f()?,
             "max_hypotheses" => p.max_hypotheses = value.extract()?,
+            "max_process_scale" => p.max_process_scale = f()?,
+            "process_scale_smoothing" => p.process_scale_smoothing = f()?,
             "perimeter_threshold_m" => p.initial.perimeter_threshold_m = f()?,
             "residual_threshold_m" => p.initial.residual_threshold_m = f()?,
             "interpolation_sigma_m" => p.initial.interpolation_sigma_m = f()?,
@@ -277,6 +279,11 @@ impl Engine {
         stats_dict(py, &self.inner.stats(tag))
     }
 
+    /// Live hypotheses of tag `tag`: [(position, normalised log-likelihood)].
+    fn hypotheses(&self, tag: usize) -> Vec<([f64; 3], f64)> {
+        self.inner.hypotheses(tag)
+    }
+
     /// (count, mean_ns, max_ns) of `step` calls so far.
     fn latency(&self) -> (u64, f64, u64) {
         let l = self.inner.latency();
@@ -313,6 +320,8 @@ fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("region_margin_m", p.region_margin_m)?;
     d.set_item("merge_distance_m", p.merge_distance_m)?;
     d.set_item("max_hypotheses", p.max_hypotheses)?;
+    d.set_item("max_process_scale", p.max_process_scale)?;
+    d.set_item("process_scale_smoothing", p.process_scale_smoothing)?;
     d.set_item("perimeter_threshold_m", p.initial.perimeter_threshold_m)?;
     d.set_item("residual_threshold_m", p.initial.residual_threshold_m)?;
     d.set_item("interpolation_sigma_m", p.initial.interpolation_sigma_m)?;

@@ -73,6 +73,11 @@ impl Engine {
         self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(TrackerStats::default, |t| t.stats())
     }
 
+    /// Live hypotheses of tag `tag` (position m, normalised log-likelihood).
+    pub fn hypotheses(&self, tag: usize) -> Vec<([f64; 3], f64)> {
+        self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(Vec::new, |t| t.hypotheses())
+    }
+
     pub fn latency(&self) -> Latency {
         self.latency
     }

@@ -302,6 +302,7 @@ class CsvReader:
 
 def format_fixed(values: np.ndarray, decimals: int, empty_nan: bool = False) -> list[str]:
     """Format floats with ``decimals`` places; nan as "" if ``empty_nan`` else "nan"."""
+    values = np.asarray(values, dtype=np.float64)
     pattern = f"%.{decimals}f"
     out = [pattern % v for v in values.tolist()]
     if empty_nan:

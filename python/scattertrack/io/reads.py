@@ -44,8 +44,11 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
     ``"duplicate row"``; rows out of time order are counted in ``reordered``.
     Raises :class:`FormatError` (file, line, column) for a malformed file.
     """
-    period = scene.reader.period_rad if scene is not None else 2.0 * math.pi
-    antenna_ids = np.array([a.id for a in scene.antennas], dtype=np.int64) if scene else None
+    period = 2.0 * math.pi
+    antenna_ids = None
+    if scene is not None:
+        period = scene.reader.period_rad
+        antenna_ids = np.array([a.id for a in scene.antennas], dtype=np.int64)
     parts = []
     lines = []
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:

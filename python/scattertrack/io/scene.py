@@ -34,7 +34,15 @@ KINDS_WITH_ANTENNAS = ("cots", "sdr-helper")
 """Reader kinds whose phase model needs antenna positions."""
 ROLES = ("txrx", "tx", "rx")
 PERIODS = ("2pi", "pi")
-KNOWN_TOP_LEVEL = ("name", "dimensions", "plane_z", "reader", "antennas", "region", "channel_offsets")
+KNOWN_TOP_LEVEL = (
+    "name",
+    "dimensions",
+    "plane_z",
+    "reader",
+    "antennas",
+    "region",
+    "channel_offsets",
+)
 
 
 def read_scene(path) -> Scene:
@@ -302,7 +310,15 @@ class _SceneChecker:
 # --- writing ----------------------------------------------------------------
 
 _BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-_ESCAPES = {'"': '\\"', "\\": "\\\\", "\b": "\\b", "\t": "\\t", "\n": "\\n", "\f": "\\f", "\r": "\\r"}
+_ESCAPES = {
+    '"': '\\"',
+    "\\": "\\\\",
+    "\b": "\\b",
+    "\t": "\\t",
+    "\n": "\\n",
+    "\f": "\\f",
+    "\r": "\\r",
+}
 
 
 def _toml_key(key: str) -> str:

@@ -101,6 +101,12 @@ class Tracker:
         """What the tag's tracker did with its reads, by reason."""
         return dict(self._engine.stats(self._tags[str(epc)])) if str(epc) in self._tags else {}
 
+    def hypotheses(self, epc: str) -> list[tuple[np.ndarray, float]]:
+        """Live candidate trajectories of a tag: (position m, normalised log-likelihood)."""
+        if str(epc) not in self._tags:
+            return []
+        return [(np.array(p), w) for p, w in self._engine.hypotheses(self._tags[str(epc)])]
+
     def latency(self) -> tuple[int, float, int]:
         """(steps, mean ns, max ns) of the Rust step calls."""
         return self._engine.latency()

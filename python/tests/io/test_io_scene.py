@@ -93,7 +93,8 @@ def test_round_trip_minimal_scene_and_methods(tmp_path):
 
 
 def test_defaults_and_unknown_keys(write_file):
-    text = GOOD.replace('name = "four-antennas"', 'name = "x"\nowner = "lab"') + '[notes]\ntext = "hi"\n'
+    text = GOOD.replace('name = "four-antennas"', 'name = "x"\nowner = "lab"')
+    text += '[notes]\ntext = "hi"\n'
     scene = read_scene(write_file("scene.toml", text))
     assert scene.reader == Reader("cots", -1, "2pi", None)
     assert [a.id for a in scene.antennas] == [1, 2, 3]
@@ -159,7 +160,8 @@ def test_dimensions_2_without_plane_z(write_file):
 
 
 def test_dimensions_2_with_plane_z(write_file):
-    scene = read_scene(write_file("scene.toml", GOOD.replace("dimensions = 3", "dimensions = 2\nplane_z = 0.5")))
+    text = GOOD.replace("dimensions = 3", "dimensions = 2\nplane_z = 0.5")
+    scene = read_scene(write_file("scene.toml", text))
     assert scene.dimensions == 2 and scene.plane_z == 0.5
 
 
@@ -210,7 +212,8 @@ def test_bad_reader_kind_and_period(write_file):
 
 
 def test_bad_phase_noise(write_file):
-    error = error_for(write_file, GOOD.replace("phase_sign = -1", "phase_sign = -1\nphase_noise_rad = 0"))
+    text = GOOD.replace("phase_sign = -1", "phase_sign = -1\nphase_noise_rad = 0")
+    error = error_for(write_file, text)
     assert (error.line, error.column) == (7, "reader.phase_noise_rad")
 
 

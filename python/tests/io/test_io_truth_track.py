@@ -5,7 +5,19 @@ import math
 import numpy as np
 import pytest
 
-from scattertrack.io import FormatError, Track, Truth, read_track, read_truth, write_track, write_truth
+from scattertrack.io import (
+    FormatError,
+    Track,
+    Truth,
+    read_track,
+    read_truth,
+    write_track,
+    write_truth,
+)
+
+
+HEADER = "time_s,epc,x,y,z,vx,vy,vz\n"
+"""The required columns of track.csv."""
 
 
 def make_truth(n: int = 50, with_velocity: bool = True) -> Truth:
@@ -115,7 +127,9 @@ def assert_track_equal(a: Track, b: Track) -> None:
             np.testing.assert_array_equal(x, y)
 
 
-@pytest.mark.parametrize("sigma,orientation", [(True, True), (False, False), (True, False), (False, True)])
+@pytest.mark.parametrize(
+    "sigma,orientation", [(True, True), (False, False), (True, False), (False, True)]
+)
 def test_track_round_trip(tmp_path, sigma, orientation):
     track = make_track(sigma=sigma, orientation=orientation)
     write_track(tmp_path / "track.csv", track)
@@ -132,7 +146,7 @@ def test_track_writes_nan_velocity_literally(tmp_path):
 
 
 def test_track_keeps_file_order_across_tags(write_file):
-    text = "time_s,epc,x,y,z,vx,vy,vz\n0.2,B,0,0,0,nan,nan,nan\n0.1,A,0,0,0,0,0,0\n0.3,A,1,0,0,0,0,0\n"
+    text = HEADER + "0.2,B,0,0,0,nan,nan,nan\n0.1,A,0,0,0,0,0,0\n0.3,A,1,0,0,0,0,0\n"
     track = read_track(write_file("track.csv", text))
     assert track.epc.tolist() == ["B", "A", "A"]
     assert track.sigma is None and track.orientation is None
@@ -152,8 +166,6 @@ def track_error(write_file, text: str) -> FormatError:
     assert caught.value.path == str(path)
     return caught.value
 
-
-HEADER = "time_s,epc,x,y,z,vx,vy,vz\n"
 
 
 def test_track_nan_only_allowed_in_velocity(write_file):

@@ -98,6 +98,16 @@ impl Transition {
                     p[(i, c)] += dt * p[(i + 3, c)];
                 }
             }
+            // The two passes add the same terms in a different order above
+            // and below the diagonal; re-symmetrise so rounding cannot
+            // accumulate into an asymmetric P over thousands of steps.
+            for r in 0..6 {
+                for c in r + 1..6 {
+                    let v = 0.5 * (p[(r, c)] + p[(c, r)]);
+                    p[(r, c)] = v;
+                    p[(c, r)] = v;
+                }
+            }
         }
         let [pp, pv, vv] = self.q_blocks;
         for i in 0..self.axes {

@@ -93,6 +93,14 @@ pub struct GlacParams {
     pub merge_distance_m: f64,
     /// Cap on live hypotheses (bounds naive inference's memory).
     pub max_hypotheses: usize,
+    /// Manoeuvre adaptation: Q is scaled by the recent mean normalised
+    /// innovation squared (NIS, expected 1), clamped to
+    /// [1, `max_process_scale`]; 1 disables it. A robot arm alternates
+    /// between near-constant velocity (small q: accurate velocity) and
+    /// sharp turns (large q: no loss of lock), which one fixed q cannot serve.
+    pub max_process_scale: f64,
+    /// Smoothing factor of the NIS average (weight of the newest reading).
+    pub process_scale_smoothing: f64,
 }
 
 impl Default for GlacParams {
@@ -114,6 +122,8 @@ impl Default for GlacParams {
             region_margin_m: 0.05,
             merge_distance_m: 0.002,
             max_hypotheses: 200_000,
+            max_process_scale: 1.0,
+            process_scale_smoothing: 0.1,
         }
     }
 }
@@ -152,6 +162,12 @@ impl GlacParams {
         if !(q > 0.0 && q.is_finite()) {
             return Err(Error::Parameter { name: "q".into(), reason: format!("process noise must be positive, got {q}") });
         }
+        if !(self.max_process_scale >= 1.0) || !(self.process_scale_smoothing > 0.0 && self.process_scale_smoothing <= 1.0) {
+            return Err(Error::Parameter {
+                name: "max_process_scale".into(),
+                reason: "max_process_scale must be >= 1 and process_scale_smoothing in (0, 1]".into(),
+            });
+        }
         if self.max_hypotheses == 0 {
             return Err(Error::Parameter { name: "max_hypotheses".into(), reason: "must be at least 1".into() });
         }
@@ -168,6 +184,9 @@ struct Hypotheses {
     log_likelihood: Vec<f64>,
     /// Consecutive gated readings.
     outliers: Vec<u32>,
+    /// Running mean of the normalised innovation squared ν²/S (1 when the
+    /// filter is consistent), driving the manoeuvre adaptation of Q.
+    nis: Vec<f64>,
 }
 
 impl Hypotheses {
@@ -180,6 +199,7 @@ impl Hypotheses {
         self.p.clear();
         self.log_likelihood.clear();
         self.outliers.clear();
+        self.nis.clear();
     }
 
     fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
@@ -187,6 +207,7 @@ impl Hypotheses {
         self.p.push(p);
         self.log_likelihood.push(log_likelihood);
         self.outliers.push(0);
+        self.nis.push(1.0);
     }
 
     /// Keeps the hypotheses for which `keep(i)` holds, in order.
@@ -198,6 +219,7 @@ impl Hypotheses {
                 self.p.swap(w, r);
                 self.log_likelihood.swap(w, r);
                 self.outliers.swap(w, r);
+                self.nis.swap(w, r);
                 w += 1;
             }
         }
@@ -205,6 +227,7 @@ impl Hypotheses {
         self.p.truncate(w);
         self.log_likelihood.truncate(w);
         self.outliers.truncate(w);
+        self.nis.truncate(w);
     }
 
     /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp) and
@@ -282,17 +305,6 @@ impl Glac {
     /// Live hypotheses.
     pub fn hypothesis_count(&self) -> usize {
         self.hypotheses.len()
-    }
-
-    /// Positions (m) and normalised log-likelihoods of all live hypotheses,
-    /// for plots like the paper's Fig. 5.
-    pub fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
-        (0..self.hypotheses.len())
-            .map(|i| {
-                let x = &self.hypotheses.x[i];
-                ([x[0], x[1], x[2]], self.hypotheses.log_likelihood[i])
-            })
-            .collect()
     }
 
     fn phase_noise(&self) -> f64 {
@@ -390,24 +402,32 @@ impl Glac {
     /// normalisation, quick stop, region constraint.
     fn step_fast(&mut self, m: &Measurement) {
         let dt = (m.time_s - self.time_s).max(0.0);
-        let transition = self.params.motion.transition(dt, self.axes);
+        let base = self.params.motion.transition(dt, self.axes);
         let antenna = self.scene.antennas[m.antenna].position;
         let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
         let spacing = self.scene.candidate_spacing(m.frequency_hz);
         let r = self.range_variance(m.frequency_hz);
         let gate2 = self.params.gate_sigmas * self.params.gate_sigmas;
+        let (max_scale, alpha) = (self.params.max_process_scale, self.params.process_scale_smoothing);
         // Log-likelihood charged for a gated reading: the density at the
         // gate, so a hypothesis cannot gain by rejecting data.
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
             let (x, p) = (&mut h.x[i], &mut h.p[i]);
             let x_prior = *x;
+            let mut transition = base;
+            if max_scale > 1.0 {
+                let scale = h.nis[i].clamp(1.0, max_scale);
+                transition.q_blocks.iter_mut().for_each(|q| *q *= scale);
+            }
             predict(x, p, &transition);
             let (d, jac) = range(x, &antenna, self.axes, true);
             let jac = jac.unwrap();
             let z = nearest_candidate(residue, spacing, d);
             let (u, b) = innovation(p, z, d, &jac, r);
-            let accepted = u.innovation * u.innovation <= gate2 * u.variance;
+            let nis = u.innovation * u.innovation / u.variance;
+            h.nis[i] += alpha * (nis.min(gate2) - h.nis[i]);
+            let accepted = nis <= gate2;
             let log_l = if accepted {
                 h.outliers[i] = 0;
                 apply_scalar(x, p, &u, &b);
@@ -716,6 +736,15 @@ impl Tracker for Glac {
 
     fn stats(&self) -> TrackerStats {
         self.stats
+    }
+
+    fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
+        (0..self.hypotheses.len())
+            .map(|i| {
+                let x = &self.hypotheses.x[i];
+                ([x[0], x[1], x[2]], self.hypotheses.log_likelihood[i])
+            })
+            .collect()
     }
 
     fn reset(&mut self) {

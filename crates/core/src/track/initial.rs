@@ -44,6 +44,13 @@ pub struct InitialState {
     pub merge_distance_m: f64,
     /// At most this many hypotheses (best likelihood first).
     pub max_hypotheses: usize,
+    /// Fastest plausible range rate, m/s: unwrapping two reads of one
+    /// antenna also tries the branches one ambiguity step away when the
+    /// tag could have moved that far between them.
+    pub max_speed_m_s: f64,
+    /// An antenna whose two reads around t_x are further apart than this
+    /// (s) is left out: too many unwrapping branches.
+    pub max_pair_gap_s: f64,
 }
 
 impl Default for InitialState {
@@ -55,6 +62,8 @@ impl Default for InitialState {
             region_margin_m: 0.05,
             merge_distance_m: 0.01,
             max_hypotheses: 2000,
+            max_speed_m_s: 0.6,
+            max_pair_gap_s: 0.3,
         }
     }
 }
@@ -122,9 +131,11 @@ pub fn initial_hypotheses(
     let t_x = usable.iter().map(|&a| per_antenna[a].last().unwrap().time_s).fold(f64::INFINITY, f64::min);
 
     let axes = scene.dimensions;
-    let lists: Vec<AntennaCandidates> =
-        usable.iter().map(|&a| synchronise(scene, a, &per_antenna[a], t_x, settings.region_margin_m)).collect();
-    if lists.iter().any(|l| l.candidates.is_empty()) {
+    let (usable, lists): (Vec<usize>, Vec<AntennaCandidates>) = usable
+        .iter()
+        .filter_map(|&a| synchronise(scene, a, &per_antenna[a], t_x, settings).map(|l| (a, l)))
+        .unzip();
+    if usable.len() < 3 || lists.iter().any(|l| l.candidates.is_empty()) {
         return None;
     }
 
@@ -242,15 +253,24 @@ pub fn initial_covariance(axes: usize, position_sigma: f64, velocity_sigma: f64)
     p
 }
 
-/// Candidate (distance, range rate) pairs of one antenna at t_x.
+/// Candidate (distance, range rate) pairs of one antenna at t_x, or
+/// `None` when its reads around t_x are too far apart to unwrap.
 ///
 /// The two reads nearest t_x that bracket it (or the last two, when t_x
-/// is this antenna's last read) are unwrapped candidate by candidate:
-/// for each candidate of the first read, the second read's nearest
-/// candidate (the tag moves far less than λ/4 between two reads of one
-/// antenna). Linear interpolation to t_x gives the distance, and the slope
-/// gives the projected velocity Δd/Δt = Δφ λ / (4π Δt).
-fn synchronise(scene: &Scene, antenna: usize, reads: &[&Measurement], t_x: f64, margin: f64) -> AntennaCandidates {
+/// is this antenna's last read) are unwrapped candidate by candidate: for
+/// each candidate of the first read, the second read's nearest candidate
+/// (the tag usually moves far less than half an ambiguity step between two
+/// reads of one antenna), plus the next branches when `max_speed_m_s`
+/// allows the tag to have moved that far (long gaps, mod-π readers).
+/// Linear interpolation to t_x gives the distance, and the slope gives the
+/// projected velocity Δd/Δt = Δφ λ / (4π Δt).
+fn synchronise(
+    scene: &Scene,
+    antenna: usize,
+    reads: &[&Measurement],
+    t_x: f64,
+    settings: &InitialState,
+) -> Option<AntennaCandidates> {
     let after = reads.iter().position(|m| m.time_s > t_x).unwrap_or(reads.len());
     let (ia, ib) = if after == 0 {
         (0, 1)
@@ -260,25 +280,35 @@ fn synchronise(scene: &Scene, antenna: usize, reads: &[&Measurement], t_x: f64, 
         (after - 1, after)
     };
     let (ra, rb) = (reads[ia], reads[ib]);
+    let dt = (rb.time_s - ra.time_s).max(1e-6);
+    if dt > settings.max_pair_gap_s {
+        return None;
+    }
     let (res_a, s_a) = (scene.distance_residue(antenna, ra.frequency_hz, ra.phase_rad), scene.candidate_spacing(ra.frequency_hz));
     let (res_b, s_b) = (scene.distance_residue(antenna, rb.frequency_hz, rb.phase_rad), scene.candidate_spacing(rb.frequency_hz));
     let (lo, hi) = scene.distance_bounds(antenna);
-    let (lo, hi) = ((lo - margin).max(0.0), hi + margin);
-    let dt = (rb.time_s - ra.time_s).max(1e-6);
+    let (lo, hi) = ((lo - settings.region_margin_m).max(0.0), hi + settings.region_margin_m);
     let alpha = (t_x - ra.time_s) / dt;
+    let reach = (settings.max_speed_m_s * dt).max(0.5 * s_b);
     let n_lo = ((lo - res_a) / s_a).floor().max(0.0) as i64;
     let n_hi = ((hi - res_a) / s_a).ceil() as i64 + 1;
     let mut candidates = Vec::with_capacity((n_hi - n_lo + 1).max(0) as usize);
     for n in n_lo..=n_hi {
         let d_a = res_a + n as f64 * s_a;
-        let d_b = nearest_candidate(res_b, s_b, d_a);
-        let distance = d_a + alpha * (d_b - d_a);
-        if distance >= lo && distance <= hi {
-            candidates.push(Candidate { distance, range_rate: (d_b - d_a) / dt });
+        let nearest = nearest_candidate(res_b, s_b, d_a);
+        for branch in -2i32..=2 {
+            let d_b = nearest + branch as f64 * s_b;
+            if branch != 0 && (d_b < 0.0 || (d_b - d_a).abs() > reach) {
+                continue;
+            }
+            let distance = d_a + alpha * (d_b - d_a);
+            if distance >= lo && distance <= hi {
+                candidates.push(Candidate { distance, range_rate: (d_b - d_a) / dt });
+            }
         }
     }
     candidates.sort_by(|a, b| a.distance.total_cmp(&b.distance));
-    AntennaCandidates { candidates }
+    Some(AntennaCandidates { candidates })
 }
 
 /// The antenna triple with the best geometry: the largest triangle (3D:

@@ -98,6 +98,11 @@ pub trait Tracker: Send + Sync {
     fn stats(&self) -> TrackerStats;
     /// Forgets everything (as if newly created), keeping the counters.
     fn reset(&mut self);
+    /// Live hypotheses: position (m) and normalised log-likelihood each,
+    /// for plots like GLAC's Fig. 5. Single-hypothesis methods return one.
+    fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
+        Vec::new()
+    }
 }
 
 /// Registered method names, for messages and the CLI.
