@@ -109,12 +109,14 @@ fn make_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
             "region_margin_m" => p.region_margin_m = f()?,
             "merge_distance_m" => p.merge_distance_m = f()?,
             "max_hypotheses" => p.max_hypotheses = value.extract()?,
-            "max_process_scale" => p.max_process_scale = f()?,
-            "process_scale_smoothing" => p.process_scale_smoothing = f()?,
+            "manoeuvre_q" => p.manoeuvre_q = if value.is_none() { None } else { Some(f()?) },
+            "model_switch_probability" => p.model_switch_probability = f()?,
             "perimeter_threshold_m" => p.initial.perimeter_threshold_m = f()?,
             "residual_threshold_m" => p.initial.residual_threshold_m = f()?,
             "interpolation_sigma_m" => p.initial.interpolation_sigma_m = f()?,
             "init_max_hypotheses" => p.initial.max_hypotheses = value.extract()?,
+            "init_max_speed_m_s" => p.initial.max_speed_m_s = f()?,
+            "init_max_pair_gap_s" => p.initial.max_pair_gap_s = f()?,
             other => return Err(PyKeyError::new_err(format!("unknown GLAC parameter '{other}'"))),
         }
     }
@@ -320,12 +322,14 @@ fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("region_margin_m", p.region_margin_m)?;
     d.set_item("merge_distance_m", p.merge_distance_m)?;
     d.set_item("max_hypotheses", p.max_hypotheses)?;
-    d.set_item("max_process_scale", p.max_process_scale)?;
-    d.set_item("process_scale_smoothing", p.process_scale_smoothing)?;
+    d.set_item("manoeuvre_q", p.manoeuvre_q)?;
+    d.set_item("model_switch_probability", p.model_switch_probability)?;
     d.set_item("perimeter_threshold_m", p.initial.perimeter_threshold_m)?;
     d.set_item("residual_threshold_m", p.initial.residual_threshold_m)?;
     d.set_item("interpolation_sigma_m", p.initial.interpolation_sigma_m)?;
     d.set_item("init_max_hypotheses", p.initial.max_hypotheses)?;
+    d.set_item("init_max_speed_m_s", p.initial.max_speed_m_s)?;
+    d.set_item("init_max_pair_gap_s", p.initial.max_pair_gap_s)?;
     Ok(d)
 }
 

@@ -70,7 +70,8 @@ def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
             dict(params),
         )
     except KeyError as error:
-        raise ValueError(str(error).strip("'\"")) from None
+        # KeyError's str() quotes its message; unwrap it for a clean message.
+        raise ValueError(error.args[0] if error.args else str(error)) from None
 
 
 class Tracker:

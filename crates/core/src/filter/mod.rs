@@ -6,5 +6,6 @@
 //! positive semi-definite (property-tested).
 
 mod ekf;
+pub mod imm;
 
 pub use ekf::{apply_scalar, innovation, log_gaussian, predict, update_position, update_scalar, ScalarUpdate};

@@ -31,7 +31,7 @@ use super::candidates::nearest_candidate;
 use super::initial::{initial_covariance, initial_hypotheses, InitialState};
 use super::{Estimate, Measurement, Tracker, TrackerStats};
 use crate::error::{Error, Result};
-use crate::filter::{apply_scalar, innovation, log_gaussian, predict, update_position};
+use crate::filter::{apply_scalar, imm, innovation, log_gaussian, predict, update_position};
 use crate::geometry::multilaterate;
 use crate::model::{range, MotionModel, StateMatrix, StateVector, Transition};
 use crate::scene::{Scene, SPEED_OF_LIGHT};
@@ -93,14 +93,14 @@ pub struct GlacParams {
     pub merge_distance_m: f64,
     /// Cap on live hypotheses (bounds naive inference's memory).
     pub max_hypotheses: usize,
-    /// Manoeuvre adaptation: Q is scaled by the recent mean normalised
-    /// innovation squared (NIS, expected 1), clamped to
-    /// [1, `max_process_scale`]; 1 disables it. A robot arm alternates
+    /// Process noise q (m²/s³) of a second, manoeuvring constant-velocity
+    /// model run as an IMM beside `motion` (fast inference only); `None`
+    /// keeps the paper's single model. A robot-carried tag alternates
     /// between near-constant velocity (small q: accurate velocity) and
-    /// sharp turns (large q: no loss of lock), which one fixed q cannot serve.
-    pub max_process_scale: f64,
-    /// Smoothing factor of the NIS average (weight of the newest reading).
-    pub process_scale_smoothing: f64,
+    /// sharp turns (large q: no loss of lock), which one q cannot serve.
+    pub manoeuvre_q: Option<f64>,
+    /// IMM Markov switch probability per reading.
+    pub model_switch_probability: f64,
 }
 
 impl Default for GlacParams {
@@ -108,7 +108,7 @@ impl Default for GlacParams {
         Self {
             inference: Inference::Fast,
             likelihood: Likelihood::Innovation,
-            motion: MotionModel::ConstantVelocity { q: 0.05 },
+            motion: MotionModel::ConstantVelocity { q: 0.02 },
             phase_noise_rad: None,
             init_window_s: 0.3,
             init_max_window_s: 1.0,
@@ -122,8 +122,8 @@ impl Default for GlacParams {
             region_margin_m: 0.05,
             merge_distance_m: 0.002,
             max_hypotheses: 200_000,
-            max_process_scale: 1.0,
-            process_scale_smoothing: 0.1,
+            manoeuvre_q: Some(1.0),
+            model_switch_probability: 0.05,
         }
     }
 }
@@ -162,11 +162,11 @@ impl GlacParams {
         if !(q > 0.0 && q.is_finite()) {
             return Err(Error::Parameter { name: "q".into(), reason: format!("process noise must be positive, got {q}") });
         }
-        if !(self.max_process_scale >= 1.0) || !(self.process_scale_smoothing > 0.0 && self.process_scale_smoothing <= 1.0) {
-            return Err(Error::Parameter {
-                name: "max_process_scale".into(),
-                reason: "max_process_scale must be >= 1 and process_scale_smoothing in (0, 1]".into(),
-            });
+        if self.manoeuvre_q.is_some_and(|q| !(q > 0.0 && q.is_finite())) {
+            return Err(Error::Parameter { name: "manoeuvre_q".into(), reason: "must be positive".into() });
+        }
+        if !(0.0..=0.5).contains(&self.model_switch_probability) {
+            return Err(Error::Parameter { name: "model_switch_probability".into(), reason: "must be in [0, 0.5]".into() });
         }
         if self.max_hypotheses == 0 {
             return Err(Error::Parameter { name: "max_hypotheses".into(), reason: "must be at least 1".into() });
@@ -176,17 +176,18 @@ impl GlacParams {
 }
 
 /// Candidate trajectories as flat arrays (struct of arrays): hypothesis
-/// `i` is `(x[i], p[i], log_likelihood[i], outliers[i])`.
+/// `i` is `(x[i], p[i], mu[i], log_likelihood[i], outliers[i])`. Each has
+/// two model-conditioned filters for the IMM; single-model trackers use
+/// slot 0 only (μ = [1, 0]).
 #[derive(Debug, Clone, Default)]
 struct Hypotheses {
-    x: Vec<StateVector>,
-    p: Vec<StateMatrix>,
+    x: Vec<[StateVector; 2]>,
+    p: Vec<[StateMatrix; 2]>,
+    /// Model probabilities μ (IMM).
+    mu: Vec<[f64; 2]>,
     log_likelihood: Vec<f64>,
     /// Consecutive gated readings.
     outliers: Vec<u32>,
-    /// Running mean of the normalised innovation squared ν²/S (1 when the
-    /// filter is consistent), driving the manoeuvre adaptation of Q.
-    nis: Vec<f64>,
 }
 
 impl Hypotheses {
@@ -197,17 +198,27 @@ impl Hypotheses {
     fn clear(&mut self) {
         self.x.clear();
         self.p.clear();
+        self.mu.clear();
         self.log_likelihood.clear();
         self.outliers.clear();
-        self.nis.clear();
     }
 
     fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
-        self.x.push(x);
-        self.p.push(p);
+        self.x.push([x, x]);
+        self.p.push([p, p]);
+        self.mu.push([1.0, 0.0]);
         self.log_likelihood.push(log_likelihood);
         self.outliers.push(0);
-        self.nis.push(1.0);
+    }
+
+    /// The reported state of hypothesis `i`: the IMM combination (which
+    /// is slot 0 itself for single-model trackers, where μ = [1, 0]).
+    fn state(&self, i: usize) -> (StateVector, StateMatrix) {
+        if self.mu[i][1] == 0.0 {
+            (self.x[i][0], self.p[i][0])
+        } else {
+            imm::combine(&self.x[i], &self.p[i], &self.mu[i])
+        }
     }
 
     /// Keeps the hypotheses for which `keep(i)` holds, in order.
@@ -217,17 +228,17 @@ impl Hypotheses {
             if keep(r) {
                 self.x.swap(w, r);
                 self.p.swap(w, r);
+                self.mu.swap(w, r);
                 self.log_likelihood.swap(w, r);
                 self.outliers.swap(w, r);
-                self.nis.swap(w, r);
                 w += 1;
             }
         }
         self.x.truncate(w);
         self.p.truncate(w);
+        self.mu.truncate(w);
         self.log_likelihood.truncate(w);
         self.outliers.truncate(w);
-        self.nis.truncate(w);
     }
 
     /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp) and
@@ -402,49 +413,83 @@ impl Glac {
     /// normalisation, quick stop, region constraint.
     fn step_fast(&mut self, m: &Measurement) {
         let dt = (m.time_s - self.time_s).max(0.0);
-        let base = self.params.motion.transition(dt, self.axes);
+        let transition = self.params.motion.transition(dt, self.axes);
+        let manoeuvre = self.params.manoeuvre_q.map(|q| MotionModel::ConstantVelocity { q }.transition(dt, self.axes));
+        let switch = self.params.model_switch_probability;
         let antenna = self.scene.antennas[m.antenna].position;
         let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
         let spacing = self.scene.candidate_spacing(m.frequency_hz);
         let r = self.range_variance(m.frequency_hz);
         let gate2 = self.params.gate_sigmas * self.params.gate_sigmas;
-        let (max_scale, alpha) = (self.params.max_process_scale, self.params.process_scale_smoothing);
         // Log-likelihood charged for a gated reading: the density at the
         // gate, so a hypothesis cannot gain by rejecting data.
+        let gated_log_l = |s: f64| -0.5 * (gate2 + (2.0 * std::f64::consts::PI * s).ln());
+        let likelihood = self.params.likelihood;
+        let axes = self.axes;
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
-            let (x, p) = (&mut h.x[i], &mut h.p[i]);
-            let x_prior = *x;
-            let mut transition = base;
-            if max_scale > 1.0 {
-                let scale = h.nis[i].clamp(1.0, max_scale);
-                transition.q_blocks.iter_mut().for_each(|q| *q *= scale);
-            }
-            predict(x, p, &transition);
-            let (d, jac) = range(x, &antenna, self.axes, true);
-            let jac = jac.unwrap();
-            let z = nearest_candidate(residue, spacing, d);
-            let (u, b) = innovation(p, z, d, &jac, r);
-            let nis = u.innovation * u.innovation / u.variance;
-            h.nis[i] += alpha * (nis.min(gate2) - h.nis[i]);
-            let accepted = nis <= gate2;
-            let log_l = if accepted {
-                h.outliers[i] = 0;
-                apply_scalar(x, p, &u, &b);
-                match self.params.likelihood {
-                    Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
-                    Likelihood::Paper => {
-                        let d_post = range(x, &antenna, self.axes, false).0;
-                        log_gaussian(d_post - z, r) + transition_log_density(x, &x_prior, &transition)
+            let Some(manoeuvre) = manoeuvre else {
+                // The paper's single EKF per trajectory.
+                let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
+                let x_prior = *x;
+                predict(x, p, &transition);
+                let (d, jac) = range(x, &antenna, axes, true);
+                let z = nearest_candidate(residue, spacing, d);
+                let (u, b) = innovation(p, z, d, &jac.unwrap(), r);
+                let log_l = if u.innovation * u.innovation <= gate2 * u.variance {
+                    h.outliers[i] = 0;
+                    apply_scalar(x, p, &u, &b);
+                    match likelihood {
+                        Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
+                        Likelihood::Paper => {
+                            let d_post = range(x, &antenna, axes, false).0;
+                            log_gaussian(d_post - z, r) + transition_log_density(x, &x_prior, &transition)
+                        }
                     }
+                } else {
+                    h.outliers[i] += 1;
+                    gated_log_l(u.variance)
+                };
+                h.log_likelihood[i] += log_l;
+                continue;
+            };
+            // IMM over (motion, manoeuvre): mix, predict each, pick the
+            // candidate nearest the combined predicted range (eq. 9), update
+            // each, and score the reading with Σ c_j Λ_j.
+            let c = imm::mix(&mut h.x[i], &mut h.p[i], &h.mu[i], switch);
+            predict(&mut h.x[i][0], &mut h.p[i][0], &transition);
+            predict(&mut h.x[i][1], &mut h.p[i][1], &manoeuvre);
+            let predicted = h.x[i][0] * c[0] + h.x[i][1] * c[1];
+            let z = nearest_candidate(residue, spacing, range(&predicted, &antenna, axes, false).0);
+            let mut updates = [None, None];
+            let mut density = [0.0; 2];
+            let mut accepted = false;
+            for j in 0..2 {
+                let (d, jac) = range(&h.x[i][j], &antenna, axes, true);
+                let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), r);
+                accepted |= u.innovation * u.innovation <= gate2 * u.variance;
+                density[j] = log_gaussian(u.innovation, u.variance);
+                updates[j] = Some((u, b));
+            }
+            if accepted {
+                h.outliers[i] = 0;
+                let max = density[0].max(density[1]);
+                let w = [c[0] * (density[0] - max).exp(), c[1] * (density[1] - max).exp()];
+                let total = w[0] + w[1];
+                for j in 0..2 {
+                    let (u, b) = updates[j].unwrap();
+                    apply_scalar(&mut h.x[i][j], &mut h.p[i][j], &u, &b);
                 }
+                h.mu[i] = [w[0] / total, w[1] / total];
+                h.log_likelihood[i] += max + total.ln();
             } else {
                 h.outliers[i] += 1;
-                -0.5 * (gate2 + (2.0 * std::f64::consts::PI * u.variance).ln())
-            };
-            h.log_likelihood[i] += log_l;
+                h.mu[i] = c;
+                let s = updates[0].unwrap().0.variance.min(updates[1].unwrap().0.variance);
+                h.log_likelihood[i] += gated_log_l(s);
+            }
         }
-        self.stats.filter_updates += h.len() as u64;
+        self.stats.filter_updates += (h.len() * if manoeuvre.is_some() { 2 } else { 1 }) as u64;
         self.time_s = m.time_s;
         self.prune();
     }
@@ -466,7 +511,7 @@ impl Glac {
         self.scratch.clear();
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
-            let (mut x, mut p) = (h.x[i], h.p[i]);
+            let (mut x, mut p) = (h.x[i][0], h.p[i][0]);
             predict(&mut x, &mut p, &transition);
             let (d, jac) = range(&x, &antenna, self.axes, true);
             let jac = jac.unwrap();
@@ -540,7 +585,7 @@ impl Glac {
         let mut distances = vec![0.0; group.len()];
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
-            let (x, p) = (&mut h.x[i], &mut h.p[i]);
+            let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
             predict(x, p, &transition);
             let predicted = Vector3::new(x[0], x[1], x[2]);
             for (k, a) in anchors.iter().enumerate() {
@@ -598,7 +643,7 @@ impl Glac {
         let (region, axes) = (self.scene.region.clone(), self.axes);
         let alive: Vec<bool> = (0..h.len())
             .map(|i| {
-                let x = &h.x[i];
+                let x = &h.x[i][0];
                 let inside = region.as_ref().is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
                 h.log_likelihood[i] >= log_threshold && inside && h.outliers[i] < max_out && x.iter().all(|v| v.is_finite())
             })
@@ -618,7 +663,7 @@ impl Glac {
                 }
                 for j in i + 1..n {
                     if keep[j] {
-                        let dp = (h.x[i] - h.x[j]).fixed_rows::<3>(0).norm_squared();
+                        let dp = (h.x[i][0] - h.x[j][0]).fixed_rows::<3>(0).norm_squared();
                         if dp < md2 {
                             if h.log_likelihood[i] >= h.log_likelihood[j] {
                                 keep[j] = false;
@@ -641,14 +686,14 @@ impl Glac {
     fn best_estimate(&self, time_s: f64) -> Option<Estimate> {
         let h = &self.hypotheses;
         let best = (0..h.len()).max_by(|&a, &b| h.log_likelihood[a].total_cmp(&h.log_likelihood[b]))?;
-        let x = &h.x[best];
+        let (x, p) = h.state(best);
         let velocity =
             if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
         Some(Estimate {
             time_s,
             position: [x[0], x[1], x[2]],
             velocity,
-            covariance: Estimate::covariance_from(&h.p[best]),
+            covariance: Estimate::covariance_from(&p),
             hypotheses: h.len(),
             weight: h.log_likelihood[best].exp(),
         })
@@ -741,7 +786,7 @@ impl Tracker for Glac {
     fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
         (0..self.hypotheses.len())
             .map(|i| {
-                let x = &self.hypotheses.x[i];
+                let (x, _) = self.hypotheses.state(i);
                 ([x[0], x[1], x[2]], self.hypotheses.log_likelihood[i])
             })
             .collect()
