@@ -111,6 +111,7 @@ fn make_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
             "max_hypotheses" => p.max_hypotheses = value.extract()?,
             "manoeuvre_q" => p.manoeuvre_q = if value.is_none() { None } else { Some(f()?) },
             "model_switch_probability" => p.model_switch_probability = f()?,
+            "max_branching_hypotheses" => p.max_branching_hypotheses = value.extract()?,
             "perimeter_threshold_m" => p.initial.perimeter_threshold_m = f()?,
             "residual_threshold_m" => p.initial.residual_threshold_m = f()?,
             "interpolation_sigma_m" => p.initial.interpolation_sigma_m = f()?,
@@ -324,6 +325,7 @@ fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
     d.set_item("max_hypotheses", p.max_hypotheses)?;
     d.set_item("manoeuvre_q", p.manoeuvre_q)?;
     d.set_item("model_switch_probability", p.model_switch_probability)?;
+    d.set_item("max_branching_hypotheses", p.max_branching_hypotheses)?;
     d.set_item("perimeter_threshold_m", p.initial.perimeter_threshold_m)?;
     d.set_item("residual_threshold_m", p.initial.residual_threshold_m)?;
     d.set_item("interpolation_sigma_m", p.initial.interpolation_sigma_m)?;

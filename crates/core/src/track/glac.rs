@@ -101,6 +101,10 @@ pub struct GlacParams {
     pub manoeuvre_q: Option<f64>,
     /// IMM Markov switch probability per reading.
     pub model_switch_probability: f64,
+    /// Ambiguity branching (fast inference) only while fewer hypotheses
+    /// than this are live; 0 disables it (the paper's pure nearest
+    /// neighbour).
+    pub max_branching_hypotheses: usize,
 }
 
 impl Default for GlacParams {
@@ -124,6 +128,7 @@ impl Default for GlacParams {
             max_hypotheses: 200_000,
             manoeuvre_q: Some(1.0),
             model_switch_probability: 0.05,
+            max_branching_hypotheses: 16,
         }
     }
 }
@@ -209,6 +214,15 @@ impl Hypotheses {
         self.mu.push([1.0, 0.0]);
         self.log_likelihood.push(log_likelihood);
         self.outliers.push(0);
+    }
+
+    /// Appends a copy of hypothesis `i` (for ambiguity branching).
+    fn duplicate(&mut self, i: usize) {
+        self.x.push(self.x[i]);
+        self.p.push(self.p[i]);
+        self.mu.push(self.mu[i]);
+        self.log_likelihood.push(self.log_likelihood[i]);
+        self.outliers.push(self.outliers[i]);
     }
 
     /// The reported state of hypothesis `i`: the IMM combination (which
@@ -411,85 +425,49 @@ impl Glac {
     /// Fast inference: nearest-neighbour pruning (eq. 9), EKF update
     /// (eqs. 5–8), 3σ recovery, likelihood propagation (eqs. 11–13),
     /// normalisation, quick stop, region constraint.
+    ///
+    /// Ambiguity branching: nearest-neighbour pruning is safe only while
+    /// the predicted range is known to well under half a candidate step.
+    /// When 3√S exceeds s/2 (after a read gap or a hard manoeuvre, and
+    /// twice as often on mod-π readers) the hypothesis also branches onto
+    /// the second-nearest candidate, so a cycle slip leaves the true
+    /// trajectory alive; the wrong branch dies by quick stop within a few
+    /// readings. Bounded by `max_branching_hypotheses`.
     fn step_fast(&mut self, m: &Measurement) {
         let dt = (m.time_s - self.time_s).max(0.0);
-        let transition = self.params.motion.transition(dt, self.axes);
-        let manoeuvre = self.params.manoeuvre_q.map(|q| MotionModel::ConstantVelocity { q }.transition(dt, self.axes));
-        let switch = self.params.model_switch_probability;
-        let antenna = self.scene.antennas[m.antenna].position;
-        let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
-        let spacing = self.scene.candidate_spacing(m.frequency_hz);
-        let r = self.range_variance(m.frequency_hz);
-        let gate2 = self.params.gate_sigmas * self.params.gate_sigmas;
-        // Log-likelihood charged for a gated reading: the density at the
-        // gate, so a hypothesis cannot gain by rejecting data.
-        let gated_log_l = |s: f64| -0.5 * (gate2 + (2.0 * std::f64::consts::PI * s).ln());
-        let likelihood = self.params.likelihood;
-        let axes = self.axes;
+        let step = FastStep {
+            transition: self.params.motion.transition(dt, self.axes),
+            manoeuvre: self.params.manoeuvre_q.map(|q| MotionModel::ConstantVelocity { q }.transition(dt, self.axes)),
+            switch: self.params.model_switch_probability,
+            antenna: self.scene.antennas[m.antenna].position,
+            residue: self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
+            spacing: self.scene.candidate_spacing(m.frequency_hz),
+            r: self.range_variance(m.frequency_hz),
+            gate2: self.params.gate_sigmas * self.params.gate_sigmas,
+            likelihood: self.params.likelihood,
+            axes: self.axes,
+        };
         let h = &mut self.hypotheses;
-        for i in 0..h.len() {
-            let Some(manoeuvre) = manoeuvre else {
-                // The paper's single EKF per trajectory.
-                let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
-                let x_prior = *x;
-                predict(x, p, &transition);
-                let (d, jac) = range(x, &antenna, axes, true);
-                let z = nearest_candidate(residue, spacing, d);
-                let (u, b) = innovation(p, z, d, &jac.unwrap(), r);
-                let log_l = if u.innovation * u.innovation <= gate2 * u.variance {
-                    h.outliers[i] = 0;
-                    apply_scalar(x, p, &u, &b);
-                    match likelihood {
-                        Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
-                        Likelihood::Paper => {
-                            let d_post = range(x, &antenna, axes, false).0;
-                            log_gaussian(d_post - z, r) + transition_log_density(x, &x_prior, &transition)
-                        }
-                    }
-                } else {
-                    h.outliers[i] += 1;
-                    gated_log_l(u.variance)
-                };
-                h.log_likelihood[i] += log_l;
-                continue;
-            };
-            // IMM over (motion, manoeuvre): mix, predict each, pick the
-            // candidate nearest the combined predicted range (eq. 9), update
-            // each, and score the reading with Σ c_j Λ_j.
-            let c = imm::mix(&mut h.x[i], &mut h.p[i], &h.mu[i], switch);
-            predict(&mut h.x[i][0], &mut h.p[i][0], &transition);
-            predict(&mut h.x[i][1], &mut h.p[i][1], &manoeuvre);
-            let predicted = h.x[i][0] * c[0] + h.x[i][1] * c[1];
-            let z = nearest_candidate(residue, spacing, range(&predicted, &antenna, axes, false).0);
-            let mut updates = [None, None];
-            let mut density = [0.0; 2];
-            let mut accepted = false;
-            for j in 0..2 {
-                let (d, jac) = range(&h.x[i][j], &antenna, axes, true);
-                let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), r);
-                accepted |= u.innovation * u.innovation <= gate2 * u.variance;
-                density[j] = log_gaussian(u.innovation, u.variance);
-                updates[j] = Some((u, b));
-            }
-            if accepted {
-                h.outliers[i] = 0;
-                let max = density[0].max(density[1]);
-                let w = [c[0] * (density[0] - max).exp(), c[1] * (density[1] - max).exp()];
-                let total = w[0] + w[1];
-                for j in 0..2 {
-                    let (u, b) = updates[j].unwrap();
-                    apply_scalar(&mut h.x[i][j], &mut h.p[i][j], &u, &b);
+        let n = h.len();
+        let branch_limit = self.params.max_branching_hypotheses;
+        let mut branches: Vec<(usize, f64)> = Vec::new();
+        for i in 0..n {
+            let (predicted_range, variance) = step.predict(h, i);
+            let z = nearest_candidate(step.residue, step.spacing, predicted_range);
+            if n + branches.len() < branch_limit && 9.0 * variance > 0.25 * step.spacing * step.spacing {
+                let second = if predicted_range > z { z + step.spacing } else { z - step.spacing };
+                if second >= 0.0 {
+                    h.duplicate(i);
+                    branches.push((h.len() - 1, second));
                 }
-                h.mu[i] = [w[0] / total, w[1] / total];
-                h.log_likelihood[i] += max + total.ln();
-            } else {
-                h.outliers[i] += 1;
-                h.mu[i] = c;
-                let s = updates[0].unwrap().0.variance.min(updates[1].unwrap().0.variance);
-                h.log_likelihood[i] += gated_log_l(s);
             }
+            step.update(h, i, z);
         }
-        self.stats.filter_updates += (h.len() * if manoeuvre.is_some() { 2 } else { 1 }) as u64;
+        for &(j, z) in &branches {
+            step.update(h, j, z);
+        }
+        let models = if step.manoeuvre.is_some() { 2 } else { 1 };
+        self.stats.filter_updates += (h.len() * models) as u64;
         self.time_s = m.time_s;
         self.prune();
     }
@@ -708,13 +686,110 @@ impl Glac {
     }
 }
 
-/// log F(θ_{k+1}; Aθ_k, Q) (eq. 13) for the block-diagonal Q of the motion
+/// Everything one reading means for every hypothesis (fast inference).
+struct FastStep {
+    transition: Transition,
+    /// The IMM's manoeuvre model, if enabled.
+    manoeuvre: Option<Transition>,
+    switch: f64,
+    antenna: Vector3<f64>,
+    /// Distance residue d₀ (m) and candidate step s (m) of the reading.
+    residue: f64,
+    spacing: f64,
+    /// Range noise variance R, m².
+    r: f64,
+    /// Squared gate in sigmas.
+    gate2: f64,
+    likelihood: Likelihood,
+    axes: usize,
+}
+
+impl FastStep {
+    /// Predicts hypothesis `i` to the reading's time (IMM: mixing first;
+    /// the predicted model probabilities c are kept in μ until the update)
+    /// and returns its predicted range (m) and innovation variance S (m²)
+    /// under the combined prediction.
+    fn predict(&self, h: &mut Hypotheses, i: usize) -> (f64, f64) {
+        match self.manoeuvre {
+            None => {
+                predict(&mut h.x[i][0], &mut h.p[i][0], &self.transition);
+                let (d, jac) = range(&h.x[i][0], &self.antenna, self.axes, true);
+                let jac = jac.unwrap();
+                (d, jac.dot(&(h.p[i][0] * jac)) + self.r)
+            }
+            Some(manoeuvre) => {
+                let c = imm::mix(&mut h.x[i], &mut h.p[i], &h.mu[i], self.switch);
+                h.mu[i] = c;
+                predict(&mut h.x[i][0], &mut h.p[i][0], &self.transition);
+                predict(&mut h.x[i][1], &mut h.p[i][1], &manoeuvre);
+                let (x, p) = imm::combine(&h.x[i], &h.p[i], &c);
+                let (d, jac) = range(&x, &self.antenna, self.axes, true);
+                let jac = jac.unwrap();
+                (d, jac.dot(&(p * jac)) + self.r)
+            }
+        }
+    }
+
+    /// Updates predicted hypothesis `i` with candidate distance `z` (m),
+    /// gating (3σ recovery) and adding the reading's log-likelihood. A
+    /// gated reading is charged the density at the gate, so a hypothesis
+    /// cannot gain by rejecting data.
+    fn update(&self, h: &mut Hypotheses, i: usize, z: f64) {
+        let gated = |s: f64| -0.5 * (self.gate2 + (2.0 * std::f64::consts::PI * s).ln());
+        if self.manoeuvre.is_none() {
+            let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
+            let x_predicted = *x;
+            let (d, jac) = range(x, &self.antenna, self.axes, true);
+            let (u, b) = innovation(p, z, d, &jac.unwrap(), self.r);
+            h.log_likelihood[i] += if u.innovation * u.innovation <= self.gate2 * u.variance {
+                h.outliers[i] = 0;
+                apply_scalar(x, p, &u, &b);
+                match self.likelihood {
+                    Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
+                    Likelihood::Paper => {
+                        let d_post = range(x, &self.antenna, self.axes, false).0;
+                        log_gaussian(d_post - z, self.r) + transition_log_density(x, &x_predicted, &self.transition)
+                    }
+                }
+            } else {
+                h.outliers[i] += 1;
+                gated(u.variance)
+            };
+            return;
+        }
+        // IMM: update each model, μ_j ∝ c_j Λ_j, factor Σ c_j Λ_j.
+        let c = h.mu[i];
+        let mut updates = Vec::with_capacity(2);
+        let mut density = [0.0; 2];
+        let mut accepted = false;
+        for j in 0..2 {
+            let (d, jac) = range(&h.x[i][j], &self.antenna, self.axes, true);
+            let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), self.r);
+            accepted |= u.innovation * u.innovation <= self.gate2 * u.variance;
+            density[j] = log_gaussian(u.innovation, u.variance);
+            updates.push((u, b));
+        }
+        if accepted {
+            h.outliers[i] = 0;
+            let max = density[0].max(density[1]);
+            let w = [c[0] * (density[0] - max).exp(), c[1] * (density[1] - max).exp()];
+            let total = w[0] + w[1];
+            for (j, (u, b)) in updates.iter().enumerate() {
+                apply_scalar(&mut h.x[i][j], &mut h.p[i][j], u, b);
+            }
+            h.mu[i] = [w[0] / total, w[1] / total];
+            h.log_likelihood[i] += max + total.ln();
+        } else {
+            h.outliers[i] += 1;
+            h.log_likelihood[i] += gated(updates[0].0.variance.min(updates[1].0.variance));
+        }
+    }
+}
+
+/// log F(θ_{k+1}; Aθ_k, Q) (eq. 13), with `predicted` = Aθ_k, for the block-diagonal Q of the motion
 /// models: per axis a 2×2 block [[Qpp, Qpv], [Qpv, Qvv]] (or a scalar Qpp
 /// without velocity), inverted in closed form.
-fn transition_log_density(x: &StateVector, x_prior: &StateVector, t: &Transition) -> f64 {
-    let mut predicted = *x_prior;
-    let mut scratch = StateMatrix::zeros();
-    t.propagate(&mut predicted, &mut scratch);
+fn transition_log_density(x: &StateVector, predicted: &StateVector, t: &Transition) -> f64 {
     let dx = x - predicted;
     let [pp, pv, vv] = t.q_blocks;
     let mut log_density = 0.0;
