@@ -22,6 +22,12 @@ so that accuracy is comparable; it is not meant to be bit-identical:
   normalisation, quick stop, region constraint, loss of lock and merging of
   coinciding hypotheses, and re-initialisation.
 
+Parameters: the tracker takes over the Rust tracker's current defaults
+(``scattertrack.track.default_params()``) for every parameter it shares
+with it (:func:`mirrored_defaults`), so that it follows tuning of those;
+features of the Rust tracker beyond the above are not implemented here, and
+:func:`mirrored_defaults` lists them.
+
 Entry point: :func:`run_filterpy_glac` ``(scene, reads) -> Track`` (any
 number of tags, one tracker per EPC), or :class:`FilterpyGlac` for one tag,
 one read at a time. Units are SI (m, s, rad, Hz).
@@ -30,7 +36,7 @@ one read at a time. Units are SI (m, s, rad, Hz).
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 
 import numpy as np
 from filterpy.kalman import ExtendedKalmanFilter
@@ -43,7 +49,13 @@ SPEED_OF_LIGHT = 299_792_458.0
 
 @dataclass
 class GlacSettings:
-    """GLAC's parameters; the defaults are the Rust ``GlacParams::default()``."""
+    """GLAC's parameters (names as in ``scattertrack.track.default_params()``).
+
+    The values here are the Rust ``GlacParams::default()`` /
+    ``InitialState::default()`` when this file was written;
+    :class:`FilterpyGlac` replaces them with the Rust tracker's current
+    defaults at run time (``init_region_margin_m`` and
+    ``init_merge_distance_m`` are not exposed by the Rust side and stay)."""
 
     q: float = 0.05
     """Acceleration noise spectral density of the constant-velocity model, m²/s³."""
@@ -66,6 +78,31 @@ class GlacSettings:
     init_region_margin_m: float = 0.05
     init_merge_distance_m: float = 0.01
     init_max_hypotheses: int = 2000
+
+
+FIXED_CHOICES = {"motion": "constant-velocity", "inference": "fast", "likelihood": "innovation"}
+"""What this implementation always does, under the names of ``scattertrack.track.default_params()``."""
+
+
+def mirrored_defaults() -> tuple[dict, dict]:
+    """The Rust tracker's current defaults (``scattertrack.track.default_params()``),
+    split into those this implementation takes over (same name as a
+    :class:`GlacSettings` field, or a fixed choice it matches) and the rest
+    (features of the Rust tracker this baseline does not implement, or
+    choices that differ), so the baseline follows the Rust defaults and a
+    report can say what is not mirrored."""
+    from scattertrack.track import default_params
+
+    names = {f.name for f in fields(GlacSettings)}
+    mirrored, other = {}, {}
+    for key, value in default_params().items():
+        if key in names:
+            mirrored[key] = value
+        elif FIXED_CHOICES.get(key) == value or key == "max_hypotheses":  # the cap only bounds naive inference
+            continue
+        else:
+            other[key] = value
+    return mirrored, other
 
 
 # --------------------------------------------------------------------------
@@ -421,8 +458,12 @@ class Counters:
 class FilterpyGlac:
     """GLAC for one tag over filterpy EKFs: ``step(time_s, antenna_index, frequency_hz, phase_rad)``."""
 
-    def __init__(self, scene: Scene, **params):
-        self.settings = GlacSettings(**params)
+    def __init__(self, scene: Scene, *, mirror_rust_defaults: bool = True, **params):
+        """``params`` override the settings: by default the Rust tracker's
+        current defaults where they apply (:func:`mirrored_defaults`), else
+        the :class:`GlacSettings` defaults."""
+        base = mirrored_defaults()[0] if mirror_rust_defaults else {}
+        self.settings = GlacSettings(**(base | params))
         self.model = SceneModel(scene)
         self.axes = self.model.dimensions
         noise = self.settings.phase_noise_rad

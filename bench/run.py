@@ -356,25 +356,28 @@ def budget_table(
             if elapsed > limit:
                 break
         exhausted = len(log) == len(rows) and log[-1][0] <= limit
-        errors = []  # error of every estimate, in order
-        first_estimate = None
-        for i, (_, e) in enumerate(log):
-            if e is not None:
-                if first_estimate is None:
-                    first_estimate = i
-                p, _ = truth_at(e.time_s)
-                errors.append((i, float(np.linalg.norm(e.position - p))))
+        # Error of every estimate (step index, error), vectorised over the estimates.
+        index = np.array([i for i, (_, e) in enumerate(log) if e is not None], dtype=np.int64)
+        first_estimate = int(index[0]) if index.size else None
+        if index.size:
+            times = np.array([log[i][1].time_s for i in index])
+            positions = np.array([log[i][1].position for i in index])
+            truth = np.column_stack([np.interp(times, truth_t, truth_p[:, k]) for k in range(3)])
+            errors = np.linalg.norm(positions - truth, axis=1)
+        else:
+            errors = np.zeros(0)
+        elapsed_s = np.array([elapsed for elapsed, _ in log])
         for budget in budgets_ms:
-            done = [i for i, (elapsed, _) in enumerate(log) if elapsed <= budget / 1e3]
+            n_done = int(np.count_nonzero(elapsed_s <= budget / 1e3))  # elapsed is increasing
             row = {"scenario": name, "method": method, "budget_ms": budget, "exhausted": False}
-            if not done:
+            if n_done == 0:
                 row.update(reads=0, depth=0, hypotheses=0, error_cm=math.nan, velocity_error_cm_s=math.nan,
                            median_error_cm=math.nan)
                 out.append(row)
                 continue
-            last = done[-1]
+            last = n_done - 1
             latest = next((log[i][1] for i in range(last, -1, -1) if log[i][1] is not None), None)
-            so_far = [err for i, err in errors if i <= last]
+            so_far = errors[index <= last]
             row["reads"] = last + 1
             row["exhausted"] = exhausted and last == len(rows) - 1
             row["depth"] = (last + 1 - first_estimate) if first_estimate is not None and first_estimate <= last else 0
@@ -680,6 +683,10 @@ def main(argv=None) -> int:
         for name in _progress(SPEED_SCENARIOS, progress, desc="speed", unit="scenario"):
             speed.append(speed_comparison(name, 0, speed_duration, repeats=3))
         result["speed"] = speed
+        from filterpy_glac import mirrored_defaults
+
+        mirrored, not_mirrored = mirrored_defaults()
+        result["filterpy_parameters"] = {"mirrored": mirrored, "not_mirrored": not_mirrored}
         cost, side, accuracy = speed_rows(speed)
         emit(
             f"Per-read cost through Python (glac, seed 0, {speed_duration:g} s)",
@@ -695,7 +702,12 @@ def main(argv=None) -> int:
             side,
             "x: filterpy ns per read / scattertrack ns per read. 'vs run()': whole run, filterpy streamed "
             "from Python against scattertrack.track.run; 'conv vs in-Rust': converged reads, filterpy "
-            "(Python) against the Rust step of the same reads.",
+            "(Python) against the Rust step of the same reads. The filterpy tracker takes the Rust "
+            "defaults of every parameter it shares ("
+            + ", ".join(f"{k}={v:g}" if isinstance(v, float) else f"{k}={v}" for k, v in mirrored.items())
+            + "); Rust parameters it does not implement: "
+            + (", ".join(f"{k}={v}" for k, v in not_mirrored.items()) or "none")
+            + ".",
         )
         emit("Accuracy of both implementations on those runs", SIDE_ACCURACY_COLUMNS, accuracy)
 

@@ -405,9 +405,11 @@ impl Glac {
         self.buffer.clear();
         for m in &replay {
             self.track(m);
-            if self.phase != Phase::Tracking {
-                return false;
-            }
+        }
+        if self.hypotheses.len() == 0 {
+            // Every hypothesis died during the replay: keep collecting.
+            self.restart();
+            return false;
         }
         true
     }

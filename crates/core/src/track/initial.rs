@@ -89,6 +89,8 @@ struct Candidate {
 struct AntennaCandidates {
     /// Sorted by distance.
     candidates: Vec<Candidate>,
+    /// Time between the two reads that were unwrapped, seconds.
+    gap_s: f64,
 }
 
 impl AntennaCandidates {
@@ -99,6 +101,17 @@ impl AntennaCandidates {
             best = self.candidates[i - 1];
         }
         best
+    }
+
+    /// Every candidate within `tolerance` (m) of `d`, nearest first.
+    fn within(&self, d: f64, tolerance: f64) -> Vec<Candidate> {
+        let mut near: Vec<Candidate> =
+            self.candidates.iter().copied().filter(|c| (c.distance - d).abs() <= tolerance).collect();
+        near.sort_by(|a, b| (a.distance - d).abs().total_cmp(&(b.distance - d).abs()));
+        if near.is_empty() {
+            near.push(self.nearest(d));
+        }
+        near
     }
 }
 
@@ -215,7 +228,11 @@ pub fn initial_hypotheses(
         if max_residual > settings.residual_threshold_m {
             continue;
         }
-        let velocity = if with_velocity { projected_velocity(&p, &anchors, &rates, axes) } else { Vector3::zeros() };
+        let velocity = if with_velocity {
+            best_velocity(&p, &anchors, &lists, &mut rates, axes, r0, settings)
+        } else {
+            Vector3::zeros()
+        };
         let mut state = StateVector::zeros();
         state.fixed_rows_mut::<3>(0).copy_from(&p);
         state.fixed_rows_mut::<3>(3).copy_from(&velocity);
@@ -308,7 +325,7 @@ fn synchronise(
         }
     }
     candidates.sort_by(|a, b| a.distance.total_cmp(&b.distance));
-    Some(AntennaCandidates { candidates })
+    Some(AntennaCandidates { candidates, gap_s: dt })
 }
 
 /// The antenna triple with the best geometry: the largest triangle (3D:
@@ -373,6 +390,62 @@ fn perimeter_centroid(
     }
     let (perimeter, centroid) = best?;
     (perimeter <= threshold).then(|| Vector3::new(centroid.x, centroid.y, plane_z))
+}
+
+/// The velocity of a fixed position when unwrapping branches leave an
+/// antenna with several candidates of nearly the same interpolated distance
+/// but different range rates (a branch one step away moves the
+/// interpolated distance by only (1 − α)·s when t_x is near the second
+/// read): every combination of the candidates within the residual
+/// threshold is tried (at most 64), and the one whose least-squares
+/// velocity explains the range rates best wins, with a weak prior towards
+/// slow motion (σ = max_speed / 2) that decides when there is no
+/// redundancy (three antennas). Writes the chosen rates into `rates`.
+fn best_velocity(
+    p: &Vector3<f64>,
+    anchors: &[Vector3<f64>],
+    lists: &[AntennaCandidates],
+    rates: &mut [f64],
+    axes: usize,
+    range_variance: f64,
+    settings: &InitialState,
+) -> Vector3<f64> {
+    let options: Vec<Vec<Candidate>> = lists
+        .iter()
+        .zip(anchors)
+        .map(|(l, a)| l.within((p - a).norm(), settings.residual_threshold_m))
+        .collect();
+    let combinations: usize = options.iter().map(|o| o.len()).product();
+    if combinations == 1 {
+        return projected_velocity(p, anchors, rates, axes);
+    }
+    let prior = 1.0 / (0.5 * settings.max_speed_m_s).powi(2);
+    let mut trial = rates.to_vec();
+    let (mut best_score, mut best_velocity) = (f64::INFINITY, Vector3::zeros());
+    for index in 0..combinations.min(64) {
+        let mut rest = index;
+        for (k, o) in options.iter().enumerate() {
+            trial[k] = o[rest % o.len()].range_rate;
+            rest /= o.len();
+        }
+        let v = projected_velocity(p, anchors, &trial, axes);
+        let mut score = prior * v.norm_squared();
+        for (k, list) in lists.iter().enumerate() {
+            let mut e = (p - anchors[k]).normalize();
+            if axes == 2 {
+                e.z = 0.0;
+            }
+            // A slope from two reads Δt apart has variance 2R/Δt².
+            let variance = 2.0 * range_variance / (list.gap_s * list.gap_s);
+            score += (trial[k] - e.dot(&v)).powi(2) / variance;
+        }
+        if score < best_score {
+            best_score = score;
+            best_velocity = v;
+            rates.copy_from_slice(&trial);
+        }
+    }
+    best_velocity
 }
 
 /// Least-squares velocity from projected velocities: eᵢ · V = ṙᵢ with eᵢ
