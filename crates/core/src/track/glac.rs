@@ -724,10 +724,16 @@ impl FastStep {
                 h.mu[i] = c;
                 predict(&mut h.x[i][0], &mut h.p[i][0], &self.transition);
                 predict(&mut h.x[i][1], &mut h.p[i][1], &manoeuvre);
-                let (x, p) = imm::combine(&h.x[i], &h.p[i], &c);
+                // The combined prediction's range variance without forming
+                // the combined P: H P H = Σ c_j (H P_j Hᵀ + (H (x_j − x̂))²).
+                let x = h.x[i][0] * c[0] + h.x[i][1] * c[1];
                 let (d, jac) = range(&x, &self.antenna, self.axes, true);
                 let jac = jac.unwrap();
-                (d, jac.dot(&(p * jac)) + self.r)
+                let spread = |j: usize| {
+                    let offset = jac.dot(&(h.x[i][j] - x));
+                    jac.dot(&(h.p[i][j] * jac)) + offset * offset
+                };
+                (d, c[0] * spread(0) + c[1] * spread(1) + self.r)
             }
         }
     }
@@ -761,16 +767,19 @@ impl FastStep {
         }
         // IMM: update each model, μ_j ∝ c_j Λ_j, factor Σ c_j Λ_j.
         let c = h.mu[i];
-        let mut updates = Vec::with_capacity(2);
         let mut density = [0.0; 2];
+        let mut variance = [0.0; 2];
         let mut accepted = false;
-        for j in 0..2 {
+        // Fixed-size, no allocation: this runs for every hypothesis on
+        // every reading.
+        let updates: [_; 2] = std::array::from_fn(|j| {
             let (d, jac) = range(&h.x[i][j], &self.antenna, self.axes, true);
             let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), self.r);
             accepted |= u.innovation * u.innovation <= self.gate2 * u.variance;
             density[j] = log_gaussian(u.innovation, u.variance);
-            updates.push((u, b));
-        }
+            variance[j] = u.variance;
+            (u, b)
+        });
         if accepted {
             h.outliers[i] = 0;
             let max = density[0].max(density[1]);
@@ -783,7 +792,7 @@ impl FastStep {
             h.log_likelihood[i] += max + total.ln();
         } else {
             h.outliers[i] += 1;
-            h.log_likelihood[i] += gated(updates[0].0.variance.min(updates[1].0.variance));
+            h.log_likelihood[i] += gated(variance[0].min(variance[1]));
         }
     }
 }
@@ -876,5 +885,82 @@ impl Tracker for Glac {
         self.group.clear();
         self.time_s = f64::NEG_INFINITY;
         self.last_time_s = f64::NEG_INFINITY;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Antenna, Region};
+
+    fn scene() -> Scene {
+        let pos = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]];
+        let antennas = pos
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0 })
+            .collect();
+        let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
+        Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+    }
+
+    fn reads(scene: &Scene, n: usize) -> Vec<Measurement> {
+        (0..n)
+            .map(|k| {
+                let t = 0.033 * k as f64;
+                let p = Vector3::new(0.6 + 0.1 * t, 0.3 + 0.05 * t, 0.0);
+                let a = k % 4;
+                let d = (p - scene.antennas[a].position).norm();
+                Measurement { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: scene.ideal_phase(a, 915.25e6, d) }
+            })
+            .collect()
+    }
+
+    /// Property: after every step the hypotheses' weights sum to 1.
+    #[test]
+    fn weights_sum_to_one() {
+        let scene = scene();
+        let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        let mut seen_estimate = false;
+        for m in reads(&scene, 120) {
+            if tracker.step(&m).is_some() {
+                seen_estimate = true;
+                let total: f64 = tracker.hypotheses.log_likelihood.iter().map(|l| l.exp()).sum();
+                assert!((total - 1.0).abs() < 1e-9, "weights sum to {total}");
+            }
+        }
+        assert!(seen_estimate);
+    }
+
+    #[test]
+    fn silent_until_initialised_then_causal_estimates() {
+        let scene = scene();
+        let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        let all = reads(&scene, 60);
+        let first = all.iter().position(|m| tracker.step(m).is_some()).unwrap();
+        assert!(all[first].time_s >= GlacParams::default().init_window_s);
+        assert_eq!(tracker.stats().initialising as usize, first + 1);
+        tracker.reset();
+        assert_eq!(tracker.hypothesis_count(), 0);
+    }
+
+    #[test]
+    fn naive_inference_respects_the_cap() {
+        let scene = scene();
+        let params = GlacParams { inference: Inference::Naive, max_hypotheses: 500, ..GlacParams::default() };
+        let mut tracker = Glac::new(scene.clone(), params).unwrap();
+        for m in reads(&scene, 20) {
+            tracker.step(&m);
+            assert!(tracker.hypothesis_count() <= 500);
+        }
+        assert!(tracker.stats().max_hypotheses >= 100, "naive inference should branch");
+    }
+
+    #[test]
+    fn rejects_invalid_parameters() {
+        let bad = GlacParams { quick_stop: 1.5, ..GlacParams::default() };
+        assert!(Glac::new(scene(), bad).is_err());
+        let bad = GlacParams { motion: MotionModel::ConstantVelocity { q: -1.0 }, ..GlacParams::default() };
+        assert!(Glac::new(scene(), bad).is_err());
     }
 }
