@@ -95,12 +95,16 @@ def format_millimetres(metres: float) -> str:
 
 
 def parse_parameter(text: str) -> tuple[str, object]:
-    """One ``--param name=value``: the value as int if it reads as one, else float, else text."""
+    """One ``--param name=value``: the value as int if it reads as one, else
+    float, else ``None`` for ``none`` (switches an optional feature off, e.g.
+    ``manoeuvre_q=none``), else text."""
     name, equals, value = text.partition("=")
     name = name.strip()
     if not equals or not name:
         raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
     value = value.strip()
+    if value.lower() == "none":
+        return name, None
     for convert in (int, float):
         try:
             return name, convert(value)
@@ -122,10 +126,19 @@ def check_parameters(method: str, scene, params: dict) -> None:
     for name, value in params.items():
         if name not in known:
             raise UsageError(f"unknown parameter '{name}' for method '{method}' (known: {', '.join(known)})")
+    try:
+        track.make(method, scene, **params)
+        return
+    except (TypeError, ValueError) as error:
+        combined = error
+    # Name the culprit when one parameter is wrong on its own; otherwise the
+    # combination is (e.g. likelihood=paper needs manoeuvre_q=none).
+    for name, value in params.items():
         try:
             track.make(method, scene, **{name: value})
         except (TypeError, ValueError) as error:
             raise UsageError(f"parameter {name}={value!r}: {error}") from None
+    raise UsageError(f"parameters {params}: {combined}") from None
 
 
 def print_tracker_summary(result, reads, wall_s: float) -> None:

@@ -144,3 +144,12 @@ def test_methods_and_defaults_are_listed():
     assert "glac" in METHODS and "glac-naive" in METHODS
     params = default_params()
     assert params["gate_sigmas"] == 3.0 and params["q"] > 0
+
+
+def test_paper_likelihood_needs_the_single_model():
+    sim = _sim("glac-2d-10cms", 7011, duration=4.0)
+    with pytest.raises(ValueError, match="manoeuvre_q"):
+        run("glac", sim.scene, sim.reads, likelihood="paper")
+    track = run("glac", sim.scene, sim.reads, likelihood="paper", manoeuvre_q=None)
+    errors, _ = _errors_after(sim, track, 1.0)
+    assert np.median(errors) < 0.01

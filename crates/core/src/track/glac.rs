@@ -21,6 +21,12 @@
 //! * Re-initialisation when every hypothesis has lost lock (too many
 //!   consecutive gated readings) or the tag goes unread for `reinit_gap_s`.
 //!
+//! Beyond the paper (docs/glac.md says why): each hypothesis runs two
+//! motion models as an IMM (`manoeuvre_q`), the initial search tries
+//! unwrapping branches when two reads of an antenna are far apart, and a
+//! hypothesis whose predicted range is too uncertain for nearest-neighbour
+//! pruning also follows the second-nearest candidate (ambiguity branching).
+//!
 //! Variants (sec. 5.2.2–5.2.3): no velocity model ([`MotionModel::RandomWalk`]),
 //! synchronous 4-read handling ([`Inference::Synchronous`]) and naive,
 //! unpruned inference ([`Inference::Naive`]).
@@ -169,6 +175,12 @@ impl GlacParams {
         }
         if self.manoeuvre_q.is_some_and(|q| !(q > 0.0 && q.is_finite())) {
             return Err(Error::Parameter { name: "manoeuvre_q".into(), reason: "must be positive".into() });
+        }
+        if self.likelihood == Likelihood::Paper && self.manoeuvre_q.is_some() && self.inference == Inference::Fast {
+            return Err(Error::Parameter {
+                name: "likelihood".into(),
+                reason: "'paper' (eqs. 12-13) is defined for one motion model: set manoeuvre_q = None".into(),
+            });
         }
         if !(0.0..=0.5).contains(&self.model_switch_probability) {
             return Err(Error::Parameter { name: "model_switch_probability".into(), reason: "must be in [0, 0.5]".into() });
