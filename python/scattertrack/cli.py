@@ -144,7 +144,7 @@ def check_parameters(method: str, scene, params: dict) -> None:
 def print_tracker_summary(result, reads, wall_s: float) -> None:
     """What ``track`` reports after tracking: skips, per-tag stats, speed."""
     say(f"  {result.skipped.summary()}")
-    stats = getattr(result, "stats", {})
+    stats = result.stats
     for epc in list(stats)[:MAX_TAGS_LISTED]:
         tag = stats[epc]
         say(
@@ -161,7 +161,7 @@ def print_tracker_summary(result, reads, wall_s: float) -> None:
         )
     throughput = len(reads) / wall_s if wall_s > 0 else math.inf
     line = f"  speed: {throughput:,.0f} reads/s wall clock ({format_duration(wall_s)} for {len(reads)} reads)"
-    latency = getattr(result, "latency", None)
+    latency = result.latency
     if latency and latency[0]:
         _, mean_ns, max_ns = latency
         line += f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(max_ns)} max per read"
@@ -361,7 +361,7 @@ def command_demo(args) -> int:
         f"  speed      tracked {duration:g} s of reads in {format_duration(wall_s)}: "
         f"{speedup:,.0f}x faster than real time"
     )
-    latency = getattr(result, "latency", None)
+    latency = result.latency
     if latency and latency[0]:
         say(
             f"  latency    {format_nanoseconds(latency[1])} mean, {format_nanoseconds(latency[2])} max "

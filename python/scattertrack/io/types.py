@@ -215,6 +215,12 @@ class Track:
     orientation: np.ndarray | None = None  # (n, 4) qw, qx, qy, qz
     skipped: SkipReport = field(default_factory=SkipReport)
     """Reads the tracker declined (outliers, duplicates...), by reason."""
+    stats: dict = field(default_factory=dict)
+    """Per-tag tracker counters (reads, initialising, reinitialisations,
+    hypotheses...), filled by :func:`scattertrack.track.run`; empty when read
+    from a file."""
+    latency: tuple | None = None
+    """(steps, mean ns, max ns) of the Rust tracker steps, when tracked here."""
 
     def __len__(self) -> int:
         return len(self.time_s)

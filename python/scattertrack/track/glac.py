@@ -182,6 +182,6 @@ def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chun
         sigma=sigma,
         skipped=skipped,
     )
-    track.stats = {str(n): tracker.stats(str(n)) for n in names}  # type: ignore[attr-defined]
-    track.latency = tracker.latency()  # type: ignore[attr-defined]
+    track.stats = {str(n): tracker.stats(str(n)) for n in names}
+    track.latency = tracker.latency()
     return track
