@@ -211,14 +211,20 @@ def write_json(path: Path, report, **inputs) -> None:
 # --- subcommands ----------------------------------------------------------------
 
 
-def command_simulate(args) -> int:
+def simulate_and_write(args):
+    """The scenario named by ``args.scenario`` (``args.duration`` overriding its
+    length), simulated with ``args.seed`` and written to ``args.out``."""
     from scattertrack import sim
 
     scenario = sim.load_scenario(args.scenario)
     if args.duration is not None:
         scenario = scenario | {"duration_s": args.duration}
     simulation = sim.simulate(scenario, seed=args.seed)
-    out = sim.write_simulation(simulation, args.out)
+    return simulation, sim.write_simulation(simulation, args.out)
+
+
+def command_simulate(args) -> int:
+    simulation, out = simulate_and_write(args)
     reads = simulation.reads
     duration = float(simulation.scenario["duration_s"])
     tags = reads.epcs()
@@ -306,13 +312,9 @@ def command_eval(args) -> int:
 
 def command_demo(args) -> int:
     from scattertrack import eval as evaluation
-    from scattertrack import io, sim
+    from scattertrack import io
 
-    scenario = sim.load_scenario(args.scenario)
-    if args.duration is not None:
-        scenario = scenario | {"duration_s": args.duration}
-    simulation = sim.simulate(scenario, seed=args.seed)
-    out = sim.write_simulation(simulation, args.out)
+    simulation, out = simulate_and_write(args)
     duration = float(simulation.scenario["duration_s"])
     say(f"scattertrack demo: scenario {simulation.scenario['name']}, seed {simulation.seed}")
     description = simulation.scenario.get("description")
