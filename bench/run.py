@@ -48,8 +48,18 @@ from scattertrack.eval import compare  # noqa: E402
 from scattertrack.io.types import Track  # noqa: E402
 from scattertrack.sim import list_scenarios, load_scenario, simulate  # noqa: E402
 
-VARIANTS = ["glac", "glac-no-velocity", "glac-sync", "glac-sync-no-velocity"]
-VARIANT_SCENARIOS = ["glac-2d-40cms", "glac-2d-10cms"]
+# (label, method, parameters): the paper's Fig. 9 variants, then two
+# ablations of scattertrack's departures from the paper (docs/glac.md): the
+# paper's single motion model, and its likelihood (eqs. 12-13) with it.
+VARIANTS = [
+    ("glac", "glac", {}),
+    ("glac-no-velocity", "glac-no-velocity", {}),
+    ("glac-sync", "glac-sync", {}),
+    ("glac-sync-no-velocity", "glac-sync-no-velocity", {}),
+    ("glac, one motion model", "glac", {"manoeuvre_q": None}),
+    ("glac, one model, paper likelihood", "glac", {"manoeuvre_q": None, "likelihood": "paper"}),
+]
+VARIANT_SCENARIOS = ["glac-2d-40cms", "glac-2d-10cms", "glac-3d-arm"]
 SPEED_SCENARIOS = ["glac-2d-10cms", "glac-3d-arm"]
 BUDGET_SCENARIOS = ["glac-2d-40cms", "glac-3d-random"]
 
@@ -154,12 +164,13 @@ def accuracy_table(scenarios, seeds, duration_s=None, method="glac", progress=Tr
 def variants_table(scenarios, seeds, duration_s=None, methods=VARIANTS, progress=True) -> list[dict]:
     """GLAC and its variants (sec. 5.2.2, Fig. 9) on the same simulations."""
     jobs = [(name, seed) for name in scenarios for seed in seeds]
-    results: dict[tuple, list[dict]] = {(n, m): [] for n in scenarios for m in methods}
+    labels = [label for label, _, _ in methods]
+    results: dict[tuple, list[dict]] = {(n, label): [] for n in scenarios for label in labels}
     for name, seed in _progress(jobs, progress, desc="variants", unit="sim"):
         sim = simulate_run(name, seed, duration_s)
-        for method in methods:
-            results[(name, method)].append(track_and_score(method, sim))
-    return [{"scenario": n, "method": m} | aggregate(results[(n, m)]) for n in scenarios for m in methods]
+        for label, method, params in methods:
+            results[(name, label)].append(track_and_score(method, sim, **params))
+    return [{"scenario": n, "method": label} | aggregate(results[(n, label)]) for n in scenarios for label in labels]
 
 
 # --------------------------------------------------------------------------

@@ -566,7 +566,14 @@ impl Glac {
         }
         let group = std::mem::take(&mut self.group);
         let dt = (m.time_s - self.time_s).max(0.0);
-        let transition = self.params.motion.transition(dt, self.axes);
+        // One model only here (no IMM): one fused position per ~4 reads
+        // must follow the turns, so a constant-velocity model takes the
+        // manoeuvre model's process noise when one is configured.
+        let motion = match (self.params.motion, self.params.manoeuvre_q) {
+            (MotionModel::ConstantVelocity { .. }, Some(q)) => MotionModel::ConstantVelocity { q },
+            (motion, _) => motion,
+        };
+        let transition = motion.transition(dt, self.axes);
         let anchors: Vec<Vector3<f64>> = group.iter().map(|g| self.scene.antennas[g.antenna].position).collect();
         let residues: Vec<(f64, f64)> = group
             .iter()
