@@ -69,7 +69,7 @@ def test_bench_helpers_smoke(tmp_path):
     rows = bench.accuracy_table(["glac-2d-10cms"], [0], duration_s=3.0, progress=False)
     assert len(rows) == 1 and rows[0]["runs"] == 1
     assert rows[0]["median_3d_mm"] < 20 and rows[0]["reads_per_s"] > 0
-    variants = bench.variants_table(["glac-2d-10cms"], [0], duration_s=2.0, methods=["glac", "glac-sync"], progress=False)
+    variants = bench.variants_table(["glac-2d-10cms"], [0], duration_s=2.0, methods=[("glac", "glac", {}), ("glac-sync", "glac-sync", {})], progress=False)
     assert [v["method"] for v in variants] == ["glac", "glac-sync"]
     speed = bench.speed_comparison("glac-2d-10cms", 0, duration_s=3.0, repeats=1)
     assert speed["reads"] > 50
