@@ -136,7 +136,9 @@ def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chun
     """
     tracker = Tracker(method, scene, **params)
     order = np.argsort(reads.time_s, kind="stable")
+    # Sort every column once; the chunks below are views into these.
     epcs = reads.epc[order]
+    time_s, frequency_hz, phase_rad = reads.time_s[order], reads.frequency_hz[order], reads.phase_rad[order]
     names, tag = np.unique(epcs, return_inverse=True)
     # Tag indices in order of first appearance, so stats line up with epcs().
     tracker._tags = {str(n): int(i) for i, n in enumerate(names)}
@@ -154,15 +156,15 @@ def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chun
         sl = slice(start, start + chunk)
         out = tracker._engine.run(
             tag[sl].astype(np.int64),
-            reads.time_s[order][sl],
+            time_s[sl],
             antenna_index[sl],
-            reads.frequency_hz[order][sl],
-            reads.phase_rad[order][sl],
+            frequency_hz[sl],
+            phase_rad[sl],
         )
         for k in columns:
             columns[k].append(out[k] + start if k == "row" else out[k])
         if bar is not None:
-            bar.update(len(reads.time_s[order][sl]))
+            bar.update(len(time_s[sl]))
     if bar is not None:
         bar.close()
     rows = np.concatenate(columns["row"]) if columns["row"] else np.zeros(0, dtype=np.int64)

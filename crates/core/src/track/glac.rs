@@ -267,20 +267,19 @@ impl Hypotheses {
         self.outliers.truncate(w);
     }
 
-    /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp) and
-    /// returns the index of the best.
-    fn normalise(&mut self) -> usize {
-        let (best, max) = self
-            .log_likelihood
-            .iter()
-            .enumerate()
-            .fold((0, f64::NEG_INFINITY), |acc, (i, &l)| if l > acc.1 { (i, l) } else { acc });
+    /// Index of the likeliest hypothesis (the one reported), if any.
+    fn best(&self) -> Option<usize> {
+        (0..self.len()).max_by(|&a, &b| self.log_likelihood[a].total_cmp(&self.log_likelihood[b]))
+    }
+
+    /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp).
+    fn normalise(&mut self) {
+        let max = self.log_likelihood.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let sum: f64 = self.log_likelihood.iter().map(|l| (l - max).exp()).sum();
         let log_norm = max + sum.ln();
         for l in &mut self.log_likelihood {
             *l -= log_norm;
         }
-        best
     }
 }
 
@@ -684,7 +683,7 @@ impl Glac {
 
     fn best_estimate(&self, time_s: f64) -> Option<Estimate> {
         let h = &self.hypotheses;
-        let best = (0..h.len()).max_by(|&a, &b| h.log_likelihood[a].total_cmp(&h.log_likelihood[b]))?;
+        let best = h.best()?;
         let (x, p) = h.state(best);
         let velocity =
             if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
@@ -701,9 +700,7 @@ impl Glac {
     /// Whether the reported hypothesis gated the latest reading.
     fn best_gated_last(&self) -> bool {
         let h = &self.hypotheses;
-        (0..h.len())
-            .max_by(|&a, &b| h.log_likelihood[a].total_cmp(&h.log_likelihood[b]))
-            .is_some_and(|b| h.outliers[b] > 0)
+        h.best().is_some_and(|b| h.outliers[b] > 0)
     }
 }
 
