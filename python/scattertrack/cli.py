@@ -2,7 +2,7 @@
 
 Subcommands::
 
-    scattertrack simulate --scenario NAME|FILE --out DIR [--seed N] [--duration S]
+    scattertrack simulate --scenario NAME|FILE --out DIR [--seed N] [--duration S] [--pipeline glac|turbotrack]
     scattertrack scenarios
     scattertrack methods
     scattertrack track --scene S --reads R [--method glac] --out T [--param name=value ...]
@@ -122,7 +122,8 @@ def check_parameters(method: str, scene, params: dict) -> None:
     from scattertrack import track
 
     track.make(method, scene)  # an unknown method or unusable scene fails here, on its own
-    known = sorted(set(track.default_params()) | set(EXTRA_PARAMETERS))
+    extra = set(EXTRA_PARAMETERS) if method not in track.WIDEBAND_METHODS else set()
+    known = sorted(set(track.default_params(method)) | extra)
     for name, value in params.items():
         if name not in known:
             raise UsageError(f"unknown parameter '{name}' for method '{method}' (known: {', '.join(known)})")
@@ -213,10 +214,21 @@ def write_json(path: Path, report, **inputs) -> None:
 
 def simulate_and_write(args):
     """The scenario named by ``args.scenario`` (``args.duration`` overriding its
-    length), simulated with ``args.seed`` and written to ``args.out``."""
+    length), simulated with ``args.seed`` and written to ``args.out``.
+
+    ``args.pipeline`` (absent: ``"glac"``; None: the scenario's own) must
+    match the scenario's ``pipeline``, else a UsageError says which it is."""
     from scattertrack import sim
 
     scenario = sim.load_scenario(args.scenario)
+    wanted = getattr(args, "pipeline", "glac")
+    declared = scenario.get("pipeline", "glac")
+    if wanted is not None and wanted != declared:
+        others = ", ".join(sim.list_scenarios(wanted)) or "none"
+        raise UsageError(
+            f"scenario {args.scenario} is for the {declared} pipeline, not {wanted} "
+            f"({wanted} scenarios: {others})"
+        )
     if args.duration is not None:
         scenario = scenario | {"duration_s": args.duration}
     simulation = sim.simulate(scenario, seed=args.seed)
@@ -225,12 +237,33 @@ def simulate_and_write(args):
 
 def command_simulate(args) -> int:
     simulation, out = simulate_and_write(args)
+    if simulation.frames is not None:
+        return report_frames(simulation, out, args)
     reads = simulation.reads
     duration = float(simulation.scenario["duration_s"])
     tags = reads.epcs()
     say(f"wrote {out}: scene.toml, reads.csv, truth.csv, simulation.json")
     say(f"  scenario {simulation.scenario.get('name', args.scenario)}, seed {simulation.seed}, {duration:g} s")
     say(f"  {plural(len(reads), 'read')} of {plural(len(tags), 'tag')}: {read_rates(len(reads), len(tags), duration)}")
+    return 0
+
+
+def report_frames(simulation, out: Path, args) -> int:
+    """What ``simulate`` says about a turbotrack scenario's frames."""
+    frames = simulation.frames
+    duration = float(simulation.scenario["duration_s"])
+    tags = frames.epcs()
+    helper = simulation.scene.extra.get("helper", {})
+    receivers = sum(a.role == "rx" for a in simulation.scene.antennas)
+    say(f"wrote {out}: scene.toml, frames.csv, truth.csv, simulation.json")
+    name = simulation.scenario.get("name", args.scenario)
+    say(f"  scenario {name} (turbotrack), seed {simulation.seed}, {duration:g} s")
+    say(
+        f"  {plural(frames.n_frames, 'frame')} of {plural(len(tags), 'tag')}: "
+        f"{read_rates(frames.n_frames, len(tags), duration).replace('reads', 'frames')}; "
+        f"{plural(receivers, 'receive antenna')}, {helper.get('n_subcarriers', '?')} subcarriers over "
+        f"{helper.get('bandwidth_hz', math.nan) / 1e6:g} MHz"
+    )
     return 0
 
 
@@ -246,18 +279,20 @@ def read_rates(count: int, tags: int, duration_s: float) -> str:
 def command_scenarios(args) -> int:
     from scattertrack import FormatError, sim
 
-    names = sim.list_scenarios()
+    names = sim.list_scenarios("all")
     if not names:
         say(f"no scenarios in {sim.SCENARIOS_DIR}")
         return 0
     width = max(len(name) for name in names)
+    pipeline_width = max(len(p) for p in sim.PIPELINES)
     for name in names:
+        pipeline = sim.scenario_pipeline(name)
         try:
             description = sim.load_scenario(name).get("description", "")
         except FormatError as error:
             # One broken file must not hide the others.
             description = f"(invalid: {error})"
-        say(f"{name.ljust(width)}  {description}")
+        say(f"{name.ljust(width)}  {pipeline.ljust(pipeline_width)}  {description}")
     return 0
 
 
@@ -273,10 +308,19 @@ def command_methods(args) -> int:
 def command_track(args) -> int:
     from scattertrack import io
 
+    from scattertrack import track as tracking
+
     scene = io.read_scene(args.scene)
     params = dict(args.param or [])
-    # Before reading the reads: a typo should not wait for a large file to load.
+    # Before reading the input: a typo should not wait for a large file to load.
     check_parameters(args.method, scene, params)
+    wideband = args.method in tracking.WIDEBAND_METHODS
+    if wideband and args.reads:
+        raise UsageError(f"method '{args.method}' tracks wideband frames: give --frames or --sigmf, not --reads")
+    if not wideband and not args.reads:
+        raise UsageError(f"method '{args.method}' tracks phase reads: give --reads")
+    if wideband:
+        return track_frames(args, scene, params)
     reads = io.read_reads(args.reads, scene)
     say(f"read {plural(len(reads), 'read')} of {plural(len(reads.epcs()), 'tag')} from {args.reads}")
     say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
@@ -288,6 +332,43 @@ def command_track(args) -> int:
     if not len(result):
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
     print_tracker_summary(result, reads, wall_s)
+    return 0
+
+
+def track_frames(args, scene, params: dict) -> int:
+    """``track`` for the localization helper: frames.csv or a SigMF recording."""
+    from scattertrack import io
+    from scattertrack import track as tracking
+
+    if args.sigmf:
+        from scattertrack.io import sigmf
+
+        frames = sigmf.read_sigmf_frames(args.sigmf, scene)
+        source = args.sigmf
+    else:
+        frames = io.read_frames(args.frames, scene)
+        source = args.frames
+    say(f"read {plural(frames.n_frames, 'frame')} of {plural(len(frames.epcs()), 'tag')} from {source}")
+    say(f"  {frames.reordered} rows out of time order (sorted, not dropped)")
+    start = time.perf_counter()
+    result = tracking.run(args.method, scene, frames, progress=show_progress(args), **params)
+    wall_s = time.perf_counter() - start
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    io.write_track(out, result)
+    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
+    say(f"  {result.skipped.summary()}")
+    for epc, tag in list(result.stats.items())[:MAX_TAGS_LISTED]:
+        say(
+            f"  tag {epc}: {tag.get('measurements', 0)} frames, {tag.get('outliers', 0)} outliers, "
+            f"{tag.get('reinitialisations', 0)} reinitialisations"
+        )
+    rate = frames.n_frames / wall_s if wall_s > 0 else math.inf
+    line = f"  speed: {rate:,.0f} frames/s wall clock ({format_duration(wall_s)} for {frames.n_frames} frames)"
+    if result.latency and result.latency[0]:
+        _, mean_ns, max_ns = result.latency
+        line += f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(max_ns)} max per frame"
+    say(line)
     return 0
 
 
@@ -397,16 +478,23 @@ def build_parser() -> argparse.ArgumentParser:
 
     simulate = commands.add_parser(
         "simulate",
-        help="simulate a reader session: scene.toml, reads.csv, truth.csv",
-        description="Run a simulation scenario and write scene.toml, reads.csv, truth.csv and simulation.json.",
+        help="simulate a reader session: scene.toml, reads.csv or frames.csv, truth.csv",
+        description="Run a simulation scenario and write scene.toml, reads.csv (a COTS reader, glac "
+        "scenarios) or frames.csv (a reader + SDR helper, turbotrack scenarios), truth.csv and simulation.json.",
     )
     simulate.add_argument("--scenario", required=True, help="a named scenario (see 'scattertrack scenarios') or a TOML file")
     simulate.add_argument("--out", required=True, help="output folder")
     simulate.add_argument("--seed", type=int, help="random seed (default: the scenario's own)")
     simulate.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, seconds")
+    simulate.add_argument(
+        "--pipeline",
+        choices=("glac", "turbotrack"),
+        default=None,
+        help="check that the scenario is for this pipeline (default: the scenario's own)",
+    )
     simulate.set_defaults(run=command_simulate)
 
-    scenarios = commands.add_parser("scenarios", help="list the named simulation scenarios")
+    scenarios = commands.add_parser("scenarios", help="list the named simulation scenarios and their pipeline")
     scenarios.set_defaults(run=command_scenarios)
 
     methods = commands.add_parser("methods", help="list the tracking methods")
@@ -420,7 +508,10 @@ def build_parser() -> argparse.ArgumentParser:
         "reads the tracker declines are counted and reported.",
     )
     track.add_argument("--scene", required=True, help="scene.toml")
-    track.add_argument("--reads", required=True, help="reads.csv")
+    source = track.add_mutually_exclusive_group(required=True)
+    source.add_argument("--reads", help="reads.csv (COTS reader methods: glac...)")
+    source.add_argument("--frames", help="frames.csv (localization-helper methods: turbotrack...)")
+    source.add_argument("--sigmf", help="a SigMF IQ recording of the helper (.sigmf-meta), turned into frames first")
     track.add_argument("--method", default="glac", help="tracking method (see 'scattertrack methods'; default glac)")
     track.add_argument("--out", required=True, help="track.csv to write")
     track.add_argument(

@@ -8,9 +8,13 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use scattertrack_core::engine::Engine as CoreEngine;
+use scattertrack_core::model::wideband::CandidateWeighting;
 use scattertrack_core::model::MotionModel;
-use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Scene};
-use scattertrack_core::track::{self, Estimate, GlacParams, Inference, Likelihood, Measurement, TrackerStats};
+use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Role, Scene};
+use scattertrack_core::track::{
+    self, Estimate, GlacParams, Inference, Likelihood, Measurement, Params, PhaseRead, TrackerStats, TurboTrackParams, WidebandFrame,
+};
+use nalgebra::Complex;
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
@@ -30,14 +34,28 @@ fn make_scene(
     region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
     channel_frequencies: PyReadonlyArray1<f64>,
     channel_offsets: PyReadonlyArray1<f64>,
+    roles: Option<Vec<String>>,
 ) -> PyResult<Scene> {
     let pos = antenna_positions.as_array();
     let off = antenna_offsets.as_array();
     if pos.ncols() != 3 || pos.nrows() != off.len() {
         return Err(value_error("antenna_positions must be (n, 3) and antenna_offsets (n,)"));
     }
+    let roles: Vec<Role> = match roles {
+        None => vec![Role::TxRx; pos.nrows()],
+        Some(r) if r.len() == pos.nrows() => r
+            .iter()
+            .map(|x| match x.as_str() {
+                "txrx" => Ok(Role::TxRx),
+                "tx" => Ok(Role::Tx),
+                "rx" => Ok(Role::Rx),
+                other => Err(value_error(format!("antenna role must be txrx, tx or rx, got {other}"))),
+            })
+            .collect::<PyResult<_>>()?,
+        Some(_) => return Err(value_error("roles must have one entry per antenna")),
+    };
     let antennas = (0..pos.nrows())
-        .map(|i| Antenna { id: i as i64, position: Vector3::new(pos[(i, 0)], pos[(i, 1)], pos[(i, 2)]), phase_offset_rad: off[i] })
+        .map(|i| Antenna { id: i as i64, position: Vector3::new(pos[(i, 0)], pos[(i, 1)], pos[(i, 2)]), phase_offset_rad: off[i], role: roles[i] })
         .collect();
     let region = match region {
         Some((lo, hi)) => {
@@ -57,9 +75,71 @@ fn make_scene(
     Scene::new(dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antennas, region, channels).map_err(value_error)
 }
 
+/// Whether a method consumes wideband frames (TurboTrack and its variants).
+fn is_wideband(method: &str) -> bool {
+    matches!(method, "turbotrack" | "gaussian-pf" | "uniform-pf" | "ellipse-intersection" | "rfind")
+}
+
+/// Reads the parameters of `method` from a dict of names → values into the
+/// block that method uses; unknown names are an error.
+fn make_params(method: &str, params: Option<&Bound<'_, PyDict>>) -> PyResult<Params> {
+    if is_wideband(method) {
+        Ok(make_turbotrack_params(params)?.into())
+    } else {
+        Ok(make_glac_params(params)?.into())
+    }
+}
+
+/// TurboTrack parameters from a dict (names as in `TurboTrackParams`;
+/// candidate extraction as `candidate_<field>`).
+fn make_turbotrack_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<TurboTrackParams> {
+    let mut p = TurboTrackParams::default();
+    let Some(params) = params else { return Ok(p) };
+    for (key, value) in params.iter() {
+        let key: String = key.extract()?;
+        let f = || -> PyResult<f64> { value.extract::<f64>() };
+        match key.as_str() {
+            "particles" => p.particles = value.extract()?,
+            "transition_sigma_m" => p.transition_sigma_m = f()?,
+            "reference_interval_s" => p.reference_interval_s = f()?,
+            "resample_threshold" => p.resample_threshold = f()?,
+            "perimeter_threshold_m" => p.perimeter_threshold_m = f()?,
+            "max_initial_components" => p.max_initial_components = value.extract()?,
+            "intersection_tolerance_m" => p.intersection_tolerance_m = f()?,
+            "distance_sigma_m" => p.distance_sigma_m = if value.is_none() { None } else { Some(f()?) },
+            "weight_floor" => p.weight_floor = f()?,
+            "outlier_chi2" => p.outlier_chi2 = f()?,
+            "outlier_jump_m" => p.outlier_jump_m = f()?,
+            "max_speed_m_s" => p.max_speed_m_s = f()?,
+            "max_consecutive_outliers" => p.max_consecutive_outliers = value.extract()?,
+            "reinit_gap_s" => p.reinit_gap_s = f()?,
+            "region_margin_m" => p.region_margin_m = f()?,
+            "history_frames" => p.history_frames = value.extract()?,
+            "velocity_window_s" => p.velocity_window_s = f()?,
+            "seed" => p.seed = value.extract()?,
+            "rfind_window_s" => p.rfind_window_s = f()?,
+            "candidate_min_relative_weight" => p.candidates.min_relative_weight = f()?,
+            "candidate_max_candidates" => p.candidates.max_candidates = value.extract()?,
+            "candidate_weight_exponent" => p.candidates.weight_exponent = f()?,
+            "candidate_likelihood_temper" => p.candidates.likelihood_temper = f()?,
+            "candidate_weighting" => {
+                p.candidates.weighting = match value.extract::<String>()?.as_str() {
+                    "amplitude" => CandidateWeighting::Amplitude,
+                    "likelihood" => CandidateWeighting::Likelihood,
+                    other => return Err(value_error(format!("candidate_weighting must be amplitude or likelihood, got {other}"))),
+                }
+            }
+            "candidate_min_sigma_m" => p.candidates.min_sigma_m = f()?,
+            "candidate_max_sigma_m" => p.candidates.max_sigma_m = f()?,
+            other => return Err(PyKeyError::new_err(format!("unknown TurboTrack parameter '{other}'"))),
+        }
+    }
+    Ok(p)
+}
+
 /// Reads GLAC parameters from a dict of names → numbers/strings; unknown
 /// names are an error (a typo must not be ignored silently).
-fn make_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
+fn make_glac_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
     let mut p = GlacParams::default();
     let Some(params) = params else { return Ok(p) };
     for (key, value) in params.iter() {
@@ -177,6 +257,28 @@ impl Columns {
     }
 }
 
+/// One frame's rows (sorted by receiver, then frequency) as a
+/// `WidebandFrame`; blocks with different subcarriers give a frame whose
+/// sizes do not match, which the trackers decline as invalid.
+fn frame_from_rows(time_s: f64, tx: usize, rx: &[i64], f: &[f64], re: &[f64], im: &[f64]) -> WidebandFrame {
+    let mut receivers: Vec<usize> = Vec::new();
+    let mut block_len = 0usize;
+    for (i, &r) in rx.iter().enumerate() {
+        if receivers.last() != Some(&(r as usize)) {
+            receivers.push(r as usize);
+        }
+        if receivers.len() == 1 {
+            block_len = i + 1;
+        }
+    }
+    let frequencies: Vec<f64> = f[..block_len].to_vec();
+    let consistent = block_len * receivers.len() == rx.len()
+        && (0..rx.len()).all(|i| (f[i] - frequencies[i % block_len.max(1)]).abs() < 1.0);
+    let h: Vec<Complex<f64>> =
+        if consistent { re.iter().zip(im).map(|(&a, &b)| Complex::new(a, b)).collect() } else { Vec::new() };
+    WidebandFrame { time_s, tx, rx: receivers, frequencies_hz: frequencies, h }
+}
+
 fn estimate_tuple(e: Estimate) -> (f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64) {
     (e.time_s, e.position, e.velocity, e.covariance.to_vec(), e.hypotheses, e.weight)
 }
@@ -192,7 +294,7 @@ struct Engine {
 impl Engine {
     #[new]
     #[pyo3(signature = (dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions,
-        antenna_offsets, region, channel_frequencies, channel_offsets, method, params=None))]
+        antenna_offsets, region, channel_frequencies, channel_offsets, method, params=None, roles=None))]
     #[allow(clippy::too_many_arguments)]
     fn new(
         dimensions: usize,
@@ -207,6 +309,7 @@ impl Engine {
         channel_offsets: PyReadonlyArray1<f64>,
         method: &str,
         params: Option<&Bound<'_, PyDict>>,
+        roles: Option<Vec<String>>,
     ) -> PyResult<Self> {
         let scene = make_scene(
             dimensions,
@@ -219,9 +322,10 @@ impl Engine {
             region,
             channel_frequencies,
             channel_offsets,
+            roles,
         )?;
         let antennas = scene.antennas.len();
-        let inner = CoreEngine::new(scene, method, make_params(params)?).map_err(value_error)?;
+        let inner = CoreEngine::new(scene, method, make_params(method, params)?).map_err(value_error)?;
         Ok(Self { inner, antennas })
     }
 
@@ -235,7 +339,7 @@ impl Engine {
         frequency_hz: f64,
         phase_rad: f64,
     ) -> Option<(f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64)> {
-        let m = Measurement { time_s, antenna, frequency_hz, phase_rad };
+        let m = Measurement::Phase(PhaseRead { time_s, antenna, frequency_hz, phase_rad });
         self.inner.step(tag, &m).map(estimate_tuple)
     }
 
@@ -267,7 +371,7 @@ impl Engine {
         let columns = py.detach(move || {
             let mut c = Columns::default();
             for i in 0..n {
-                let m = Measurement { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] };
+                let m = Measurement::Phase(PhaseRead { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] });
                 if let Some(e) = inner.step(tag[i] as usize, &m) {
                     c.push(i, &e);
                 }
@@ -275,6 +379,67 @@ impl Engine {
             c
         });
         columns.into_dict(py)
+    }
+
+    /// Many wideband frames in time order. Frame `k` is tag `tag[k]` at
+    /// `time_s[k]`, transmit antenna index `tx[k]`, and rows
+    /// `frame_start[k]..frame_start[k+1]` of the row columns (receive
+    /// antenna index, subcarrier Hz, channel re/im), sorted by receiver
+    /// then frequency. Receivers must share one subcarrier set; a frame
+    /// whose blocks differ is passed on malformed so the tracker declines
+    /// (and counts) it. Returns the same columns as `run`, `row` being
+    /// the frame index.
+    #[allow(clippy::too_many_arguments)]
+    fn run_frames<'py>(
+        &mut self,
+        py: Python<'py>,
+        tag: PyReadonlyArray1<i64>,
+        time_s: PyReadonlyArray1<f64>,
+        tx: PyReadonlyArray1<i64>,
+        frame_start: PyReadonlyArray1<i64>,
+        rx: PyReadonlyArray1<i64>,
+        frequency_hz: PyReadonlyArray1<f64>,
+        h_re: PyReadonlyArray1<f64>,
+        h_im: PyReadonlyArray1<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        let (tag, t, tx, start) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx.as_array().to_vec(), frame_start.as_array().to_vec());
+        let (rx, f, re, im) = (rx.as_array().to_vec(), frequency_hz.as_array().to_vec(), h_re.as_array().to_vec(), h_im.as_array().to_vec());
+        let m = t.len();
+        let n = rx.len();
+        if tag.len() != m || tx.len() != m || start.len() != m + 1 {
+            return Err(value_error("tag, time_s and tx need one entry per frame, frame_start one more"));
+        }
+        if f.len() != n || re.len() != n || im.len() != n {
+            return Err(value_error("rx, frequency_hz, h_re and h_im must have the same length"));
+        }
+        if start.windows(2).any(|w| w[1] < w[0]) || start.first() != Some(&0) || start.last() != Some(&(n as i64)) {
+            return Err(value_error("frame_start must rise from 0 to the number of rows"));
+        }
+        if tag.iter().any(|&x| x < 0) {
+            return Err(value_error("tag indices must be non-negative"));
+        }
+        let antennas = self.antennas as i64;
+        if let Some(bad) = rx.iter().chain(tx.iter()).find(|&&x| x < 0 || x >= antennas) {
+            return Err(value_error(format!("antenna index {bad} out of range")));
+        }
+        let inner = &mut self.inner;
+        let columns = py.detach(move || {
+            let mut c = Columns::default();
+            for k in 0..m {
+                let rows = start[k] as usize..start[k + 1] as usize;
+                let frame = frame_from_rows(t[k], tx[k] as usize, &rx[rows.clone()], &f[rows.clone()], &re[rows.clone()], &im[rows]);
+                if let Some(e) = inner.step(tag[k] as usize, &Measurement::Wideband(frame)) {
+                    c.push(k, &e);
+                }
+            }
+            c
+        });
+        columns.into_dict(py)
+    }
+
+    /// Smoothed (backtracked MAP) trajectory of tag `tag`: (time_s, position) pairs.
+    fn trajectory(&self, tag: usize) -> Vec<(f64, [f64; 3])> {
+        self.inner.trajectory(tag)
     }
 
     /// Counters of tag `tag`.
@@ -302,9 +467,46 @@ fn methods() -> Vec<&'static str> {
 
 /// Default GLAC parameters as a dict (the names `Engine` accepts).
 #[pyfunction]
-fn default_params(py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
-    let p = GlacParams::default();
+#[pyo3(signature = (method="glac"))]
+fn default_params<'py>(py: Python<'py>, method: &str) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
+    if is_wideband(method) {
+        let p = TurboTrackParams::default();
+        d.set_item("particles", p.particles)?;
+        d.set_item("transition_sigma_m", p.transition_sigma_m)?;
+        d.set_item("reference_interval_s", p.reference_interval_s)?;
+        d.set_item("resample_threshold", p.resample_threshold)?;
+        d.set_item("perimeter_threshold_m", p.perimeter_threshold_m)?;
+        d.set_item("max_initial_components", p.max_initial_components)?;
+        d.set_item("intersection_tolerance_m", p.intersection_tolerance_m)?;
+        d.set_item("distance_sigma_m", p.distance_sigma_m)?;
+        d.set_item("weight_floor", p.weight_floor)?;
+        d.set_item("outlier_chi2", p.outlier_chi2)?;
+        d.set_item("outlier_jump_m", p.outlier_jump_m)?;
+        d.set_item("max_speed_m_s", p.max_speed_m_s)?;
+        d.set_item("max_consecutive_outliers", p.max_consecutive_outliers)?;
+        d.set_item("reinit_gap_s", p.reinit_gap_s)?;
+        d.set_item("region_margin_m", p.region_margin_m)?;
+        d.set_item("history_frames", p.history_frames)?;
+        d.set_item("velocity_window_s", p.velocity_window_s)?;
+        d.set_item("seed", p.seed)?;
+        d.set_item("rfind_window_s", p.rfind_window_s)?;
+        d.set_item("candidate_min_relative_weight", p.candidates.min_relative_weight)?;
+        d.set_item("candidate_max_candidates", p.candidates.max_candidates)?;
+        d.set_item("candidate_weight_exponent", p.candidates.weight_exponent)?;
+        d.set_item("candidate_likelihood_temper", p.candidates.likelihood_temper)?;
+        d.set_item(
+            "candidate_weighting",
+            match p.candidates.weighting {
+                CandidateWeighting::Amplitude => "amplitude",
+                CandidateWeighting::Likelihood => "likelihood",
+            },
+        )?;
+        d.set_item("candidate_min_sigma_m", p.candidates.min_sigma_m)?;
+        d.set_item("candidate_max_sigma_m", p.candidates.max_sigma_m)?;
+        return Ok(d);
+    }
+    let p = GlacParams::default();
     let q = match p.motion {
         MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
     };

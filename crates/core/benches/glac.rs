@@ -35,7 +35,7 @@ use nalgebra::Vector3;
 use scattertrack_core::filter::{predict, update_scalar};
 use scattertrack_core::model::{range, MotionModel, StateMatrix, StateVector};
 use scattertrack_core::scene::{Scene, SPEED_OF_LIGHT};
-use scattertrack_core::track::{initial_hypotheses, Glac, GlacParams, InitialState, Measurement, Tracker};
+use scattertrack_core::track::{initial_hypotheses, Glac, GlacParams, InitialState, Measurement, PhaseRead, Tracker};
 
 /// Loop radius of `common::truth`, metres.
 const LOOP_RADIUS_M: f64 = 0.2;
@@ -52,7 +52,7 @@ fn options(dimensions: usize, duration: f64) -> Options {
 /// by `span_s` continue the same trajectory.
 struct Stream {
     scene: Scene,
-    reads: Vec<Measurement>,
+    reads: Vec<PhaseRead>,
     truths: Vec<Vector3<f64>>,
     span_s: f64,
 }
@@ -78,7 +78,7 @@ impl<'a> Cycler<'a> {
     }
 
     #[inline]
-    fn next(&mut self) -> (Measurement, Vector3<f64>) {
+    fn next(&mut self) -> (PhaseRead, Vector3<f64>) {
         let mut m = self.stream.reads[self.index];
         let truth = self.stream.truths[self.index];
         m.time_s += self.offset_s;
@@ -101,7 +101,7 @@ fn feed(tracker: &mut Glac, cycler: &mut Cycler<'_>, n: usize) -> Option<f64> {
     let mut worst: Option<f64> = None;
     for k in 0..n {
         let (m, truth) = cycler.next();
-        if let Some(e) = tracker.step(&m) {
+        if let Some(e) = tracker.step(&Measurement::Phase(m)) {
             if k >= n - n / 4 {
                 let err = error_m(&e.position, &truth);
                 worst = Some(worst.map_or(err, |w| w.max(err)));
@@ -148,7 +148,7 @@ fn converged_step(c: &mut Criterion) {
         group.bench_function(BenchmarkId::new("converged_step", label), |b| {
             b.iter(|| {
                 let (m, _) = cycler.next();
-                black_box(tracker.step(black_box(&m)))
+                black_box(tracker.step(black_box(&Measurement::Phase(m))))
             })
         });
         let stats = tracker.stats();
@@ -177,7 +177,7 @@ fn converged_step(c: &mut Criterion) {
 fn initialising_reads(stream: &Stream) -> (usize, usize) {
     let mut tracker = Glac::new(stream.scene.clone(), GlacParams::default()).unwrap();
     for (i, m) in stream.reads.iter().enumerate() {
-        if tracker.step(m).is_some() {
+        if tracker.step(&Measurement::Phase(*m)).is_some() {
             return (i + 1, tracker.hypothesis_count());
         }
     }
@@ -204,24 +204,24 @@ fn initialising_step(c: &mut Criterion) {
                 || {
                     let mut t = Glac::new(stream.scene.clone(), GlacParams::default()).unwrap();
                     for m in &stream.reads[..n_init] {
-                        t.step(m);
+                        t.step(&Measurement::Phase(*m));
                     }
                     t
                 },
-                |t| black_box(t.step(black_box(&next))),
+                |t| black_box(t.step(black_box(&Measurement::Phase(next)))),
                 BatchSize::SmallInput,
             )
         });
 
         // Everything a fresh tracker does in its first half second.
-        let window: Vec<Measurement> = stream.reads.iter().copied().filter(|m| m.time_s < 0.5).collect();
+        let window: Vec<PhaseRead> = stream.reads.iter().copied().filter(|m| m.time_s < 0.5).collect();
         group.throughput(Throughput::Elements(window.len() as u64));
         group.bench_function(BenchmarkId::new("first_half_second", label), |b| {
             b.iter_batched_ref(
                 || Glac::new(stream.scene.clone(), GlacParams::default()).unwrap(),
                 |t| {
                     for m in &window {
-                        black_box(t.step(m));
+                        black_box(t.step(&Measurement::Phase(*m)));
                     }
                 },
                 BatchSize::SmallInput,
@@ -270,7 +270,7 @@ fn initial(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(3));
     for (label, dimensions) in [("3d", 3usize), ("2d", 2)] {
         let (scene, reads, _) = simulate(&options(dimensions, 1.0), SEED);
-        let window: Vec<Measurement> = reads.into_iter().filter(|m| m.time_s < 0.35).collect();
+        let window: Vec<PhaseRead> = reads.into_iter().filter(|m| m.time_s < 0.35).collect();
         let f = window[0].frequency_hz;
         let range_sigma = scene.phase_noise_rad * SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
         let settings = InitialState::default();

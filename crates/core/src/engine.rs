@@ -12,7 +12,7 @@ use std::time::Instant;
 
 use crate::error::Result;
 use crate::scene::Scene;
-use crate::track::{make, Estimate, GlacParams, Measurement, Tracker, TrackerStats};
+use crate::track::{make, Estimate, Measurement, Params, Tracker, TrackerStats};
 
 /// Wall-clock cost of `step` calls, nanoseconds.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -36,7 +36,7 @@ impl Latency {
 pub struct Engine {
     scene: Scene,
     method: String,
-    params: GlacParams,
+    params: Params,
     trackers: Vec<Option<Box<dyn Tracker>>>,
     latency: Latency,
 }
@@ -44,7 +44,7 @@ pub struct Engine {
 impl Engine {
     /// Fails on an unknown method or invalid parameters (checked by
     /// building one tracker up front).
-    pub fn new(scene: Scene, method: &str, params: GlacParams) -> Result<Self> {
+    pub fn new(scene: Scene, method: &str, params: Params) -> Result<Self> {
         make(method, &scene, &params)?;
         Ok(Self { scene, method: method.to_string(), params, trackers: Vec::new(), latency: Latency::default() })
     }
@@ -78,6 +78,11 @@ impl Engine {
         self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(Vec::new, |t| t.hypotheses())
     }
 
+    /// Smoothed trajectory of tag `tag` (methods that revise the past).
+    pub fn trajectory(&self, tag: usize) -> Vec<(f64, [f64; 3])> {
+        self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(Vec::new, |t| t.trajectory())
+    }
+
     pub fn latency(&self) -> Latency {
         self.latency
     }
@@ -88,7 +93,7 @@ impl Engine {
 }
 
 /// A measurement waiting in the reorder window.
-#[derive(Debug, Clone, Copy)]
+#[derive(Debug, Clone)]
 struct Pending {
     tag: usize,
     sequence: u64,
@@ -111,8 +116,8 @@ impl Ord for Pending {
     fn cmp(&self, other: &Self) -> Ordering {
         other
             .measurement
-            .time_s
-            .total_cmp(&self.measurement.time_s)
+            .time_s()
+            .total_cmp(&self.measurement.time_s())
             .then_with(|| other.sequence.cmp(&self.sequence))
     }
 }
@@ -138,10 +143,10 @@ impl ReorderWindow {
 
     /// Adds a measurement; returns those now older than the window.
     pub fn push(&mut self, tag: usize, measurement: Measurement) -> Vec<(usize, Measurement)> {
-        if measurement.time_s < self.released_s {
+        if measurement.time_s() < self.released_s {
             self.late += 1;
         }
-        self.newest_s = self.newest_s.max(measurement.time_s);
+        self.newest_s = self.newest_s.max(measurement.time_s());
         self.heap.push(Pending { tag, sequence: self.sequence, measurement });
         self.sequence += 1;
         self.release(self.newest_s - self.window_s)
@@ -154,9 +159,9 @@ impl ReorderWindow {
 
     fn release(&mut self, until_s: f64) -> Vec<(usize, Measurement)> {
         let mut out = Vec::new();
-        while self.heap.peek().is_some_and(|p| p.measurement.time_s <= until_s) {
+        while self.heap.peek().is_some_and(|p| p.measurement.time_s() <= until_s) {
             let p = self.heap.pop().unwrap();
-            self.released_s = self.released_s.max(p.measurement.time_s);
+            self.released_s = self.released_s.max(p.measurement.time_s());
             out.push((p.tag, p.measurement));
         }
         out
@@ -168,7 +173,7 @@ mod tests {
     use super::*;
 
     fn m(t: f64) -> Measurement {
-        Measurement { time_s: t, antenna: 0, frequency_hz: 915e6, phase_rad: 0.0 }
+        Measurement::Phase(crate::track::PhaseRead { time_s: t, antenna: 0, frequency_hz: 915e6, phase_rad: 0.0 })
     }
 
     #[test]
@@ -179,7 +184,7 @@ mod tests {
             out.extend(w.push(0, m(t)));
         }
         out.extend(w.flush());
-        let times: Vec<f64> = out.iter().map(|(_, m)| m.time_s).collect();
+        let times: Vec<f64> = out.iter().map(|(_, m)| m.time_s()).collect();
         assert_eq!(times, vec![0.0, 0.03, 0.05, 0.12, 0.2, 0.4]);
         assert_eq!(w.late, 0);
     }

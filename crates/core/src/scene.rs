@@ -17,6 +17,17 @@ use crate::error::{Error, Result};
 /// Speed of light in vacuum, m/s.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
 
+/// What an antenna does (FORMATS.md §1 `role`): a COTS reader's ports
+/// transmit and receive; a localization helper has one transmit antenna
+/// and several receive antennas (bistatic).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Role {
+    #[default]
+    TxRx,
+    Tx,
+    Rx,
+}
+
 /// One antenna port.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Antenna {
@@ -26,6 +37,8 @@ pub struct Antenna {
     pub position: Vector3<f64>,
     /// Calibrated cable/port phase offset θ_a, radians.
     pub phase_offset_rad: f64,
+    /// Transmit, receive or both.
+    pub role: Role,
 }
 
 /// Axis-aligned box where tags can be, metres.
@@ -180,6 +193,16 @@ impl Scene {
         }
     }
 
+    /// Index of the helper's transmit antenna (`role = "tx"`), if any.
+    pub fn transmitter(&self) -> Option<usize> {
+        self.antennas.iter().position(|a| a.role == Role::Tx)
+    }
+
+    /// Indices of the helper's receive antennas (`role = "rx"`).
+    pub fn receivers(&self) -> Vec<usize> {
+        (0..self.antennas.len()).filter(|&i| self.antennas[i].role == Role::Rx).collect()
+    }
+
     /// Phase (rad, in [0, P)) that an ideal reader reports for a tag at
     /// `distance` m: the forward model the simulators and tests share.
     pub fn ideal_phase(&self, antenna: usize, frequency_hz: f64, distance: f64) -> f64 {
@@ -198,7 +221,7 @@ mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.3 * i as f64 })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.3 * i as f64, role: Default::default() })
             .collect();
         Scene::new(dimensions, 0.0, -1.0, TWO_PI, 0.1, antennas, None, vec![]).unwrap()
     }
@@ -228,7 +251,7 @@ mod tests {
     #[test]
     fn rejects_bad_scenes() {
         assert!(Scene::new(3, 0.0, 1.0, TWO_PI, 0.1, vec![], None, vec![]).is_err());
-        let a = vec![Antenna { id: 1, position: Vector3::zeros(), phase_offset_rad: 0.0 }];
+        let a = vec![Antenna { id: 1, position: Vector3::zeros(), phase_offset_rad: 0.0, role: Default::default() }];
         assert!(Scene::new(4, 0.0, 1.0, TWO_PI, 0.1, a.clone(), None, vec![]).is_err());
         assert!(Scene::new(3, 0.0, 0.5, TWO_PI, 0.1, a.clone(), None, vec![]).is_err());
         assert!(Scene::new(3, 0.0, 1.0, 1.0, 0.1, a, None, vec![]).is_err());

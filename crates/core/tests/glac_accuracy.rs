@@ -10,10 +10,10 @@ use scattertrack_core::track::{make, GlacParams};
 /// Median 3D error (m) of the estimates after `settle_s` seconds.
 fn median_error(o: &Options, seed: u64, settle_s: f64) -> f64 {
     let (scene, reads, truths) = simulate(o, seed);
-    let mut tracker = make("glac", &scene, &GlacParams::default()).unwrap();
+    let mut tracker = make("glac", &scene, &GlacParams::default().into()).unwrap();
     let mut errors = Vec::new();
     for (m, p) in reads.iter().zip(&truths) {
-        if let Some(e) = tracker.step(m) {
+        if let Some(e) = tracker.step(&(*m).into()) {
             if m.time_s > settle_s {
                 let d = ((e.position[0] - p.x).powi(2) + (e.position[1] - p.y).powi(2) + (e.position[2] - p.z).powi(2)).sqrt();
                 errors.push(d);

@@ -21,6 +21,7 @@ from scattertrack.io.types import (
     Truth,
 )
 from scattertrack.io.reads import read_reads, write_reads
+from scattertrack.io.frames import Frames, make_frames, read_frames, write_frames
 from scattertrack.io.scene import read_scene, write_scene
 from scattertrack.io.track import read_track, write_track
 from scattertrack.io.truth import read_truth, write_truth
@@ -29,6 +30,7 @@ __all__ = [
     "Antenna",
     "ChannelOffset",
     "FormatError",
+    "Frames",
     "Reader",
     "Reads",
     "Region",
@@ -36,10 +38,13 @@ __all__ = [
     "SkipReport",
     "Track",
     "Truth",
+    "make_frames",
+    "read_frames",
     "read_reads",
     "read_scene",
     "read_track",
     "read_truth",
+    "write_frames",
     "write_reads",
     "write_scene",
     "write_track",

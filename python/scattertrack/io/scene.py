@@ -5,6 +5,12 @@ its antennas (ids, positions in metres, calibrated phase offsets in
 radians), an optional region where tags can be (metres) and optional
 per-channel phase offsets (hertz, radians).
 
+A helper scene (``kind = "sdr-helper"``, FORMATS.md section 5) has exactly
+one antenna with ``role = "tx"`` and at least two with ``role = "rx"`` (no
+``"txrx"``); its optional ``[helper]`` table records the OFDM set-up
+(``centre_frequency_hz``, ``bandwidth_hz`` in hertz, ``n_subcarriers``,
+``blf_hz`` in hertz) and is kept in ``Scene.extra["helper"]``.
+
 Errors name the key path as the "column" (``antennas[2].position``, list
 indices 0-based as in ``Scene.antennas``) and the 1-based line where that key
 is written, found by scanning the text (tomllib does not report positions).
@@ -33,6 +39,10 @@ READER_KINDS = ("cots", "sdr-helper", "lora-backscatter")
 KINDS_WITH_ANTENNAS = ("cots", "sdr-helper")
 """Reader kinds whose phase model needs antenna positions."""
 ROLES = ("txrx", "tx", "rx")
+HELPER_ROLES = ("tx", "rx")
+"""Roles an ``sdr-helper`` scene's antennas may have (bistatic: no "txrx")."""
+HELPER_NUMBERS = ("centre_frequency_hz", "bandwidth_hz", "blf_hz")
+"""Positive numbers (hertz) of a helper scene's ``[helper]`` table; ``n_subcarriers`` is a positive integer."""
 PERIODS = ("2pi", "pi")
 KNOWN_TOP_LEVEL = (
     "name",
@@ -240,6 +250,10 @@ class _SceneChecker:
         region = self.region(self.table(document, "region")) if "region" in document else None
         channel_offsets = self.channel_offsets(document)
         extra = {k: v for k, v in document.items() if k not in KNOWN_TOP_LEVEL}
+        if reader.kind == "sdr-helper":
+            self.helper_roles(antennas)
+            if "helper" in document:
+                self.helper_table(self.table(document, "helper"))
         return Scene(
             name=name,
             dimensions=dimensions,
@@ -287,6 +301,39 @@ class _SceneChecker:
                 )
             )
         return antennas
+
+    def helper_roles(self, antennas: list[Antenna]) -> None:
+        """An sdr-helper scene: roles "tx"/"rx" only, exactly one tx, at least two rx."""
+        for i, antenna in enumerate(antennas):
+            if antenna.role not in HELPER_ROLES:
+                raise self.fail(
+                    f"antennas[{i}].role",
+                    f"an 'sdr-helper' antenna needs role 'tx' or 'rx', found {antenna.role!r}",
+                    near=f"antennas[{i}]",
+                )
+        tx = [i for i, a in enumerate(antennas) if a.role == "tx"]
+        if len(tx) > 1:
+            raise self.fail(
+                f"antennas[{tx[1]}].role",
+                f"an 'sdr-helper' scene has exactly one 'tx' antenna; antennas[{tx[0]}] is one already",
+            )
+        if not tx:
+            raise self.fail("antennas", "an 'sdr-helper' scene needs one antenna with role 'tx', found none")
+        n_rx = sum(a.role == "rx" for a in antennas)
+        if n_rx < 2:
+            raise self.fail("antennas", f"an 'sdr-helper' scene needs at least 2 antennas with role 'rx', found {n_rx}")
+
+    def helper_table(self, table: dict) -> None:
+        """The optional ``[helper]`` table: positive frequencies (Hz) and a positive subcarrier count."""
+        for key in HELPER_NUMBERS:
+            if key in table:
+                value = self.number(table, key, f"helper.{key}")
+                if value <= 0.0:
+                    raise self.fail(f"helper.{key}", f"must be positive, found {value!r}")
+        if "n_subcarriers" in table:
+            value = table["n_subcarriers"]
+            if not isinstance(value, int) or isinstance(value, bool) or value < 1:
+                raise self.fail("helper.n_subcarriers", f"expected a positive integer, found {value!r}")
 
     def region(self, table: dict) -> Region:
         low = self.vector3(table, "min", "region.min")

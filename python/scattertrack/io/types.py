@@ -221,6 +221,9 @@ class Track:
     from a file."""
     latency: tuple | None = None
     """(steps, mean ns, max ns) of the Rust tracker steps, when tracked here."""
+    smoothed: dict = field(default_factory=dict)
+    """Methods that revise the past (TurboTrack's backtracked MAP trajectory):
+    ``epc -> (times s (n,), positions m (n, 3))``; empty otherwise."""
 
     def __len__(self) -> int:
         return len(self.time_s)

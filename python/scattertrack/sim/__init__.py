@@ -20,8 +20,19 @@ Contract
 ``write_simulation(sim, out_dir)``
     Writes ``scene.toml``, ``reads.csv``, ``truth.csv`` (FORMATS.md 1-3) and
     ``simulation.json`` (seed, resolved scenario, package version, details).
-``list_scenarios() -> list[str]``
-    The named scenarios shipped in ``<repo>/scenarios``.
+``list_scenarios(pipeline="glac") -> list[str]``
+    The named scenarios shipped in ``<repo>/scenarios`` for one pipeline
+    (``"glac"``, ``"turbotrack"``, or ``"all"``).
+
+Scenarios with ``pipeline = "turbotrack"`` simulate a reader plus SDR
+localization helper instead (:mod:`scattertrack.sim.wideband`): their
+``Simulation`` has ``frames`` (FORMATS.md section 5) and ``reads = None``,
+and ``write_simulation`` writes ``frames.csv`` instead of ``reads.csv``.
+``list_scenarios("turbotrack")`` lists them. The helper's channel physics
+(``tag_channel``, ``static_channel``, ``bistatic_path_lengths``,
+``subcarrier_frequencies``) and the frame-level simulator
+(``simulate_frames(scene, tags, model, seed) -> (Frames, Truth)``) are
+exported here too.
 
 The reads follow FORMATS.md's monostatic phase model
 ``phase = (phase_sign 4 pi f d / c + antenna offset + channel offset(f)
@@ -42,8 +53,28 @@ from scattertrack.sim.scenario import (
     write_simulation,
 )
 from scattertrack.sim.trajectory import positions_velocities
+from scattertrack.sim.scenario import PIPELINES, resolve_helper_model, scenario_pipeline
+from scattertrack.sim.wideband import (
+    HELPER_MODEL_DEFAULTS,
+    bistatic_path_lengths,
+    helper_geometry,
+    simulate_frames,
+    static_channel,
+    subcarrier_frequencies,
+    tag_channel,
+)
 
 __all__ = [
+    "HELPER_MODEL_DEFAULTS",
+    "PIPELINES",
+    "bistatic_path_lengths",
+    "helper_geometry",
+    "resolve_helper_model",
+    "scenario_pipeline",
+    "simulate_frames",
+    "static_channel",
+    "subcarrier_frequencies",
+    "tag_channel",
     "SCENARIOS_DIR",
     "Simulation",
     "list_scenarios",

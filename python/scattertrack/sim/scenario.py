@@ -1,8 +1,13 @@
-"""Scenarios: a TOML file describing one simulated COTS reader session.
+"""Scenarios: a TOML file describing one simulated reader session.
 
 A scenario holds the scene (antennas, reader conventions, region), the reader
 model (schedule and impairments, :data:`scattertrack.sim.cots.READER_MODEL_DEFAULTS`)
 and the tags with their trajectories (:mod:`scattertrack.sim.trajectory`).
+Its ``pipeline`` says which hardware it simulates: ``"glac"`` (the default: a
+COTS reader, ``[reader_model]``, output ``reads.csv``) or ``"turbotrack"``
+(a reader plus SDR localization helper, ``[helper_model]`` with the keys of
+:data:`scattertrack.sim.wideband.HELPER_MODEL_DEFAULTS`, antennas with
+``role = "tx"``/``"rx"``, output ``frames.csv``).
 The schema, with every key, unit and default, is in ``docs/simulator.md``;
 named scenarios live in ``<repo>/scenarios/NAME.toml``.
 
@@ -25,11 +30,18 @@ from pathlib import Path
 
 import numpy as np
 
+from scattertrack.io.frames import Frames
 from scattertrack.io.types import Antenna, ChannelOffset, FormatError, Reader, Reads, Region, Scene, Truth
-from scattertrack.sim import cots, trajectory
+from scattertrack.sim import cots, trajectory, wideband
 
 SCENARIOS_DIR = Path(__file__).resolve().parents[3] / "scenarios"
 """The repository's named scenarios: python/scattertrack/sim/ -> ../../../scenarios."""
+
+PIPELINES = ("glac", "turbotrack")
+"""What a scenario simulates: a COTS reader (reads.csv) or a reader + SDR helper (frames.csv)."""
+
+MODEL_TABLE = {"glac": "reader_model", "turbotrack": "helper_model"}
+"""The table of impairments each pipeline's scenarios use."""
 
 TOP_LEVEL_DEFAULTS = {
     "description": "",
@@ -45,8 +57,8 @@ class Simulation:
 
     scene: Scene
     """The scene as a user would have calibrated it (written offsets include calibration error)."""
-    reads: Reads
-    """Reads sorted by time, all tags interleaved."""
+    reads: Reads | None
+    """Reads sorted by time, all tags interleaved (None for a turbotrack scenario)."""
     truth: Truth
     """True positions and velocities of every tag at ``truth_rate_hz``."""
     scenario: dict
@@ -54,15 +66,45 @@ class Simulation:
     seed: int
     details: dict = field(default_factory=dict)
     """Hidden truth (true offsets, hop table) and counts (attempts, misses, outliers)."""
+    frames: Frames | None = None
+    """Wideband channel frames of a turbotrack scenario (None for glac)."""
+
+    @property
+    def pipeline(self) -> str:
+        """``"glac"`` or ``"turbotrack"``: which scenario kind produced this."""
+        return self.scenario.get("pipeline", "glac")
 
 
 # --------------------------------------------------------------------------
 # loading
 
 
-def list_scenarios() -> list[str]:
-    """Names of the scenarios shipped in ``<repo>/scenarios`` (sorted)."""
-    return sorted(path.stem for path in SCENARIOS_DIR.glob("*.toml"))
+def list_scenarios(pipeline: str = "glac") -> list[str]:
+    """Names of the scenarios shipped in ``<repo>/scenarios`` for one pipeline (sorted).
+
+    ``pipeline`` is ``"glac"`` (the default: the COTS reader scenarios, what
+    callers written before the turbotrack pipeline expect), ``"turbotrack"``,
+    or ``"all"``.
+    """
+    names = sorted(path.stem for path in SCENARIOS_DIR.glob("*.toml"))
+    if pipeline == "all":
+        return names
+    if pipeline not in PIPELINES:
+        raise ValueError(f"unknown pipeline {pipeline!r}; expected one of {', '.join(PIPELINES)} or 'all'")
+    return [name for name in names if scenario_pipeline(name) == pipeline]
+
+
+def scenario_pipeline(name_or_path) -> str:
+    """The ``pipeline`` a scenario file declares (``"glac"`` when absent), without validating the rest.
+
+    A file that is not valid TOML reads as ``"glac"`` here; :func:`load_scenario` reports it.
+    """
+    try:
+        with open(scenario_path(name_or_path), "rb") as handle:
+            pipeline = tomllib.load(handle).get("pipeline", "glac")
+    except tomllib.TOMLDecodeError:
+        return "glac"
+    return pipeline if isinstance(pipeline, str) else "glac"
 
 
 def scenario_path(name_or_path) -> Path:
@@ -73,7 +115,7 @@ def scenario_path(name_or_path) -> Path:
     else:
         path = SCENARIOS_DIR / f"{text}.toml"
     if not path.is_file():
-        known = ", ".join(list_scenarios()) or "none"
+        known = ", ".join(list_scenarios("all")) or "none"
         raise FormatError(path, None, None, f"no such scenario file (named scenarios: {known})")
     return path
 
@@ -163,6 +205,9 @@ _SCENE_KEYS = ("name", "dimensions", "plane_z", "reader", "antennas", "region")
 _READER_KEYS = ("phase_sign", "phase_period", "phase_noise_rad")
 _ANTENNA_KEYS = ("id", "position", "phase_offset_rad")
 _TAG_KEYS = ("epc", "trajectory", "phase_offset_rad")
+_HELPER_SCENE_KEYS = ("name", "dimensions", "plane_z", "antennas", "region")
+_HELPER_ANTENNA_KEYS = ("id", "position", "role")
+_HELPER_TAG_KEYS = ("epc", "trajectory")
 
 
 def resolve_scenario(scenario: dict) -> dict:
@@ -174,7 +219,12 @@ def resolve_scenario(scenario: dict) -> dict:
     source = str(scenario.get("source", f"<scenario {scenario.get('name', '?')}>"))
     check = _Checker(source)
     data = copy.deepcopy(scenario)
-    check.keys(data, ("name", "source", "scene", "reader_model", "tags", *TOP_LEVEL_DEFAULTS), "")
+    pipeline = check.choice(data.setdefault("pipeline", "glac"), "pipeline", PIPELINES)
+    helper = pipeline == "turbotrack"
+    for other, table in MODEL_TABLE.items():
+        if other != pipeline and table in data:
+            check.fail(table, f"is for {other} scenarios; this one has pipeline = {pipeline!r}")
+    check.keys(data, ("name", "source", "pipeline", "scene", MODEL_TABLE[pipeline], "tags", *TOP_LEVEL_DEFAULTS), "")
     for key, default in TOP_LEVEL_DEFAULTS.items():
         data.setdefault(key, default)
     if "name" not in data:
@@ -189,7 +239,7 @@ def resolve_scenario(scenario: dict) -> dict:
     if "scene" not in data:
         check.fail("scene", "missing")
     scene = check.table(data["scene"], "scene")
-    check.keys(scene, _SCENE_KEYS, "scene")
+    check.keys(scene, _HELPER_SCENE_KEYS if helper else _SCENE_KEYS, "scene")
     scene.setdefault("name", data["name"])
     check.string(scene["name"], "scene.name")
     if "dimensions" not in scene:
@@ -202,14 +252,15 @@ def resolve_scenario(scenario: dict) -> dict:
         scene["plane_z"] = check.number(scene["plane_z"], "scene.plane_z")
     elif "plane_z" in scene:
         scene["plane_z"] = check.number(scene["plane_z"], "scene.plane_z")
-    reader = check.table(scene.setdefault("reader", {}), "scene.reader")
-    check.keys(reader, _READER_KEYS, "scene.reader")
-    reader.setdefault("phase_sign", 1)
-    if reader["phase_sign"] not in (1, -1) or isinstance(reader["phase_sign"], bool):
-        check.fail("scene.reader.phase_sign", f"must be 1 or -1, got {reader['phase_sign']!r}")
-    check.choice(reader.setdefault("phase_period", "2pi"), "scene.reader.phase_period", ("2pi", "pi"))
-    if "phase_noise_rad" in reader:
-        reader["phase_noise_rad"] = check.number(reader["phase_noise_rad"], "scene.reader.phase_noise_rad", 0.0)
+    if not helper:
+        reader = check.table(scene.setdefault("reader", {}), "scene.reader")
+        check.keys(reader, _READER_KEYS, "scene.reader")
+        reader.setdefault("phase_sign", 1)
+        if reader["phase_sign"] not in (1, -1) or isinstance(reader["phase_sign"], bool):
+            check.fail("scene.reader.phase_sign", f"must be 1 or -1, got {reader['phase_sign']!r}")
+        check.choice(reader.setdefault("phase_period", "2pi"), "scene.reader.phase_period", ("2pi", "pi"))
+        if "phase_noise_rad" in reader:
+            reader["phase_noise_rad"] = check.number(reader["phase_noise_rad"], "scene.reader.phase_noise_rad", 0.0)
     antennas = scene.get("antennas")
     if not isinstance(antennas, list) or not antennas:
         check.fail("scene.antennas", "must be a non-empty array of tables [[scene.antennas]]")
@@ -217,8 +268,8 @@ def resolve_scenario(scenario: dict) -> dict:
     for index, antenna in enumerate(antennas):
         where = f"scene.antennas[{index}]"
         check.table(antenna, where)
-        check.keys(antenna, _ANTENNA_KEYS, where)
-        for required in ("id", "position"):
+        check.keys(antenna, _HELPER_ANTENNA_KEYS if helper else _ANTENNA_KEYS, where)
+        for required in ("id", "position", "role") if helper else ("id", "position"):
             if required not in antenna:
                 check.fail(f"{where}.{required}", "missing")
         antenna_id = check.integer(antenna["id"], f"{where}.id")
@@ -228,6 +279,16 @@ def resolve_scenario(scenario: dict) -> dict:
         antenna["position"] = check.point(antenna["position"], f"{where}.position")
         if "phase_offset_rad" in antenna:
             antenna["phase_offset_rad"] = check.number(antenna["phase_offset_rad"], f"{where}.phase_offset_rad")
+        if helper:
+            check.choice(antenna["role"], f"{where}.role", ("tx", "rx"))
+    if helper:
+        roles = [antenna["role"] for antenna in antennas]
+        if roles.count("tx") != 1 or roles.count("rx") < 2:
+            check.fail(
+                "scene.antennas",
+                "a helper needs exactly one antenna with role 'tx' and at least two with role 'rx', "
+                f"found {roles.count('tx')} and {roles.count('rx')}",
+            )
     if "region" in scene:
         region = check.table(scene["region"], "scene.region")
         check.keys(region, ("min", "max"), "scene.region")
@@ -238,12 +299,17 @@ def resolve_scenario(scenario: dict) -> dict:
         if any(lo >= hi for lo, hi in zip(region["min"], region["max"])):
             check.fail("scene.region", "min must be below max on every axis")
 
-    data["reader_model"] = _resolve_reader_model(
-        check, check.table(data.get("reader_model", {}), "reader_model"), seen_ids, reader["phase_period"]
-    )
-    if "phase_noise_rad" not in reader:
-        model = data["reader_model"]
-        reader["phase_noise_rad"] = float(np.hypot(model["white_noise_rad"], model["wander_rad"]))
+    if helper:
+        data["helper_model"] = resolve_helper_model(
+            check.table(data.get("helper_model", {}), "helper_model"), source, "helper_model."
+        )
+    else:
+        data["reader_model"] = _resolve_reader_model(
+            check, check.table(data.get("reader_model", {}), "reader_model"), seen_ids, reader["phase_period"]
+        )
+        if "phase_noise_rad" not in reader:
+            model = data["reader_model"]
+            reader["phase_noise_rad"] = float(np.hypot(model["white_noise_rad"], model["wander_rad"]))
 
     # tags
     tags = data.get("tags")
@@ -253,7 +319,7 @@ def resolve_scenario(scenario: dict) -> dict:
     for index, tag in enumerate(tags):
         where = f"tags[{index}]"
         check.table(tag, where)
-        check.keys(tag, _TAG_KEYS, where)
+        check.keys(tag, _HELPER_TAG_KEYS if helper else _TAG_KEYS, where)
         for required in ("epc", "trajectory"):
             if required not in tag:
                 check.fail(f"{where}.{required}", "missing")
@@ -331,9 +397,15 @@ def _resolve_reader_model(check: _Checker, given: dict, antenna_ids: set, phase_
         )
     for name in ("tx_power_dbm", "antenna_gain_dbi", "tag_gain_dbi", "backscatter_loss_db"):
         model[name] = check.number(model[name], key + name)
-    if not isinstance(model["reflectors"], list):
-        check.fail(key + "reflectors", "must be an array of tables [[reader_model.reflectors]]")
-    for i, reflector in enumerate(model["reflectors"]):
+    _check_reflectors(check, model["reflectors"], key)
+    return model
+
+
+def _check_reflectors(check: _Checker, reflectors, key: str) -> None:
+    """Validate ``[[<model>.reflectors]]`` in place (``key`` is the model's prefix, e.g. ``reader_model.``)."""
+    if not isinstance(reflectors, list):
+        check.fail(key + "reflectors", f"must be an array of tables [[{key}reflectors]]")
+    for i, reflector in enumerate(reflectors):
         where = f"{key}reflectors[{i}]"
         check.table(reflector, where)
         kind = check.choice(reflector.get("kind"), where + ".kind", tuple(cots.REFLECTOR_KEYS))
@@ -347,6 +419,49 @@ def _resolve_reader_model(check: _Checker, given: dict, antenna_ids: set, phase_
                 reflector[name] = check.point(reflector[name], f"{where}.{name}")
         if kind == "plane" and not any(reflector["normal"]):
             check.fail(where + ".normal", "must be a non-zero vector")
+
+
+def resolve_helper_model(given: dict, source: str = "<helper_model>", key: str = "") -> dict:
+    """A helper model with every default of :data:`wideband.HELPER_MODEL_DEFAULTS` filled in, validated.
+
+    Raises :class:`FormatError` naming ``source`` and the key (prefixed by
+    ``key``, e.g. ``"helper_model."``) for an unknown key or a bad value,
+    including OFDM symbols too long for the tag's switching: the thesis's
+    rule ``N < B / (2 BLF)`` (sec. 4.2).
+    """
+    check = _Checker(source)
+    defaults = wideband.HELPER_MODEL_DEFAULTS
+    check.table(given, key.rstrip(".") or "helper_model")
+    check.keys(given, defaults, key.rstrip("."))
+    model = {name: copy.deepcopy(given.get(name, default)) for name, default in defaults.items()}
+    for name in ("centre_frequency_hz", "bandwidth_hz", "blf_hz", "slot_s", "dropout_burst_mean_s"):
+        model[name] = check.number(model[name], key + name, 0.0, strict=True)
+    for name in (
+        "round_overhead_s",
+        "round_jitter_cv",
+        "dropout_burst_rate_hz",
+        "calibration_phase_error_rad",
+        "calibration_delay_error_s",
+    ):
+        model[name] = check.number(model[name], key + name, 0.0)
+    for name in ("miss_probability", "rx_miss_probability"):
+        model[name] = check.number(model[name], key + name, 0.0, maximum=0.99)
+    model["outlier_probability"] = check.number(
+        model["outlier_probability"], key + "outlier_probability", 0.0, maximum=1.0
+    )
+    for name in ("snr_db", "outlier_power_db"):
+        model[name] = check.number(model[name], key + name)
+    model["n_subcarriers"] = check.integer(model["n_subcarriers"], key + "n_subcarriers", 1)
+    if model["centre_frequency_hz"] <= model["bandwidth_hz"] / 2.0:
+        check.fail(key + "centre_frequency_hz", "must exceed half the bandwidth (every subcarrier above 0 Hz)")
+    longest = model["bandwidth_hz"] / (2.0 * model["blf_hz"])
+    if not model["n_subcarriers"] < longest:
+        check.fail(
+            key + "n_subcarriers",
+            f"an OFDM symbol of {model['n_subcarriers']} samples at {model['bandwidth_hz']:g} samples/s is longer "
+            f"than half the tag's switching period 1 / (2 BLF): need N < B / (2 BLF) = {longest:g}",
+        )
+    _check_reflectors(check, model["reflectors"], key)
     return model
 
 
@@ -391,6 +506,8 @@ def simulate(scenario: dict, seed: int | None = None) -> Simulation:
         scenario = {**scenario, "seed": seed}
     data = resolve_scenario(scenario)
     seed = data["seed"]
+    if data["pipeline"] == "turbotrack":
+        return _simulate_helper(data)
     root = np.random.default_rng(seed)
     names = (*cots.STREAMS, "trajectories")
     rngs = dict(zip(names, root.spawn(len(names))))
@@ -498,20 +615,40 @@ def simulate(scenario: dict, seed: int | None = None) -> Simulation:
     return Simulation(scene=scene, reads=reads, truth=truth, scenario=data, seed=seed, details=details)
 
 
+def _simulate_helper(data: dict) -> Simulation:
+    """Run a resolved turbotrack scenario: frames, truth and the helper's scene."""
+    seed = data["seed"]
+    rngs = wideband.helper_streams(seed)
+    scene_spec, model = data["scene"], data["helper_model"]
+    region = scene_spec.get("region")
+    scene = Scene(
+        name=scene_spec["name"],
+        dimensions=int(scene_spec["dimensions"]),
+        reader=Reader(kind="sdr-helper", phase_sign=1, phase_period="2pi"),
+        antennas=[
+            Antenna(id=int(a["id"]), position=np.array(a["position"], dtype=float), role=a["role"])
+            for a in scene_spec["antennas"]
+        ],
+        plane_z=scene_spec.get("plane_z") if scene_spec["dimensions"] == 2 else None,
+        region=Region(np.array(region["min"], float), np.array(region["max"], float)) if region else None,
+        # What the user's hardware is set to; trackers read the OFDM grid from here.
+        extra={"helper": {key: model[key] for key in wideband.OFDM_KEYS}},
+    )
+    tags = data["tags"]
+    for tag in tags:
+        trajectory_seed = int(rngs["trajectories"].integers(2**31))
+        if tag["trajectory"]["kind"] == "random":
+            tag["trajectory"].setdefault("seed", trajectory_seed)
+    epcs = [tag["epc"] for tag in tags]
+    trajectories = [tag["trajectory"] for tag in tags]
+    frames, details = wideband.frames_from_trajectories(scene, epcs, trajectories, data["duration_s"], model, rngs)
+    truth = _truth(epcs, trajectories, data["duration_s"], data["truth_rate_hz"])
+    return Simulation(scene=scene, reads=None, truth=truth, scenario=data, seed=seed, details=details, frames=frames)
+
+
 def _truth(epcs: list[str], trajectories: list[dict], duration_s: float, rate_hz: float) -> Truth:
     """Positions and velocities of every tag on a regular grid over [0, duration_s], time-major."""
-    times = np.arange(int(np.floor(duration_s * rate_hz + 1e-9)) + 1) / rate_hz
-    n_times, n_tags = len(times), len(epcs)
-    position = np.empty((n_times, n_tags, 3))
-    velocity = np.empty((n_times, n_tags, 3))
-    for index, params in enumerate(trajectories):
-        position[:, index], velocity[:, index] = trajectory.positions_velocities(params, times)
-    return Truth(
-        time_s=np.repeat(times, n_tags),
-        epc=np.tile(np.asarray(epcs, dtype=str), n_times),
-        position=position.reshape(-1, 3),
-        velocity=velocity.reshape(-1, 3),
-    )
+    return wideband.truth_grid(epcs, trajectories, duration_s, rate_hz)
 
 
 # --------------------------------------------------------------------------
@@ -519,19 +656,23 @@ def _truth(epcs: list[str], trajectories: list[dict], duration_s: float, rate_hz
 
 
 def write_simulation(sim: Simulation, out_dir) -> Path:
-    """Write ``scene.toml``, ``reads.csv``, ``truth.csv`` and ``simulation.json`` into ``out_dir``.
+    """Write ``scene.toml``, ``reads.csv`` (``frames.csv`` for a turbotrack
+    scenario), ``truth.csv`` and ``simulation.json`` into ``out_dir``.
 
     ``simulation.json`` records the seed, the resolved scenario, the package
     version and the hidden truth (true offsets, hop table, counts), so a run
     can be reproduced and audited. Returns the folder.
     """
     from scattertrack import __version__
-    from scattertrack.io import write_reads, write_scene, write_truth
+    from scattertrack.io import write_frames, write_reads, write_scene, write_truth
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_scene(out / "scene.toml", sim.scene)
-    write_reads(out / "reads.csv", sim.reads)
+    if sim.frames is not None:
+        write_frames(out / "frames.csv", sim.frames)
+    else:
+        write_reads(out / "reads.csv", sim.reads)
     write_truth(out / "truth.csv", sim.truth)
     record = {
         "generator": "scattertrack.sim",

@@ -4,10 +4,34 @@ Contract: ``make(method, scene, **params)`` builds a :class:`Tracker`;
 ``tracker.step(...)`` takes one read and returns an :class:`Estimate` or
 ``None`` (causal: only reads at or before that time are used); ``run`` is
 the batch helper, a loop over ``step`` done in Rust, for many interleaved
-tags. Reads a tracker declines (gated outliers, out-of-order, invalid) are
-counted and reported in ``Track.skipped``, never dropped silently.
+tags: COTS phase reads (GLAC and its variants) or a localization helper's
+wideband frames (TurboTrack and its variants). Inputs a tracker declines
+(gated outliers, out-of-order, invalid) are counted and reported in
+``Track.skipped``, never dropped silently.
 """
 
-from scattertrack.track.glac import METHODS, Estimate, Tracker, default_params, make, run
+from scattertrack.io.frames import Frames
+from scattertrack.io.types import Reads, Scene, Track
+from scattertrack.track import glac, wideband
+from scattertrack.track.glac import METHODS, Estimate, Tracker, make
+from scattertrack.track.wideband import WIDEBAND_METHODS, run_frames
 
-__all__ = ["METHODS", "Estimate", "Tracker", "default_params", "make", "run"]
+
+def default_params(method: str = "glac") -> dict:
+    """The parameters ``method`` accepts, with their defaults (SI units)."""
+    return wideband.default_params(method) if method in WIDEBAND_METHODS else glac.default_params()
+
+
+def run(method: str, scene: Scene, data: Reads | Frames, **kwargs) -> Track:
+    """Tracks every tag in ``data``: phase reads (reads.csv) or wideband
+    frames (frames.csv), whichever the method consumes."""
+    if isinstance(data, Frames):
+        if method not in WIDEBAND_METHODS:
+            raise ValueError(f"method '{method}' takes phase reads; frames need one of {', '.join(WIDEBAND_METHODS)}")
+        return run_frames(method, scene, data, **kwargs)
+    if method in WIDEBAND_METHODS:
+        raise ValueError(f"method '{method}' takes wideband frames (frames.csv), not phase reads")
+    return glac.run(method, scene, data, **kwargs)
+
+
+__all__ = ["METHODS", "WIDEBAND_METHODS", "Estimate", "Tracker", "default_params", "make", "run", "run_frames"]

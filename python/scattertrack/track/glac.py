@@ -41,6 +41,10 @@ class Estimate:
 
 
 def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
+    from scattertrack.track import wideband
+
+    if method in wideband.WIDEBAND_METHODS:
+        return wideband.engine(method, scene, params)
     if scene.reader.kind != "cots":
         raise ValueError(f"method '{method}' needs a monostatic reader scene (kind = 'cots'), got '{scene.reader.kind}'")
     if method not in METHODS:
@@ -97,6 +101,38 @@ class Tracker:
             return None
         t, position, velocity, covariance, hypotheses, weight = out
         return Estimate(t, str(epc), np.array(position), np.array(velocity), np.array(covariance).reshape(6, 6), hypotheses, weight)
+
+    def step_frame(self, time_s: float, epc: str, tx: int, rx, frequency_hz, h) -> Estimate | None:
+        """One wideband frame (wideband methods): ``rx`` (n,) receive antenna
+        ids, ``frequency_hz`` (n,) and complex ``h`` (n,), sorted by receiver
+        then frequency, every receiver with the same subcarriers; ``tx`` is
+        the transmit antenna id."""
+        rx = np.asarray(rx)
+        for antenna in [tx, *np.unique(rx).tolist()]:
+            if antenna not in self._antennas:
+                raise ValueError(f"antenna {antenna} is not in the scene")
+        h = np.asarray(h, dtype=complex)
+        out = self._engine.run_frames(
+            np.array([self._tag(epc)], dtype=np.int64),
+            np.array([float(time_s)]),
+            np.array([self._antennas[tx]], dtype=np.int64),
+            np.array([0, len(rx)], dtype=np.int64),
+            np.array([self._antennas[int(r)] for r in rx], dtype=np.int64),
+            np.asarray(frequency_hz, dtype=float),
+            np.ascontiguousarray(h.real),
+            np.ascontiguousarray(h.imag),
+        )
+        if len(out["row"]) == 0:
+            return None
+        return Estimate(
+            float(out["time_s"][0]),
+            str(epc),
+            out["position"][0].copy(),
+            out["velocity"][0].copy(),
+            out["covariance"][0].reshape(6, 6).copy(),
+            int(out["hypotheses"][0]),
+            float(out["weight"][0]),
+        )
 
     def stats(self, epc: str) -> dict:
         """What the tag's tracker did with its reads, by reason."""

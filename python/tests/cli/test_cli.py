@@ -345,3 +345,42 @@ def test_python_dash_m():
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("scattertrack ")
+
+
+# --- turbotrack (reader + SDR helper) scenarios ----------------------------------
+
+
+def test_simulate_turbotrack_scenario_writes_frames(capsys, tmp_path):
+    from scattertrack.io import read_frames, read_scene
+
+    code, out, err = run(
+        capsys, "simulate", "--scenario", "turbotrack-3d-arm", "--out", tmp_path, "--duration", "1", "--seed", 4
+    )
+    assert code == 0, err
+    for name in ("scene.toml", "frames.csv", "truth.csv", "simulation.json"):
+        assert (tmp_path / name).is_file()
+    assert not (tmp_path / "reads.csv").exists()
+    frames = read_frames(tmp_path / "frames.csv", read_scene(tmp_path / "scene.toml"))
+    assert f"{frames.n_frames} frames of 1 tag" in out
+    assert "frames/s" in out and "(turbotrack), seed 4" in out and "20 subcarriers over 100 MHz" in out
+    code, _, err = run(
+        capsys, "simulate", "--scenario", "turbotrack-static", "--out", tmp_path / "b", "--duration", "1",
+        "--pipeline", "turbotrack",
+    )
+    assert code == 0, err
+
+
+def test_simulate_scenario_of_the_other_pipeline(capsys, tmp_path):
+    code, out, err = run(capsys, "simulate", "--scenario", "turbotrack-static", "--out", tmp_path, "--pipeline", "glac")
+    assert_input_error(code, out, err, "turbotrack-static is for the turbotrack pipeline, not glac", "glac-3d-arm")
+    code, out, err = run(capsys, "simulate", "--scenario", SHORT_SCENARIO, "--out", tmp_path, "--pipeline", "turbotrack")
+    assert_input_error(code, out, err, "is for the glac pipeline, not turbotrack", "turbotrack-3d-arm")
+    assert not any(tmp_path.iterdir())
+
+
+def test_scenarios_lists_the_pipeline(capsys):
+    code, out, _ = run(capsys, "scenarios")
+    assert code == 0
+    lines = {line.split()[0]: line.split()[1] for line in out.splitlines()}
+    assert lines["turbotrack-3d-arm"] == "turbotrack" and lines["turbotrack-2d-speed-50"] == "turbotrack"
+    assert lines[SHORT_SCENARIO] == "glac"

@@ -7,5 +7,6 @@
 
 mod ekf;
 pub mod imm;
+pub mod particle;
 
 pub use ekf::{apply_scalar, innovation, log_gaussian, predict, update_position, update_scalar, ScalarUpdate};

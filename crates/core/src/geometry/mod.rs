@@ -1,15 +1,18 @@
 //! Distances and the intersections of the loci that a phase defines:
-//! spheres (monostatic, 3D), circles (monostatic, tag in a plane), and a
+//! spheres (monostatic, 3D), circles (monostatic, tag in a plane),
+//! ellipsoids and ellipses (bistatic helper: tx → tag → rx), and a
 //! least-squares multilateration that refines a rough fix.
 //!
 //! Contract: pure functions on `nalgebra` vectors, metres in and out; a
 //! degenerate configuration returns no point rather than a NaN.
 
 mod circle;
+mod ellipsoid;
 mod multilateration;
 mod sphere;
 
 pub use circle::circle_intersections;
+pub use ellipsoid::{bistatic_distance, bistatic_intersections};
 pub use multilateration::{multilaterate, Multilateration};
 pub use sphere::sphere_intersections;
 

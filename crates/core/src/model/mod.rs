@@ -3,7 +3,8 @@
 //! Contract: a motion model returns the transition `F` and process noise
 //! `Q` for a time step; a measurement model returns the predicted value
 //! and, on request, its Jacobian `H` with respect to the state. Every
-//! Jacobian has a finite-difference test.
+//! Jacobian has a finite-difference test. [`wideband`] turns a helper's
+//! wideband channel into distance candidates (TurboTrack eq. 5.1).
 //!
 //! The state is always `x = [px, py, pz, vx, vy, vz]ᵀ` (m, m/s): a 2D
 //! tracker keeps z and vz fixed by giving them zero covariance and zero
@@ -12,6 +13,7 @@
 
 mod motion;
 mod range;
+pub mod wideband;
 
 pub use motion::{MotionModel, Transition};
 pub use range::range;

@@ -35,7 +35,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::candidates::nearest_candidate;
 use super::initial::{initial_covariance, initial_hypotheses, InitialState};
-use super::{Estimate, Measurement, Tracker, TrackerStats};
+use super::{Estimate, Measurement, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
 use crate::filter::{apply_scalar, imm, innovation, log_gaussian, predict, update_position};
 use crate::geometry::multilaterate;
@@ -299,7 +299,7 @@ pub struct Glac {
     /// Moving axes: 2 (tag in the plane z = plane_z) or 3.
     axes: usize,
     phase: Phase,
-    buffer: Vec<Measurement>,
+    buffer: Vec<PhaseRead>,
     hypotheses: Hypotheses,
     /// Scratch for naive branching.
     scratch: Hypotheses,
@@ -308,7 +308,7 @@ pub struct Glac {
     /// Time of the last accepted measurement, seconds.
     last_time_s: f64,
     /// Synchronous variant: reads collected towards one group.
-    group: Vec<Measurement>,
+    group: Vec<PhaseRead>,
     /// Antennas a synchronous group must cover (those that read during init).
     group_antennas: Vec<bool>,
     stats: TrackerStats,
@@ -412,7 +412,7 @@ impl Glac {
         self.group_antennas = counts.iter().map(|&c| c >= 2).collect();
         self.group.clear();
         self.phase = Phase::Tracking;
-        let replay: Vec<Measurement> = self.buffer.iter().copied().filter(|m| m.time_s > t_x).collect();
+        let replay: Vec<PhaseRead> = self.buffer.iter().copied().filter(|m| m.time_s > t_x).collect();
         self.buffer.clear();
         for m in &replay {
             self.track(m);
@@ -427,7 +427,7 @@ impl Glac {
 
     /// One reading through every hypothesis (fast or naive inference), or
     /// into the current group (synchronous).
-    fn track(&mut self, m: &Measurement) {
+    fn track(&mut self, m: &PhaseRead) {
         match self.params.inference {
             Inference::Fast => self.step_fast(m),
             Inference::Naive => self.step_naive(m),
@@ -446,7 +446,7 @@ impl Glac {
     /// the second-nearest candidate, so a cycle slip leaves the true
     /// trajectory alive; the wrong branch dies by quick stop within a few
     /// readings. Bounded by `max_branching_hypotheses`.
-    fn step_fast(&mut self, m: &Measurement) {
+    fn step_fast(&mut self, m: &PhaseRead) {
         let dt = (m.time_s - self.time_s).max(0.0);
         let step = FastStep {
             transition: self.params.motion.transition(dt, self.axes),
@@ -489,7 +489,7 @@ impl Glac {
     /// candidate distance the region allows (no nearest-neighbour pruning,
     /// no quick stop). Growth is O(nᵏ); the cap keeps the best
     /// `max_hypotheses` so that memory stays bounded.
-    fn step_naive(&mut self, m: &Measurement) {
+    fn step_naive(&mut self, m: &PhaseRead) {
         let dt = (m.time_s - self.time_s).max(0.0);
         let transition = self.params.motion.transition(dt, self.axes);
         let antenna = self.scene.antennas[m.antenna].position;
@@ -548,7 +548,7 @@ impl Glac {
     /// per antenna the candidate nearest its predicted range, trilaterates
     /// them into a position z with covariance σ_d² (JᵀJ)⁻¹, and updates with
     /// H = [I 0]; the likelihood is Πᵢ p(zᵢ* | θ).
-    fn step_synchronous(&mut self, m: &Measurement) {
+    fn step_synchronous(&mut self, m: &PhaseRead) {
         if let Some(prev) = self.group.iter().position(|g| g.antenna == m.antenna) {
             // A second read of one antenna before the group is complete:
             // the newest read of that antenna replaces the older one.
@@ -836,8 +836,9 @@ fn transition_log_density(x: &StateVector, predicted: &StateVector, t: &Transiti
     log_density
 }
 
-impl Tracker for Glac {
-    fn step(&mut self, m: &Measurement) -> Option<Estimate> {
+impl Glac {
+    /// One phase reading (the body of [`Tracker::step`]).
+    fn step_read(&mut self, m: &PhaseRead) -> Option<Estimate> {
         self.stats.measurements += 1;
         let valid = m.antenna < self.scene.antennas.len()
             && m.time_s.is_finite()
@@ -880,6 +881,20 @@ impl Tracker for Glac {
         }
         self.best_estimate(m.time_s)
     }
+}
+
+impl Tracker for Glac {
+    fn step(&mut self, measurement: &Measurement) -> Option<Estimate> {
+        match measurement {
+            Measurement::Phase(read) => self.step_read(read),
+            Measurement::Wideband(_) => {
+                // GLAC consumes single phase readings only.
+                self.stats.measurements += 1;
+                self.stats.invalid += 1;
+                None
+            }
+        }
+    }
 
     fn stats(&self) -> TrackerStats {
         self.stats
@@ -914,20 +929,20 @@ mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0 })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
         let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
         Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
     }
 
-    fn reads(scene: &Scene, n: usize) -> Vec<Measurement> {
+    fn reads(scene: &Scene, n: usize) -> Vec<PhaseRead> {
         (0..n)
             .map(|k| {
                 let t = 0.033 * k as f64;
                 let p = Vector3::new(0.6 + 0.1 * t, 0.3 + 0.05 * t, 0.0);
                 let a = k % 4;
                 let d = (p - scene.antennas[a].position).norm();
-                Measurement { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: scene.ideal_phase(a, 915.25e6, d) }
+                PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: scene.ideal_phase(a, 915.25e6, d) }
             })
             .collect()
     }
@@ -939,7 +954,7 @@ mod tests {
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
         let mut seen_estimate = false;
         for m in reads(&scene, 120) {
-            if tracker.step(&m).is_some() {
+            if tracker.step(&Measurement::Phase(m)).is_some() {
                 seen_estimate = true;
                 let total: f64 = tracker.hypotheses.log_likelihood.iter().map(|l| l.exp()).sum();
                 assert!((total - 1.0).abs() < 1e-9, "weights sum to {total}");
@@ -953,7 +968,7 @@ mod tests {
         let scene = scene();
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
         let all = reads(&scene, 60);
-        let first = all.iter().position(|m| tracker.step(m).is_some()).unwrap();
+        let first = all.iter().position(|m| tracker.step(&Measurement::Phase(*m)).is_some()).unwrap();
         assert!(all[first].time_s >= GlacParams::default().init_window_s);
         assert_eq!(tracker.stats().initialising as usize, first + 1);
         tracker.reset();
@@ -966,7 +981,7 @@ mod tests {
         let params = GlacParams { inference: Inference::Naive, max_hypotheses: 500, ..GlacParams::default() };
         let mut tracker = Glac::new(scene.clone(), params).unwrap();
         for m in reads(&scene, 20) {
-            tracker.step(&m);
+            tracker.step(&Measurement::Phase(m));
             assert!(tracker.hypothesis_count() <= 500);
         }
         assert!(tracker.stats().max_hypotheses >= 100, "naive inference should branch");

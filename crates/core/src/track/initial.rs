@@ -23,7 +23,7 @@
 use nalgebra::{Matrix3, Vector2, Vector3};
 
 use super::candidates::nearest_candidate;
-use super::Measurement;
+use super::PhaseRead;
 use crate::filter::log_gaussian;
 use crate::geometry::{circle_intersections, multilaterate, sphere_intersections};
 use crate::model::{StateMatrix, StateVector};
@@ -124,13 +124,13 @@ impl AntennaCandidates {
 /// zero velocities (the no-velocity variant).
 pub fn initial_hypotheses(
     scene: &Scene,
-    reads: &[Measurement],
+    reads: &[PhaseRead],
     settings: &InitialState,
     range_sigma_m: f64,
     with_velocity: bool,
 ) -> Option<(f64, Vec<InitialHypothesis>)> {
     let n_antennas = scene.antennas.len();
-    let mut per_antenna: Vec<Vec<&Measurement>> = vec![Vec::new(); n_antennas];
+    let mut per_antenna: Vec<Vec<&PhaseRead>> = vec![Vec::new(); n_antennas];
     for m in reads {
         per_antenna[m.antenna].push(m);
     }
@@ -284,7 +284,7 @@ pub fn initial_covariance(axes: usize, position_sigma: f64, velocity_sigma: f64)
 fn synchronise(
     scene: &Scene,
     antenna: usize,
-    reads: &[&Measurement],
+    reads: &[&PhaseRead],
     t_x: f64,
     settings: &InitialState,
 ) -> Option<AntennaCandidates> {
@@ -478,7 +478,7 @@ mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.7 * i as f64 })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.7 * i as f64, role: Default::default() })
             .collect();
         let region = if dimensions == 3 {
             Region { min: Vector3::new(-0.5, -0.5, 0.05), max: Vector3::new(1.5, 1.5, 1.5) }
@@ -488,14 +488,14 @@ mod tests {
         Scene::new(dimensions, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
     }
 
-    fn reads_for(scene: &Scene, p0: Vector3<f64>, v: Vector3<f64>, n: usize) -> Vec<Measurement> {
+    fn reads_for(scene: &Scene, p0: Vector3<f64>, v: Vector3<f64>, n: usize) -> Vec<PhaseRead> {
         (0..n)
             .map(|k| {
                 let t = 0.033 * k as f64;
                 let a = k % scene.antennas.len();
                 let d = (p0 + v * t - scene.antennas[a].position).norm();
                 let f = 915.25e6;
-                Measurement { time_s: t, antenna: a, frequency_hz: f, phase_rad: scene.ideal_phase(a, f, d) }
+                PhaseRead { time_s: t, antenna: a, frequency_hz: f, phase_rad: scene.ideal_phase(a, f, d) }
             })
             .collect()
     }
@@ -525,7 +525,7 @@ mod tests {
     fn waits_for_three_antennas() {
         let scene = scene(3);
         let reads = reads_for(&scene, Vector3::new(0.4, 0.4, 0.6), Vector3::zeros(), 12);
-        let two: Vec<Measurement> = reads.into_iter().filter(|m| m.antenna < 2).collect();
+        let two: Vec<PhaseRead> = reads.into_iter().filter(|m| m.antenna < 2).collect();
         assert!(initial_hypotheses(&scene, &two, &InitialState::default(), 0.0026, true).is_none());
     }
 }

@@ -9,21 +9,30 @@
 //!
 //! Registering a method: add its file, one arm in [`make`], and its tests.
 
+pub mod bistatic;
 mod candidates;
+mod ellipse_intersection;
 mod glac;
 mod initial;
+mod rfind;
+mod turbotrack;
 
 pub use candidates::nearest_candidate;
 pub use glac::{Glac, GlacParams, Inference, Likelihood};
 pub use initial::{initial_hypotheses, InitialHypothesis, InitialState};
+pub use ellipse_intersection::EllipseIntersection;
+pub use rfind::RFind;
+pub use turbotrack::{InitialSampling, Proposal, TurboTrack, TurboTrackParams, WidebandLikelihood};
 
 use crate::error::{Error, Result};
+use nalgebra::Complex;
+
 use crate::model::StateMatrix;
 use crate::scene::Scene;
 
 /// One phase reading from one antenna (a row of reads.csv for one tag).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Measurement {
+pub struct PhaseRead {
     /// Read time on the reader clock, seconds.
     pub time_s: f64,
     /// Index into `Scene::antennas` (not the port id).
@@ -32,6 +41,59 @@ pub struct Measurement {
     pub frequency_hz: f64,
     /// Reported phase in [0, P), radians.
     pub phase_rad: f64,
+}
+
+/// One wideband frame of an SDR localization helper: the tag channel
+/// estimated from a single reply at every subcarrier of every receive
+/// antenna (the rows of frames.csv with one `time_s`, FORMATS.md §5).
+///
+/// After calibration one path of length `d = |tx − tag| + |tag − rx|`
+/// (m) contributes `a · exp(−j 2π f d / c)` with `a > 0`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WidebandFrame {
+    /// Reply time, seconds.
+    pub time_s: f64,
+    /// Index into `Scene::antennas` of the transmit antenna.
+    pub tx: usize,
+    /// Index into `Scene::antennas` of each receive antenna, one per channel block.
+    pub rx: Vec<usize>,
+    /// Subcarrier frequencies, Hz, shared by every receive antenna.
+    pub frequencies_hz: Vec<f64>,
+    /// Tag channel, row-major `rx.len() × frequencies_hz.len()`:
+    /// `h[r * F + k]` is receive antenna `rx[r]` at subcarrier `k`.
+    pub h: Vec<Complex<f64>>,
+}
+
+/// What a tracker consumes: one reading of one tag. Each method accepts
+/// the kinds its hardware produces and counts any other as invalid.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Measurement {
+    /// A COTS reader's phase reading (GLAC).
+    Phase(PhaseRead),
+    /// A localization helper's wideband frame (TurboTrack).
+    Wideband(WidebandFrame),
+}
+
+impl Measurement {
+    /// Time of the reading, seconds.
+    pub fn time_s(&self) -> f64 {
+        match self {
+            Measurement::Phase(r) => r.time_s,
+            Measurement::Wideband(f) => f.time_s,
+        }
+    }
+}
+
+impl From<PhaseRead> for Measurement {
+    fn from(r: PhaseRead) -> Self {
+        Measurement::Phase(r)
+    }
+}
+
+impl From<WidebandFrame> for Measurement {
+    fn from(f: WidebandFrame) -> Self {
+        Measurement::Wideband(f)
+    }
 }
 
 /// A tracker's output after one step.
@@ -103,16 +165,54 @@ pub trait Tracker: Send + Sync {
     fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
         Vec::new()
     }
+    /// The method's smoothed (backtracked) trajectory so far, as (time s,
+    /// position m), oldest first: TurboTrack's MAP trajectory. Methods
+    /// that do not revise the past return nothing.
+    fn trajectory(&self) -> Vec<(f64, [f64; 3])> {
+        Vec::new()
+    }
 }
 
-/// Registered method names, for messages and the CLI.
-pub const METHODS: &[&str] = &["glac", "glac-no-velocity", "glac-sync", "glac-sync-no-velocity", "glac-naive"];
+/// Registered method names, for messages and the CLI: GLAC and its
+/// variants consume phase reads, the rest wideband frames.
+pub const METHODS: &[&str] = &[
+    "glac",
+    "glac-no-velocity",
+    "glac-sync",
+    "glac-sync-no-velocity",
+    "glac-naive",
+    "turbotrack",
+    "gaussian-pf",
+    "uniform-pf",
+    "ellipse-intersection",
+    "rfind",
+];
+
+/// Every method's parameters; [`make`] uses the block of the named method.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Params {
+    pub glac: GlacParams,
+    pub turbotrack: TurboTrackParams,
+}
+
+impl From<GlacParams> for Params {
+    fn from(glac: GlacParams) -> Self {
+        Self { glac, ..Default::default() }
+    }
+}
+
+impl From<TurboTrackParams> for Params {
+    fn from(turbotrack: TurboTrackParams) -> Self {
+        Self { turbotrack, ..Default::default() }
+    }
+}
 
 /// Builds a tracker by name with the given parameters; the variant names
-/// set the parameters that define them (GLAC sec. 5.2.2 and 5.2.3) on top
-/// of `params`.
-pub fn make(name: &str, scene: &Scene, params: &GlacParams) -> Result<Box<dyn Tracker>> {
-    let mut p = params.clone();
+/// set the parameters that define them on top of `params` (GLAC sec.
+/// 5.2.2–5.2.3; TurboTrack thesis §7.2).
+pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
+    let mut p = params.glac.clone();
+    let mut w = params.turbotrack.clone();
     match name {
         "glac" => {}
         "glac-no-velocity" => p.motion_model_no_velocity(),
@@ -122,10 +222,33 @@ pub fn make(name: &str, scene: &Scene, params: &GlacParams) -> Result<Box<dyn Tr
             p.motion_model_no_velocity();
         }
         "glac-naive" => p.inference = Inference::Naive,
+        "turbotrack" => return Ok(Box::new(TurboTrack::new(scene.clone(), w)?)),
+        "gaussian-pf" => {
+            // §7.2(a): one broad Gaussian around the strongest candidate,
+            // a bootstrap (prior) proposal.
+            w.likelihood = WidebandLikelihood::SingleGaussian { sigma_m: GAUSSIAN_PF_SIGMA_M };
+            w.proposal = Proposal::Prior;
+            return Ok(Box::new(TurboTrack::new(scene.clone(), w)?));
+        }
+        "uniform-pf" => {
+            // §7.2(b): particles spread uniformly over the region, the
+            // prior as proposal, the same mixture likelihood.
+            w.initial_sampling = InitialSampling::Uniform;
+            w.proposal = Proposal::Prior;
+            return Ok(Box::new(TurboTrack::new(scene.clone(), w)?));
+        }
+        "ellipse-intersection" => return Ok(Box::new(EllipseIntersection::new(scene.clone(), w)?)),
+        "rfind" => return Ok(Box::new(RFind::new(scene.clone(), w)?)),
         _ => return Err(Error::UnknownMethod(name.to_string(), METHODS.join(", "))),
     }
     Ok(Box::new(Glac::new(scene.clone(), p)?))
 }
+
+/// 1-sigma of the Gaussian-PF baseline's single-Gaussian likelihood, m:
+/// "a large standard deviation" (§7.2(a)) — a quarter of the 100 MHz
+/// range resolution (c / B = 3 m), wide enough to cover the envelope's
+/// wavelength-scale ambiguity.
+pub const GAUSSIAN_PF_SIGMA_M: f64 = 0.3;
 
 /// Runs a tracker over measurements (time-ordered) and collects estimates.
 pub fn run(tracker: &mut dyn Tracker, measurements: &[Measurement]) -> Vec<Estimate> {

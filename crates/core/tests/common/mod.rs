@@ -4,12 +4,14 @@
 
 #![allow(dead_code)]
 
+pub mod helper;
+
 use nalgebra::Vector3;
 use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Scene};
-use scattertrack_core::track::Measurement;
+use scattertrack_core::track::PhaseRead;
 
 pub struct Options {
     pub dimensions: usize,
@@ -33,7 +35,7 @@ pub fn scene(o: &Options, rng: &mut StdRng) -> Scene {
     let antennas = pos
         .iter()
         .enumerate()
-        .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: rng.random::<f64>() * 6.28 })
+        .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: rng.random::<f64>() * 6.28, role: Default::default() })
         .collect();
     let region = if o.dimensions == 3 {
         Region { min: Vector3::new(-0.1, -0.3, 0.05), max: Vector3::new(1.2, 1.2, 1.2) }
@@ -61,7 +63,7 @@ pub fn truth(o: &Options, t: f64) -> Vector3<f64> {
     }
 }
 
-pub fn simulate(o: &Options, seed: u64) -> (Scene, Vec<Measurement>, Vec<Vector3<f64>>) {
+pub fn simulate(o: &Options, seed: u64) -> (Scene, Vec<PhaseRead>, Vec<Vector3<f64>>) {
     let mut rng = StdRng::seed_from_u64(seed);
     let scene = scene(o, &mut rng);
     let noise = Normal::new(0.0, o.phase_noise.max(1e-12)).unwrap();
@@ -81,7 +83,7 @@ pub fn simulate(o: &Options, seed: u64) -> (Scene, Vec<Measurement>, Vec<Vector3
         let d = (p - scene.antennas[a].position).norm();
         let phase = scene.ideal_phase(a, channel, d) + if o.phase_noise > 0.0 { noise.sample(&mut rng) } else { 0.0 };
         let phase = scattertrack_core::angle::wrap(phase, scene.phase_period);
-        reads.push(Measurement { time_s: t, antenna: a, frequency_hz: channel, phase_rad: phase });
+        reads.push(PhaseRead { time_s: t, antenna: a, frequency_hz: channel, phase_rad: phase });
         truths.push(p);
         k += 1;
         // gamma-ish jitter around the mean interval

@@ -1,0 +1,331 @@
+//! Distance candidates from one wideband channel (TurboTrack thesis §5.1
+//! and eq. 5.1): the measurement model of the localization helper.
+//!
+//! After calibration a path of length `d` (m) gives, at subcarrier `f`
+//! (Hz), `h(f) = a · exp(−j 2π f d / c)` (FORMATS.md §5). The
+//! fractional Fourier transform ("delay-domain beamformer")
+//!
+//! `B(d) = Σ_k h(f_k) · exp(+j 2π f_k d / c)`
+//!
+//! is `K a` at the true `d`. Around it, for subcarriers symmetric about
+//! `f_c`, `B(d) ≈ K a · E(d − d_true) · exp(j 2π f_c (d − d_true) / c)`
+//! with a real envelope `E` whose main lobe is `c / Δf_total` wide (3 m
+//! for 100 MHz). So the *magnitude* only says roughly where the tag is,
+//! but the *phase* of `B` is zero exactly at `d_true + n λ_c`, `λ_c =
+//! c / f_c`: the candidates are one wavelength apart, with weights from
+//! the envelope. That is the mixture of Gaussians of eq. 5.1.
+
+use nalgebra::Complex;
+
+use crate::scene::SPEED_OF_LIGHT;
+
+/// Tunables of candidate extraction.
+#[derive(Debug, Clone, PartialEq)]
+pub struct CandidateParams {
+    /// Keep candidates whose envelope is at least this fraction of the
+    /// peak (0–1): the "N" of eq. 5.1.
+    pub min_relative_weight: f64,
+    /// Largest number of candidates kept per receive antenna.
+    pub max_candidates: usize,
+    /// How the comb teeth are weighted.
+    pub weighting: CandidateWeighting,
+    /// Exponent of the amplitude weighting `|B(d_n)|^weight_exponent`.
+    pub weight_exponent: f64,
+    /// Temper κ ∈ (0, 1] of the likelihood weighting.
+    pub likelihood_temper: f64,
+    /// Smallest 1-sigma distance error σ_w reported, m (residual
+    /// calibration error puts a floor under the noise-based estimate).
+    pub min_sigma_m: f64,
+    /// Largest σ_w reported, m.
+    pub max_sigma_m: f64,
+}
+
+impl Default for CandidateParams {
+    fn default() -> Self {
+        Self {
+            min_relative_weight: 0.5,
+            max_candidates: 15,
+            weighting: CandidateWeighting::Likelihood,
+            weight_exponent: 1.0,
+            likelihood_temper: 1.0,
+            min_sigma_m: 0.003,
+            max_sigma_m: 0.05,
+        }
+    }
+}
+
+/// The weights `w(n)` of eq. 5.1.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CandidateWeighting {
+    /// The thesis: the fractional-Fourier amplitude `|B(d_n)|^p`. Over
+    /// 100 MHz neighbouring teeth differ by ~2 %, so this barely ranks them.
+    Amplitude,
+    /// The profile likelihood of one path with unknown complex amplitude
+    /// in white noise of per-subcarrier variance σ̂² (estimated from the
+    /// frame's own fit residual): `log w(n) = κ (|B(d_n)|² − |B_max|²) / (K σ̂²)`.
+    /// The same envelope, weighed by the frame's SNR: sharp when the single-path
+    /// model fits, flat when multipath inflates the residual. (The thesis
+    /// allows "a MUSIC projection" here for sharper weights.)
+    Likelihood,
+}
+
+/// The candidates of one receive antenna: path lengths `d0 + n λ` with
+/// weights `w(n)` (eq. 5.1) and one noise level σ_w.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Candidates {
+    /// Candidate path lengths tx → tag → rx, ascending, m.
+    pub distances_m: Vec<f64>,
+    /// Mixture weights, summing to 1.
+    pub weights: Vec<f64>,
+    /// Spacing between candidates (the centre wavelength `c / f̄`), m.
+    pub spacing_m: f64,
+    /// 1-sigma error of each candidate, m (from the residual of the
+    /// single-path fit, clamped to the parameter bounds).
+    pub sigma_m: f64,
+    /// Index of the highest-weight candidate.
+    pub best: usize,
+}
+
+impl Candidates {
+    /// Index `n` (relative to `distances_m[0]`, may be outside the kept
+    /// list) of the candidate nearest to path length `d` (m).
+    #[inline]
+    pub fn nearest_index(&self, d: f64) -> i64 {
+        ((d - self.distances_m[0]) / self.spacing_m).round() as i64
+    }
+
+    /// Path length (m) of candidate index `n` (any integer: the comb
+    /// continues beyond the kept list).
+    #[inline]
+    pub fn distance(&self, n: i64) -> f64 {
+        self.distances_m[0] + n as f64 * self.spacing_m
+    }
+
+    /// Mixture weight of candidate index `n`; `floor` outside the kept list.
+    #[inline]
+    pub fn weight(&self, n: i64, floor: f64) -> f64 {
+        if n >= 0 && (n as usize) < self.weights.len() {
+            self.weights[n as usize].max(floor)
+        } else {
+            floor
+        }
+    }
+}
+
+/// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m).
+pub fn beamform(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64) -> Complex<f64> {
+    let mut sum = Complex::new(0.0, 0.0);
+    for (&f, &hk) in frequencies_hz.iter().zip(h) {
+        let (s, c) = (2.0 * std::f64::consts::PI * f * d / SPEED_OF_LIGHT).sin_cos();
+        sum += hk * Complex::new(c, s);
+    }
+    sum
+}
+
+/// Distance candidates of one receive antenna from its channel `h` at
+/// `frequencies_hz`, searching path lengths in `[d_min, d_max]` (m).
+///
+/// Steps: (1) `|B(d)|` on a grid of λ/8 (phasor recurrence: one complex
+/// multiply per subcarrier and step) finds the envelope peak; (2) the
+/// phase of `B` is zeroed by Newton steps (`∂ arg B / ∂d ≈ 2π f̄ / c`)
+/// near the peak: the phase-refined candidate; (3) the comb `d0 + n λ̄`
+/// is walked both ways while the envelope stays above the threshold, each
+/// tooth refined by one more Newton step. Returns None when the channel
+/// has no finite, non-zero value or the interval is empty.
+pub fn distance_candidates(
+    frequencies_hz: &[f64],
+    h: &[Complex<f64>],
+    d_min: f64,
+    d_max: f64,
+    params: &CandidateParams,
+) -> Option<Candidates> {
+    let k = frequencies_hz.len();
+    if k == 0 || h.len() != k || !(d_max > d_min) {
+        return None;
+    }
+    if h.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) || frequencies_hz.iter().any(|f| !(*f > 0.0)) {
+        return None;
+    }
+    let energy: f64 = h.iter().map(|v| v.norm_sqr()).sum();
+    if energy <= 0.0 {
+        return None;
+    }
+    let f_mean = frequencies_hz.iter().sum::<f64>() / k as f64;
+    let lambda = SPEED_OF_LIGHT / f_mean;
+    let two_pi_over_c = 2.0 * std::f64::consts::PI / SPEED_OF_LIGHT;
+
+    // (1) Coarse envelope peak by phasor recurrence.
+    let step = lambda / 8.0;
+    let n_grid = ((d_max - d_min) / step).ceil() as usize + 1;
+    let mut phasor: Vec<Complex<f64>> = frequencies_hz
+        .iter()
+        .zip(h)
+        .map(|(&f, &hk)| {
+            let (s, c) = (two_pi_over_c * f * d_min).sin_cos();
+            hk * Complex::new(c, s)
+        })
+        .collect();
+    let rotation: Vec<Complex<f64>> = frequencies_hz
+        .iter()
+        .map(|&f| {
+            let (s, c) = (two_pi_over_c * f * step).sin_cos();
+            Complex::new(c, s)
+        })
+        .collect();
+    let (mut best_d, mut best_mag) = (d_min, -1.0);
+    for i in 0..n_grid {
+        let mag = phasor.iter().sum::<Complex<f64>>().norm_sqr();
+        if mag > best_mag {
+            best_mag = mag;
+            best_d = d_min + i as f64 * step;
+        }
+        for (p, r) in phasor.iter_mut().zip(&rotation) {
+            *p *= r;
+        }
+    }
+
+    // (2) Zero the phase near the peak.
+    let slope = two_pi_over_c * f_mean;
+    let refine = |mut d: f64, steps: usize| -> f64 {
+        for _ in 0..steps {
+            d -= beamform(frequencies_hz, h, d).arg() / slope;
+        }
+        d
+    };
+    let d_peak = refine(best_d, 3);
+    let peak = beamform(frequencies_hz, h, d_peak).norm();
+    if !(peak > 0.0) {
+        return None;
+    }
+
+    // (3) Walk the comb both ways.
+    let mut teeth: Vec<(f64, f64)> = vec![(d_peak, peak)];
+    for direction in [-1.0, 1.0] {
+        let mut d = d_peak;
+        loop {
+            d = refine(d + direction * lambda, 1);
+            if d < d_min - lambda / 2.0 || d > d_max + lambda / 2.0 || teeth.len() > 4 * params.max_candidates {
+                break;
+            }
+            let mag = beamform(frequencies_hz, h, d).norm();
+            if mag < params.min_relative_weight * peak {
+                break;
+            }
+            teeth.push((d, mag));
+        }
+    }
+    teeth.sort_by(|a, b| a.0.total_cmp(&b.0));
+    // Keep the strongest `max_candidates` as a contiguous run (the comb
+    // must stay evenly spaced for `nearest_index`).
+    while teeth.len() > params.max_candidates {
+        if teeth[0].1 <= teeth[teeth.len() - 1].1 {
+            teeth.remove(0);
+        } else {
+            teeth.pop();
+        }
+    }
+    // σ_w from the residual of the single-path fit at the peak: with
+    // noise σ per subcarrier and amplitude a, the phase of B has
+    // variance σ² / (2 K a²); distance = phase / slope.
+    let a = peak / k as f64;
+    let residual: f64 = frequencies_hz
+        .iter()
+        .zip(h)
+        .map(|(&f, &hk)| {
+            let (s, c) = (two_pi_over_c * f * d_peak).sin_cos();
+            (hk - Complex::new(c, -s) * a).norm_sqr()
+        })
+        .sum::<f64>()
+        / k as f64;
+    let sigma_phase = (residual / (2.0 * k as f64 * a * a)).sqrt();
+    let mut weights: Vec<f64> = match params.weighting {
+        CandidateWeighting::Amplitude => teeth.iter().map(|t| t.1.powf(params.weight_exponent)).collect(),
+        CandidateWeighting::Likelihood => {
+            // Residual variance with K − 2 degrees of freedom used (a, d);
+            // never below 1e-6 of the signal so a noiseless channel stays finite.
+            let noise = (residual * k as f64 / (k as f64 - 2.0).max(1.0)).max(1e-6 * a * a);
+            let top = teeth.iter().map(|t| t.1).fold(0.0, f64::max);
+            teeth.iter().map(|t| (params.likelihood_temper * (t.1 * t.1 - top * top) / (k as f64 * noise)).exp()).collect()
+        }
+    };
+    let total: f64 = weights.iter().sum();
+    weights.iter_mut().for_each(|w| *w /= total);
+    let best = weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
+    let sigma_m = (sigma_phase / slope).clamp(params.min_sigma_m, params.max_sigma_m);
+    Some(Candidates {
+        distances_m: teeth.iter().map(|t| t.0).collect(),
+        weights,
+        spacing_m: lambda,
+        sigma_m,
+        best,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn subcarriers() -> Vec<f64> {
+        (0..20).map(|k| 867.5e6 + 5e6 * k as f64).collect()
+    }
+
+    fn channel(freqs: &[f64], d: f64, a: f64) -> Vec<Complex<f64>> {
+        freqs
+            .iter()
+            .map(|&f| {
+                let (s, c) = (2.0 * std::f64::consts::PI * f * d / SPEED_OF_LIGHT).sin_cos();
+                Complex::new(c, -s) * a
+            })
+            .collect()
+    }
+
+    #[test]
+    fn noiseless_channel_puts_a_candidate_on_the_truth() {
+        let f = subcarriers();
+        for d in [1.234, 2.5, 4.71, 7.9] {
+            let c = distance_candidates(&f, &channel(&f, d, 0.3), 0.5, 12.0, &CandidateParams::default()).unwrap();
+            let n = c.nearest_index(d);
+            assert!((c.distance(n) - d).abs() < 1e-6, "d={d}: {:?}", c.distances_m);
+            assert!(n >= 0 && (n as usize) < c.distances_m.len());
+            assert!((c.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
+            assert!(c.sigma_m <= CandidateParams::default().min_sigma_m + 1e-12);
+            // Noiseless: the likelihood weighting is (nearly) certain of the truth.
+            assert!(c.weights[n as usize] > 0.99, "{:?}", c.weights);
+            // 100 MHz: the main lobe spans several wavelengths (thesis: ~9).
+            assert!(c.distances_m.len() >= 5, "{}", c.distances_m.len());
+            let spacing = c.distances_m.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+            assert!((spacing - c.spacing_m).abs() < 1e-3);
+        }
+    }
+
+    #[test]
+    fn noise_level_is_estimated() {
+        let f = subcarriers();
+        let mut h = channel(&f, 2.0, 1.0);
+        // Deterministic pseudo-noise of rms 0.2 per subcarrier.
+        for (k, v) in h.iter_mut().enumerate() {
+            let t = k as f64 * 1.7;
+            *v += Complex::new(t.sin(), (2.3 * t).cos()) * 0.2;
+        }
+        let c = distance_candidates(&f, &h, 0.5, 12.0, &CandidateParams { min_sigma_m: 0.0, ..Default::default() }).unwrap();
+        // Amplitude (thesis) weights are nearly flat over 100 MHz; likelihood weights are not.
+        let amplitude =
+            distance_candidates(&f, &h, 0.5, 12.0, &CandidateParams { weighting: CandidateWeighting::Amplitude, ..Default::default() })
+                .unwrap();
+        let spread = |w: &[f64]| w.iter().cloned().fold(0.0, f64::max) / w.iter().cloned().fold(1.0, f64::min);
+        assert!(spread(&amplitude.weights) < 2.5, "{:?}", amplitude.weights);
+        assert!(spread(&c.weights) > 100.0, "{:?}", c.weights);
+        // σφ ≈ 0.2/√(2·20) rad → σ_d ≈ 0.032 · λ/2π ≈ 1.7 mm.
+        assert!(c.sigma_m > 0.0008 && c.sigma_m < 0.004, "{}", c.sigma_m);
+    }
+
+    #[test]
+    fn rejects_empty_and_non_finite() {
+        let f = subcarriers();
+        let mut h = channel(&f, 2.0, 1.0);
+        assert!(distance_candidates(&f, &vec![Complex::new(0.0, 0.0); 20], 0.5, 12.0, &Default::default()).is_none());
+        h[3] = Complex::new(f64::NAN, 0.0);
+        assert!(distance_candidates(&f, &h, 0.5, 12.0, &Default::default()).is_none());
+        assert!(distance_candidates(&f, &channel(&f, 2.0, 1.0), 3.0, 1.0, &Default::default()).is_none());
+    }
+}

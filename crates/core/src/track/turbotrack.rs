@@ -1,0 +1,827 @@
+//! TurboTrack: Bayesian space-time super-resolution over wideband frames
+//! (thesis ch. 5, Algorithm 1).
+//!
+//! Each frame gives, per receive antenna, path-length candidates one
+//! wavelength apart with weights (eq. 5.1, `model::wideband`). The state
+//! is the tag position `x_t` with the random-walk prior of eq. 5.3,
+//! `x_t = x_{t−1} + v_t, v_t ~ N(0, Σ_v)`; the likelihood is the product
+//! over receivers of mixtures of Gaussians (eq. 5.2). Inference is a
+//! sequential importance sampler:
+//!
+//! - **Initial sampling** (§5.3.1): candidate tuples are intersected
+//!   (ellipses / ellipsoids), pruned by the perimeter rule `r(s) ≤ T`,
+//!   linearised (eq. 5.4), fused by their centroid (eq. 5.5) and weighted
+//!   by `w(s) = Π w(s_j)` (eq. 5.6); particles are drawn from that mixture
+//!   and weighted `p(y₀|x) / q₀(x)` (a uniform prior over the region).
+//! - **Sequential sampling** (§5.3.2): each particle's proposal is the
+//!   product of the prior and the mixture component nearest to it — the
+//!   tuple whose comb teeth are nearest its path lengths — computed once
+//!   per tuple ("cluster") and shared by its particles; weights
+//!   `w_t = w_{t−1} p(y_t|x_t) p(x_t|x_{t−1}) / π(x_t|x_{t−1}, y_t)`.
+//! - **Resampling** when `N̂_eff < threshold · N`; **outliers** (all
+//!   particles improbable, or the fix jumping) leave the particles as
+//!   they were and extrapolate; **MAP** output is the highest-weight
+//!   particle's mode, and its backtracked ancestry is the MAP trajectory.
+//!
+//! The comparison variants of §7.2 are parameter settings of the same
+//! filter (see [`make`](super::make)): a single broad Gaussian likelihood
+//! with the prior as proposal ("gaussian-pf"), and uniform initial
+//! sampling with the prior as proposal ("uniform-pf").
+
+use std::collections::{HashMap, VecDeque};
+
+use nalgebra::{Matrix3, Vector3};
+use rand::rngs::StdRng;
+use rand::{RngExt, SeedableRng};
+use rand_distr::StandardNormal;
+
+use crate::error::{Error, Result};
+use crate::filter::particle::{effective_sample_size, normalise_log_weights, systematic_resample};
+use crate::model::wideband::CandidateParams;
+use crate::scene::Scene;
+
+use super::bistatic::{
+    frame_receivers, log_normal, mixture_log_likelihood, tuple_gaussian, usable_subsets, Decline, HelperGeometry,
+    PositionGaussian, Receiver,
+};
+use super::{Estimate, Measurement, Tracker, TrackerStats, WidebandFrame};
+
+/// The observation model used to weight particles.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum WidebandLikelihood {
+    /// Eqs. 5.1–5.2: a mixture of narrow Gaussians, one per candidate.
+    Mixture,
+    /// §7.2(a) baseline: one Gaussian per receiver, centred on its
+    /// highest-weight candidate, with this 1-sigma, m.
+    SingleGaussian { sigma_m: f64 },
+}
+
+/// How the first particles are drawn.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum InitialSampling {
+    /// §5.3.1: from the pruned, linearised intersection tuples.
+    Intersections,
+    /// §7.2(b) baseline: uniformly over the region (needs `[region]`).
+    Uniform,
+}
+
+/// Where each new particle is drawn from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Proposal {
+    /// §5.3.2: prior × nearest mixture component (near-optimal).
+    NearOptimal,
+    /// The transition prior alone (bootstrap filter).
+    Prior,
+}
+
+/// TurboTrack's tunables. Defaults follow the thesis where it gives a
+/// value (Σ_v = 5 mm, 100 particles suffice per Fig. 7-5).
+#[derive(Debug, Clone, PartialEq)]
+pub struct TurboTrackParams {
+    /// Number of particles N.
+    pub particles: usize,
+    /// 1-sigma per axis of the random-walk step Σ_v over one
+    /// `reference_interval_s`, m (thesis ch. 6: 5 mm).
+    pub transition_sigma_m: f64,
+    /// Frame interval the step sigma refers to, s (300 frames/s); the
+    /// variance scales with the actual interval (a random walk).
+    pub reference_interval_s: f64,
+    /// Resample when `N̂_eff < resample_threshold · N`.
+    pub resample_threshold: f64,
+    /// Perimeter threshold T of the initial pruning, m (doubled up to 3
+    /// times when no tuple survives).
+    pub perimeter_threshold_m: f64,
+    /// Largest number of initial mixture components kept (by weight).
+    pub max_initial_components: usize,
+    /// Tangency tolerance of the intersection routine, m.
+    pub intersection_tolerance_m: f64,
+    /// Candidate extraction from each receiver's channel.
+    pub candidates: CandidateParams,
+    /// Fixed 1-sigma path-length error σ_w, m; None: each frame's estimate.
+    pub distance_sigma_m: Option<f64>,
+    /// Mixture weight of comb teeth outside the kept candidates.
+    pub weight_floor: f64,
+    pub likelihood: WidebandLikelihood,
+    pub initial_sampling: InitialSampling,
+    pub proposal: Proposal,
+    /// A frame is an outlier when even the best particle's χ² over the
+    /// receivers exceeds this (every particle improbable).
+    pub outlier_chi2: f64,
+    /// ... or when the fix jumps farther than this plus `max_speed_m_s · dt`, m.
+    pub outlier_jump_m: f64,
+    /// Largest plausible tag speed, m/s (only for the jump test).
+    pub max_speed_m_s: f64,
+    /// Start over after this many consecutive outlier frames.
+    pub max_consecutive_outliers: u32,
+    /// Start over after a gap between frames longer than this, s.
+    pub reinit_gap_s: f64,
+    /// Particles farther than this outside the region are impossible, m.
+    pub region_margin_m: f64,
+    /// Frames of particle ancestry kept for the backtracked MAP trajectory.
+    pub history_frames: usize,
+    /// Velocity is the slope of the estimates over this window, s.
+    pub velocity_window_s: f64,
+    /// Seed of the sampler's random numbers.
+    pub seed: u64,
+    /// Acquisition window of the RFind baseline (a static tag is assumed
+    /// over it), s; the thesis reports ~3 s of hopping.
+    pub rfind_window_s: f64,
+}
+
+impl Default for TurboTrackParams {
+    fn default() -> Self {
+        Self {
+            particles: 100,
+            transition_sigma_m: 0.005,
+            reference_interval_s: 1.0 / 300.0,
+            resample_threshold: 0.5,
+            perimeter_threshold_m: 0.03,
+            max_initial_components: 64,
+            intersection_tolerance_m: 0.02,
+            candidates: CandidateParams::default(),
+            distance_sigma_m: None,
+            weight_floor: 1e-3,
+            likelihood: WidebandLikelihood::Mixture,
+            initial_sampling: InitialSampling::Intersections,
+            proposal: Proposal::NearOptimal,
+            outlier_chi2: 100.0,
+            outlier_jump_m: 0.05,
+            max_speed_m_s: 2.0,
+            max_consecutive_outliers: 30,
+            reinit_gap_s: 1.0,
+            region_margin_m: 0.05,
+            history_frames: 3000,
+            velocity_window_s: 0.1,
+            seed: 0,
+            rfind_window_s: 3.0,
+        }
+    }
+}
+
+impl TurboTrackParams {
+    fn validate(&self, scene: &Scene) -> Result<()> {
+        let bad = |name: &str, reason: &str| Err(Error::Parameter { name: name.into(), reason: reason.into() });
+        if self.particles == 0 {
+            return bad("particles", "must be at least 1");
+        }
+        if !(self.transition_sigma_m > 0.0) || !(self.reference_interval_s > 0.0) {
+            return bad("transition_sigma_m", "must be positive");
+        }
+        if !(self.resample_threshold >= 0.0 && self.resample_threshold <= 1.0) {
+            return bad("resample_threshold", "must be in [0, 1]");
+        }
+        if let Some(s) = self.distance_sigma_m {
+            if !(s > 0.0) {
+                return bad("distance_sigma_m", "must be positive");
+            }
+        }
+        if self.initial_sampling == InitialSampling::Uniform && scene.region.is_none() {
+            return bad("initial_sampling", "uniform sampling needs a [region] in the scene");
+        }
+        if HelperGeometry::new(scene).is_none() {
+            return Err(Error::Scene(
+                "a wideband tracker needs one antenna with role \"tx\" and at least 3 (2 for dimensions = 2) with role \"rx\"".into(),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// One mixture component's proposal, shared by the particles of a cluster:
+/// `π(x | x_prev) = N(A x_prev + b, P)` with `P = (Σ_v⁻¹ + Σ_s⁻¹)⁻¹`,
+/// `A = P Σ_v⁻¹`, `b = P Σ_s⁻¹ μ_s` (product of two Gaussians).
+struct ClusterProposal {
+    a: Matrix3<f64>,
+    b: Vector3<f64>,
+    /// Cholesky factor of P.
+    l: Matrix3<f64>,
+    p_inv: Matrix3<f64>,
+    log_det_p: f64,
+    /// The tuple's fused position μ_s (eq. 5.5), m.
+    centroid: Vector3<f64>,
+}
+
+/// The TurboTrack particle filter (and its §7.2 variants).
+pub struct TurboTrack {
+    scene: Scene,
+    geometry: HelperGeometry,
+    params: TurboTrackParams,
+    rng: StdRng,
+    /// Particle positions, m (flat: one `Vector3` each).
+    positions: Vec<Vector3<f64>>,
+    /// Normalised log-weights.
+    log_weights: Vec<f64>,
+    /// Ancestry per frame (after resampling): positions and the parent
+    /// index into the previous frame's arrays, for backtracking.
+    history: VecDeque<(f64, Vec<Vector3<f64>>, Vec<usize>)>,
+    /// Recent estimates (time s, position m) for the velocity slope.
+    recent: VecDeque<(f64, Vector3<f64>)>,
+    last_time_s: f64,
+    last_estimate: Option<Estimate>,
+    consecutive_outliers: u32,
+    initialised: bool,
+    stats: TrackerStats,
+    // Scratch buffers reused every frame.
+    scratch_positions: Vec<Vector3<f64>>,
+    scratch_keys: Vec<u64>,
+    scratch_ancestors: Vec<usize>,
+}
+
+/// Packs a candidate-index tuple into a hash key (8 bits per receiver,
+/// offset so small negative indices fit; up to 8 receivers).
+fn pack(indices: &[i64]) -> u64 {
+    indices.iter().fold(0u64, |key, &n| (key << 8) | ((n + 128).clamp(0, 255) as u64))
+}
+
+fn log_gaussian3(r: &Vector3<f64>, inverse: &Matrix3<f64>, log_det: f64, dims: usize) -> f64 {
+    -0.5 * (r.dot(&(inverse * r)) + log_det + dims as f64 * (2.0 * std::f64::consts::PI).ln())
+}
+
+impl TurboTrack {
+    pub fn new(scene: Scene, params: TurboTrackParams) -> Result<Self> {
+        params.validate(&scene)?;
+        let geometry = HelperGeometry::new(&scene).expect("validated");
+        let rng = StdRng::seed_from_u64(params.seed);
+        Ok(Self {
+            geometry,
+            rng,
+            positions: Vec::new(),
+            log_weights: Vec::new(),
+            history: VecDeque::new(),
+            recent: VecDeque::new(),
+            last_time_s: f64::NEG_INFINITY,
+            last_estimate: None,
+            consecutive_outliers: 0,
+            initialised: false,
+            stats: TrackerStats::default(),
+            scratch_positions: Vec::new(),
+            scratch_keys: Vec::new(),
+            scratch_ancestors: Vec::new(),
+            scene,
+            params,
+        })
+    }
+
+    /// The backtracked MAP trajectory (Algorithm 1's output): the ancestry
+    /// of the current highest-weight particle over the kept history, as
+    /// (time s, position m), oldest first.
+    pub fn map_trajectory(&self) -> Vec<(f64, [f64; 3])> {
+        let Some(mut index) = self.best_particle() else { return Vec::new() };
+        let mut out = Vec::with_capacity(self.history.len());
+        for (t, positions, parents) in self.history.iter().rev() {
+            let p = positions[index];
+            out.push((*t, [p.x, p.y, p.z]));
+            index = parents[index];
+        }
+        out.reverse();
+        out
+    }
+
+    fn best_particle(&self) -> Option<usize> {
+        self.log_weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i)
+    }
+
+    fn in_region(&self, p: &Vector3<f64>) -> bool {
+        self.scene.region.as_ref().is_none_or(|r| r.contains(p, self.params.region_margin_m, self.scene.dimensions))
+    }
+
+    /// Applies the fixed σ_w if configured.
+    fn receivers(&self, frame: &WidebandFrame) -> std::result::Result<Vec<Receiver>, Decline> {
+        let mut receivers = frame_receivers(&self.scene, &self.geometry, frame, &self.params.candidates)?;
+        if let Some(s) = self.params.distance_sigma_m {
+            receivers.iter_mut().for_each(|r| r.candidates.sigma_m = s);
+        }
+        Ok(receivers)
+    }
+
+    /// Log-likelihood of a position under the configured observation model,
+    /// and the χ² of the nearest candidates.
+    fn log_likelihood(&self, receivers: &[Receiver], p: &Vector3<f64>) -> (f64, f64) {
+        if !self.in_region(p) {
+            return (f64::NEG_INFINITY, f64::INFINITY);
+        }
+        match self.params.likelihood {
+            WidebandLikelihood::Mixture => mixture_log_likelihood(&self.geometry, receivers, p, self.params.weight_floor),
+            WidebandLikelihood::SingleGaussian { sigma_m } => {
+                let mut log_l = 0.0;
+                let mut chi2 = 0.0;
+                for rx in receivers {
+                    let d = crate::geometry::bistatic_distance(p, &self.geometry.tx_position, &rx.position).0;
+                    let centre = rx.candidates.distances_m[rx.candidates.best];
+                    log_l += log_normal(d, centre, sigma_m);
+                    chi2 += ((d - centre) / sigma_m).powi(2);
+                }
+                (log_l, chi2)
+            }
+        }
+    }
+
+    fn subset_list(&self, receivers: &[Receiver]) -> Vec<Vec<usize>> {
+        usable_subsets(&self.geometry, receivers)
+    }
+
+    /// Standard-normal draw in the tracked dimensions (z stays 0 in a plane).
+    fn normal3(&mut self) -> Vector3<f64> {
+        let z = if self.scene.dimensions == 3 { self.rng.sample(StandardNormal) } else { 0.0 };
+        Vector3::new(self.rng.sample(StandardNormal), self.rng.sample(StandardNormal), z)
+    }
+
+    /// Transition covariance Σ_v for a step of `dt` seconds (random walk:
+    /// variance grows linearly with time; at least a quarter step so
+    /// bursts of nearly simultaneous frames still move). Planar scenes get
+    /// a unit z variance that is never sampled.
+    fn transition(&self, dt: f64) -> Matrix3<f64> {
+        let scale = (dt / self.params.reference_interval_s).clamp(0.25, 1e4);
+        let v = self.params.transition_sigma_m.powi(2) * scale;
+        let vz = if self.scene.dimensions == 3 { v } else { 1.0 };
+        Matrix3::from_diagonal(&Vector3::new(v, v, vz))
+    }
+
+    /// Algorithm 1, initialisation: the mixture q₀ of §5.3.1 and N particles from it.
+    fn initialise(&mut self, time_s: f64, receivers: &[Receiver]) -> bool {
+        let n = self.params.particles;
+        self.positions.clear();
+        self.log_weights.clear();
+        self.history.clear();
+        self.recent.clear();
+        self.last_estimate = None;
+        self.consecutive_outliers = 0;
+        if self.params.initial_sampling == InitialSampling::Uniform {
+            let region = self.scene.region.clone().expect("validated");
+            for _ in 0..n {
+                let mut p = Vector3::zeros();
+                for k in 0..3 {
+                    p[k] = region.min[k] + self.rng.random::<f64>() * (region.max[k] - region.min[k]);
+                }
+                if self.scene.dimensions == 2 {
+                    p.z = self.scene.plane_z;
+                }
+                self.positions.push(p);
+                let (log_l, _) = self.log_likelihood(receivers, &p);
+                self.log_weights.push(log_l);
+            }
+        } else {
+            let components = self.initial_components(receivers);
+            if components.is_empty() {
+                return false;
+            }
+            // q₀ = Σ w̄_s N(μ_s, Σ_s); precompute inverses for q₀(x).
+            let total: f64 = components.iter().map(|c| c.1).sum();
+            let dims = self.scene.dimensions;
+            let prepared: Vec<(Vector3<f64>, Matrix3<f64>, Matrix3<f64>, f64, f64)> = components
+                .iter()
+                .filter_map(|(g, w)| {
+                    let chol = g.covariance.cholesky()?;
+                    let inv = chol.inverse();
+                    let log_det = if dims == 3 { g.covariance.determinant().ln() } else { g.covariance.fixed_view::<2, 2>(0, 0).determinant().ln() };
+                    Some((g.mean, chol.l(), inv, log_det, (w / total).ln()))
+                })
+                .collect();
+            if prepared.is_empty() {
+                return false;
+            }
+            let mut log_component: Vec<f64> = prepared.iter().map(|c| c.4).collect();
+            normalise_log_weights(&mut log_component);
+            // Systematic draw of N component labels from the weights.
+            let u = self.rng.random::<f64>();
+            let mut chosen = Vec::with_capacity(n);
+            let cumulative: Vec<f64> = log_component
+                .iter()
+                .scan(0.0, |s, w| {
+                    *s += w.exp();
+                    Some(*s)
+                })
+                .collect();
+            for i in 0..n {
+                let target = (i as f64 + u) / n as f64;
+                chosen.push(cumulative.iter().position(|&c| c >= target).unwrap_or(cumulative.len() - 1));
+            }
+            for &c in &chosen {
+                let (mean, l, ..) = prepared[c];
+                let z = self.normal3();
+                let mut p = mean + l * z;
+                if dims == 2 {
+                    p.z = self.scene.plane_z;
+                }
+                let log_q = {
+                    let terms: Vec<f64> = prepared
+                        .iter()
+                        .zip(&log_component)
+                        .map(|((m, _, inv, log_det, _), lw)| lw + log_gaussian3(&(p - m), inv, *log_det, dims))
+                        .collect();
+                    let max = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+                    max + terms.iter().map(|t| (t - max).exp()).sum::<f64>().ln()
+                };
+                let (log_l, _) = self.log_likelihood(receivers, &p);
+                self.positions.push(p);
+                self.log_weights.push(log_l - log_q);
+            }
+        }
+        if normalise_log_weights(&mut self.log_weights) == f64::NEG_INFINITY {
+            self.positions.clear();
+            self.log_weights.clear();
+            return false;
+        }
+        self.history.push_back((time_s, self.positions.clone(), (0..n).collect()));
+        self.initialised = true;
+        true
+    }
+
+    /// §5.3.1 steps 1–4: the surviving tuples' Gaussians and weights
+    /// `w(s) = Π_j w_j(s_j)`. Tuples are seeded from the first `needed`
+    /// receivers' candidate combinations (each intersected); the other
+    /// receivers' indices are the comb teeth nearest the seed point; then
+    /// every subset is intersected and the perimeter rule applied.
+    fn initial_components(&self, receivers: &[Receiver]) -> Vec<(PositionGaussian, f64)> {
+        let subset_list = self.subset_list(receivers);
+        let Some(base_set) = subset_list.first().cloned() else { return Vec::new() };
+        let single = matches!(self.params.likelihood, WidebandLikelihood::SingleGaussian { .. });
+        let base: Vec<Vec<i64>> = base_set
+            .iter()
+            .map(|&j| {
+                let c = &receivers[j].candidates;
+                if single {
+                    vec![c.best as i64]
+                } else {
+                    (0..c.distances_m.len() as i64).collect()
+                }
+            })
+            .collect();
+        // Cartesian product of the base receivers' candidate indices.
+        let mut combos: Vec<Vec<i64>> = vec![Vec::new()];
+        for options in &base {
+            combos = combos.into_iter().flat_map(|c| options.iter().map(move |&o| [c.clone(), vec![o]].concat())).collect();
+        }
+        let positions: Vec<Vector3<f64>> = base_set.iter().map(|&j| receivers[j].position).collect();
+        let mut tuples: HashMap<u64, (Vec<i64>, Vector3<f64>)> = HashMap::new();
+        for combo in combos {
+            let distances: Vec<f64> = combo.iter().zip(&base_set).map(|(&n, &j)| receivers[j].candidates.distance(n)).collect();
+            for p in crate::geometry::bistatic_intersections(
+                &self.geometry.tx_position,
+                &positions,
+                &distances,
+                self.geometry.plane(),
+                self.params.intersection_tolerance_m,
+            ) {
+                if !self.in_region(&p) {
+                    continue;
+                }
+                let mut indices: Vec<i64> = receivers
+                    .iter()
+                    .map(|rx| {
+                        let d = crate::geometry::bistatic_distance(&p, &self.geometry.tx_position, &rx.position).0;
+                        if single {
+                            rx.candidates.best as i64
+                        } else {
+                            rx.candidates.nearest_index(d)
+                        }
+                    })
+                    .collect();
+                for (&n, &j) in combo.iter().zip(&base_set) {
+                    indices[j] = n;
+                }
+                tuples.entry(pack(&indices)).or_insert((indices, p));
+            }
+        }
+        let mut threshold = self.params.perimeter_threshold_m;
+        for _ in 0..4 {
+            let kept: Vec<(PositionGaussian, f64)> = tuples
+                .values()
+                .filter_map(|(indices, seed)| {
+                    let g = tuple_gaussian(&self.geometry, receivers, indices, &subset_list, seed, self.params.intersection_tolerance_m)?;
+                    if g.perimeter_m > threshold || !self.in_region(&g.mean) {
+                        return None;
+                    }
+                    let w: f64 = indices.iter().zip(receivers).map(|(&n, r)| r.candidates.weight(n, self.params.weight_floor)).product();
+                    let mut g = g;
+                    if let WidebandLikelihood::SingleGaussian { sigma_m } = self.params.likelihood {
+                        // The broad baseline starts as broad as its likelihood.
+                        g.covariance += Matrix3::identity() * sigma_m * sigma_m;
+                    }
+                    Some((g, w))
+                })
+                .collect();
+            if !kept.is_empty() {
+                // Keep the components that explain this frame best: the
+                // likelihood at their mean weighs both the candidate weights
+                // and the consistency across *all* receivers (w(s) alone is
+                // nearly flat over a 100 MHz envelope and would drop the
+                // right tuple among equals).
+                let mut scored: Vec<(f64, (PositionGaussian, f64))> =
+                    kept.into_iter().map(|c| (self.log_likelihood(receivers, &c.0.mean).0, c)).collect();
+                scored.sort_by(|a, b| b.0.total_cmp(&a.0));
+                scored.truncate(self.params.max_initial_components);
+                return scored.into_iter().map(|(_, c)| c).collect();
+            }
+            threshold *= 2.0;
+        }
+        Vec::new()
+    }
+
+    /// Algorithm 1, one iteration. Returns false when the frame is an outlier.
+    fn sequential_step(&mut self, time_s: f64, receivers: &[Receiver]) -> bool {
+        let dt = (time_s - self.last_time_s).max(0.0);
+        let sigma_v = self.transition(dt);
+        let sigma_v_inv = sigma_v.try_inverse().expect("diagonal, positive");
+        let sigma_v_chol = sigma_v.cholesky().expect("diagonal, positive").l();
+        let dims = self.scene.dimensions;
+        let log_det_v = if dims == 3 { sigma_v.determinant().ln() } else { (sigma_v[(0, 0)] * sigma_v[(1, 1)]).ln() };
+        let subset_list = self.subset_list(receivers);
+        let n = self.positions.len();
+
+        // Cluster keys: the nearest comb tooth of every receiver.
+        self.scratch_keys.clear();
+        let mut tuples: HashMap<u64, Option<ClusterProposal>> = HashMap::new();
+        let mut indices = vec![0i64; receivers.len()];
+        for i in 0..n {
+            let p = self.positions[i];
+            for (j, rx) in receivers.iter().enumerate() {
+                let d = crate::geometry::bistatic_distance(&p, &self.geometry.tx_position, &rx.position).0;
+                indices[j] = rx.candidates.nearest_index(d);
+            }
+            let key = pack(&indices);
+            self.scratch_keys.push(key);
+            if self.params.proposal == Proposal::NearOptimal && !tuples.contains_key(&key) {
+                let proposal =
+                    tuple_gaussian(&self.geometry, receivers, &indices, &subset_list, &p, self.params.intersection_tolerance_m)
+                        .and_then(|g| {
+                            let s_inv = g.covariance.try_inverse()?;
+                            let mut p_inv = sigma_v_inv + s_inv;
+                            if dims == 2 {
+                                p_inv[(2, 2)] = 1.0;
+                                p_inv[(0, 2)] = 0.0;
+                                p_inv[(1, 2)] = 0.0;
+                                p_inv[(2, 0)] = 0.0;
+                                p_inv[(2, 1)] = 0.0;
+                            }
+                            let pm = p_inv.try_inverse()?;
+                            let l = pm.cholesky()?.l();
+                            let log_det_p = if dims == 3 { pm.determinant().ln() } else { (pm[(0, 0)] * pm[(1, 1)] - pm[(0, 1)] * pm[(1, 0)]).ln() };
+                            Some(ClusterProposal { a: pm * sigma_v_inv, b: pm * (s_inv * g.mean), l, p_inv, log_det_p, centroid: g.mean })
+                        });
+                tuples.insert(key, proposal);
+            }
+        }
+
+        // Sample and weight (into scratch; committed only if not an outlier).
+        let mut new_positions = std::mem::take(&mut self.scratch_positions);
+        new_positions.clear();
+        let mut new_log_weights = self.log_weights.clone();
+        let mut best_chi2 = f64::INFINITY;
+        for i in 0..n {
+            let prev = self.positions[i];
+            let z = self.normal3();
+            let (mut x, log_correction) = match tuples.get(&self.scratch_keys[i]).and_then(|c| c.as_ref()) {
+                Some(c) => {
+                    let mean = c.a * prev + c.b;
+                    let x = mean + c.l * z;
+                    let mut r_prior = x - prev;
+                    let mut r_prop = x - mean;
+                    if dims == 2 {
+                        r_prior.z = 0.0;
+                        r_prop.z = 0.0;
+                    }
+                    let log_prior = log_gaussian3(&r_prior, &sigma_v_inv, log_det_v, dims);
+                    let log_prop = log_gaussian3(&r_prop, &c.p_inv, c.log_det_p, dims);
+                    (x, log_prior - log_prop)
+                }
+                // Bootstrap: sampled from the prior, which cancels.
+                None => (prev + sigma_v_chol * z, 0.0),
+            };
+            if dims == 2 {
+                x.z = self.scene.plane_z;
+            }
+            let (log_l, chi2) = self.log_likelihood(receivers, &x);
+            best_chi2 = best_chi2.min(chi2);
+            new_log_weights[i] += log_l + log_correction;
+            new_positions.push(x);
+        }
+        let evidence = normalise_log_weights(&mut new_log_weights);
+        let outlier = evidence == f64::NEG_INFINITY || best_chi2 > self.params.outlier_chi2;
+        // §5.3.2 outlier rule 1, on the measurement side: the centroid
+        // (eq. 5.5) that this frame gives the most probable particle jumped
+        // from where that particle was. (Testing the particle estimate
+        // instead would also reject the legitimate switch to another mode.)
+        let jumped = !outlier
+            && self.best_particle().is_some_and(|best| {
+                let key = self.scratch_keys[best];
+                match tuples.get(&key) {
+                    Some(Some(c)) => {
+                        (c.centroid - self.positions[best]).norm() > self.params.outlier_jump_m + self.params.max_speed_m_s * dt
+                    }
+                    _ => false,
+                }
+            });
+        if outlier || jumped {
+            self.scratch_positions = new_positions;
+            return false;
+        }
+        self.scratch_positions = std::mem::replace(&mut self.positions, new_positions);
+        self.log_weights = new_log_weights;
+
+        // Resample on low effective sample size.
+        let mut parents: Vec<usize> = (0..n).collect();
+        if effective_sample_size(&self.log_weights) < self.params.resample_threshold * n as f64 {
+            let u = self.rng.random::<f64>();
+            systematic_resample(&self.log_weights, u, &mut self.scratch_ancestors);
+            let old = self.positions.clone();
+            for (i, &a) in self.scratch_ancestors.iter().enumerate() {
+                self.positions[i] = old[a];
+                parents[i] = a;
+            }
+            let uniform = -(n as f64).ln();
+            self.log_weights.iter_mut().for_each(|w| *w = uniform);
+        }
+        self.history.push_back((time_s, self.positions.clone(), parents));
+        while self.history.len() > self.params.history_frames.max(1) {
+            self.history.pop_front();
+        }
+        true
+    }
+
+    /// Particles within this distance of the best one form its mode
+    /// (half the smallest candidate spacing: another comb tooth is another mode), m.
+    fn mode_radius(&self) -> f64 {
+        0.08
+    }
+
+    fn estimate(&mut self, time_s: f64) -> Option<Estimate> {
+        let best = self.best_particle()?;
+        let (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+        self.recent.push_back((time_s, mean));
+        while self.recent.front().is_some_and(|(t, _)| time_s - t > self.params.velocity_window_s) {
+            self.recent.pop_front();
+        }
+        let velocity = slope(&self.recent);
+        let mut cov = [0.0; 36];
+        for r in 0..3 {
+            for k in 0..3 {
+                cov[r * 6 + k] = covariance[(r, k)];
+            }
+        }
+        // Velocity variance: unknown beyond the spread of the slope; NaN-free.
+        for k in 3..6 {
+            cov[k * 6 + k] = f64::NAN;
+        }
+        let e = Estimate {
+            time_s,
+            position: [mean.x, mean.y, mean.z],
+            velocity: [velocity.x, velocity.y, velocity.z],
+            covariance: cov,
+            hypotheses: self.positions.len(),
+            weight,
+        };
+        self.last_estimate = Some(e.clone());
+        Some(e)
+    }
+
+    /// The previous estimate carried forward to `time_s` (outlier recovery:
+    /// "extrapolates the previous estimates").
+    fn extrapolate(&mut self, time_s: f64) -> Option<Estimate> {
+        let mut e = self.last_estimate.clone()?;
+        let dt = time_s - e.time_s;
+        if e.velocity.iter().all(|v| v.is_finite()) {
+            for k in 0..3 {
+                e.position[k] += e.velocity[k] * dt;
+            }
+        }
+        e.time_s = time_s;
+        Some(e)
+    }
+
+    fn restart(&mut self) {
+        self.initialised = false;
+        self.positions.clear();
+        self.log_weights.clear();
+        self.history.clear();
+        self.recent.clear();
+        self.last_estimate = None;
+        self.consecutive_outliers = 0;
+        self.stats.reinitialisations += 1;
+    }
+
+    fn step_frame(&mut self, frame: &WidebandFrame) -> Option<Estimate> {
+        self.stats.measurements += 1;
+        if !frame.time_s.is_finite() {
+            self.stats.invalid += 1;
+            return None;
+        }
+        if frame.time_s < self.last_time_s {
+            self.stats.out_of_order += 1;
+            return None;
+        }
+        let receivers = match self.receivers(frame) {
+            Ok(r) => r,
+            Err(_) => {
+                self.stats.invalid += 1;
+                return None;
+            }
+        };
+        if self.initialised && frame.time_s - self.last_time_s > self.params.reinit_gap_s {
+            self.restart();
+        }
+        if !self.initialised {
+            self.stats.initialising += 1;
+            self.last_time_s = frame.time_s;
+            if !self.initialise(frame.time_s, &receivers) {
+                return None;
+            }
+            self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.positions.len() as u64);
+            return self.estimate(frame.time_s);
+        }
+        self.stats.filter_updates += self.positions.len() as u64;
+        let accepted = self.sequential_step(frame.time_s, &receivers);
+        self.last_time_s = frame.time_s;
+        if accepted {
+            self.consecutive_outliers = 0;
+            return self.estimate(frame.time_s);
+        }
+        self.stats.outliers += 1;
+        self.consecutive_outliers += 1;
+        if self.consecutive_outliers > self.params.max_consecutive_outliers {
+            self.restart();
+            self.stats.initialising += 1;
+            if self.initialise(frame.time_s, &receivers) {
+                return self.estimate(frame.time_s);
+            }
+            return None;
+        }
+        self.extrapolate(frame.time_s)
+    }
+}
+
+/// Weighted mean and covariance (m, m²) of the particles within `radius`
+/// of particle `best`, and their total weight.
+fn mode_mean(positions: &[Vector3<f64>], log_weights: &[f64], best: usize, radius: f64) -> (Vector3<f64>, Matrix3<f64>, f64) {
+    let centre = positions[best];
+    let mut total = 0.0;
+    let mut mean = Vector3::zeros();
+    for (p, lw) in positions.iter().zip(log_weights) {
+        if (p - centre).norm() <= radius {
+            let w = lw.exp();
+            total += w;
+            mean += p * w;
+        }
+    }
+    if !(total > 0.0) {
+        return (centre, Matrix3::identity() * radius * radius, 0.0);
+    }
+    mean /= total;
+    let mut cov = Matrix3::zeros();
+    for (p, lw) in positions.iter().zip(log_weights) {
+        if (p - centre).norm() <= radius {
+            let r = p - mean;
+            cov += r * r.transpose() * (lw.exp() / total);
+        }
+    }
+    (mean, cov, total)
+}
+
+/// Least-squares slope of positions over time (m/s); zero with fewer than
+/// two samples or no time spread.
+fn slope(samples: &VecDeque<(f64, Vector3<f64>)>) -> Vector3<f64> {
+    let n = samples.len() as f64;
+    if samples.len() < 2 {
+        return Vector3::zeros();
+    }
+    let t_mean = samples.iter().map(|s| s.0).sum::<f64>() / n;
+    let p_mean = samples.iter().map(|s| s.1).sum::<Vector3<f64>>() / n;
+    let stt: f64 = samples.iter().map(|s| (s.0 - t_mean).powi(2)).sum();
+    if stt <= 0.0 {
+        return Vector3::zeros();
+    }
+    samples.iter().map(|s| (s.1 - p_mean) * (s.0 - t_mean)).sum::<Vector3<f64>>() / stt
+}
+
+impl Tracker for TurboTrack {
+    fn step(&mut self, measurement: &Measurement) -> Option<Estimate> {
+        match measurement {
+            Measurement::Wideband(frame) => self.step_frame(frame),
+            Measurement::Phase(_) => {
+                self.stats.measurements += 1;
+                self.stats.invalid += 1;
+                None
+            }
+        }
+    }
+
+    fn stats(&self) -> TrackerStats {
+        self.stats
+    }
+
+    fn reset(&mut self) {
+        let stats = self.stats;
+        self.restart();
+        self.stats = stats;
+        self.last_time_s = f64::NEG_INFINITY;
+        self.rng = StdRng::seed_from_u64(self.params.seed);
+    }
+
+    fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
+        self.positions.iter().zip(&self.log_weights).map(|(p, w)| ([p.x, p.y, p.z], *w)).collect()
+    }
+
+    fn trajectory(&self) -> Vec<(f64, [f64; 3])> {
+        self.map_trajectory()
+    }
+}

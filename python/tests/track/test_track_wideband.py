@@ -1,0 +1,96 @@
+"""TurboTrack and its variants through the Python API and the CLI."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scattertrack import eval as evaluation
+from scattertrack import io, sim, track
+from scattertrack.cli import main
+from scattertrack.io.frames import make_frames
+
+EXAMPLE = Path(__file__).resolve().parents[3] / ".." / "shared" / "examples" / "helper-3d-arm"
+
+
+@pytest.fixture(scope="module")
+def arm():
+    scenario = sim.load_scenario("turbotrack-3d-arm")
+    scenario["duration_s"] = 3.0
+    return sim.simulate(scenario, seed=5)
+
+
+def test_turbotrack_tracks_the_arm_to_millimetres(arm):
+    result = track.run("turbotrack", arm.scene, arm.frames)
+    report = evaluation.compare(arm.truth, result, skip_first_s=0.5)
+    assert report.overall.median_3d_m < 0.01
+    assert np.all(report.overall.p90_axis_m < 0.02)
+    # Every frame is accounted for: an estimate, or a counted decline.
+    stats = result.stats[arm.frames.epcs()[0]]
+    assert stats["measurements"] == arm.frames.n_frames
+    assert len(result) + stats["invalid"] + stats["out_of_order"] + stats["initialising"] - 1 <= arm.frames.n_frames
+    # The backtracked MAP trajectory covers the recent frames.
+    times, positions = result.smoothed[arm.frames.epcs()[0]]
+    assert len(times) > 100 and positions.shape == (len(times), 3)
+
+
+def test_variants_are_selectable_and_worse(arm):
+    full = evaluation.compare(arm.truth, track.run("turbotrack", arm.scene, arm.frames), skip_first_s=0.5).overall.median_3d_m
+    for method in ("ellipse-intersection", "gaussian-pf"):
+        other = evaluation.compare(arm.truth, track.run(method, arm.scene, arm.frames), skip_first_s=0.5).overall.median_3d_m
+        assert other > full, method
+
+
+def test_step_frame_streams_one_frame_at_a_time(arm):
+    tracker = track.make("turbotrack", arm.scene)
+    frames = arm.frames
+    estimates = []
+    for k in range(200):
+        rx, f, h = frames.frame(k)
+        tx = int(frames.tx[frames.frame_start[k]])
+        e = tracker.step_frame(frames.frame_time_s[k], frames.frame_epc[k], tx, rx, f, h)
+        if e is not None:
+            estimates.append(e)
+    assert len(estimates) > 150
+    assert estimates[-1].position.shape == (3,)
+    assert tracker.stats(frames.frame_epc[0])["measurements"] == 200
+
+
+def test_all_nan_frame_is_counted_not_fatal(arm):
+    f = arm.frames.select_frames(np.arange(60))
+    h = f.h.copy()
+    h[f.frame_start[30] : f.frame_start[31]] = np.nan
+    broken = make_frames(f.time_s, f.epc, f.tx, f.rx, f.frequency_hz, h)
+    result = track.run("turbotrack", arm.scene, broken)
+    assert result.stats[f.epcs()[0]]["invalid"] == 1
+    assert "frame without enough usable receivers (declined by tracker)" in result.skipped.counts
+
+
+def test_method_and_input_must_match(arm):
+    with pytest.raises(ValueError, match="frames"):
+        track.run("turbotrack", arm.scene, io.Reads.__new__(io.Reads)) if hasattr(io, "Reads") else None
+    with pytest.raises(ValueError, match="phase reads"):
+        track.run("glac", arm.scene, arm.frames)
+
+
+def test_outside_example_tracks():
+    if not EXAMPLE.exists():
+        pytest.skip("needs ../shared/examples")
+    scene = io.read_scene(EXAMPLE / "scene.toml")
+    frames = io.read_frames(EXAMPLE / "frames.csv", scene)
+    result = track.run("turbotrack", scene, frames)
+    assert len(result) > 0.9 * frames.n_frames
+
+
+def test_cli_track_frames(tmp_path, capsys):
+    out = tmp_path / "sim"
+    assert main(["simulate", "--scenario", "turbotrack-static", "--out", str(out), "--duration", "1", "--seed", "3"]) == 0
+    assert main(["track", "--scene", str(out / "scene.toml"), "--frames", str(out / "frames.csv"), "--method", "turbotrack", "--out", str(tmp_path / "track.csv"), "--no-progress"]) == 0
+    text = capsys.readouterr().out
+    assert "frames/s wall clock" in text
+    assert io.read_track(tmp_path / "track.csv").time_s.size > 200
+    # The wrong input for the method is a usage error, not a crash.
+    code = main(["track", "--scene", str(out / "scene.toml"), "--reads", str(out / "frames.csv"), "--method", "turbotrack", "--out", str(tmp_path / "t2.csv")])
+    assert code == 2
