@@ -24,7 +24,9 @@ class Engine:
         channel_offsets: npt.NDArray[np.float64],
         method: str,
         params: dict[str, Any] | None = None,
-    ) -> None: ...
+        roles: list[str] | None = None,
+    ) -> None:
+        """``roles``: one of "txrx", "tx", "rx" per antenna (default all "txrx")."""
     def step(
         self, tag: int, time_s: float, antenna: int, frequency_hz: float, phase_rad: float
     ) -> EstimateTuple | None:
@@ -38,11 +40,30 @@ class Engine:
         phase_rad: npt.NDArray[np.float64],
     ) -> dict[str, np.ndarray]:
         """Columns row, time_s, position (n,3), velocity (n,3), covariance (n,36), hypotheses, weight."""
+    def run_frames(
+        self,
+        tag: npt.NDArray[np.int64],
+        time_s: npt.NDArray[np.float64],
+        tx: npt.NDArray[np.int64],
+        frame_start: npt.NDArray[np.int64],
+        rx: npt.NDArray[np.int64],
+        frequency_hz: npt.NDArray[np.float64],
+        h_re: npt.NDArray[np.float64],
+        h_im: npt.NDArray[np.float64],
+    ) -> dict[str, np.ndarray]:
+        """Wideband frames: per frame tag, time, tx index and row offsets; per row
+        rx index, subcarrier Hz and channel (sorted by rx, then frequency).
+        Same columns as ``run``; ``row`` is the frame index."""
+    def trajectory(self, tag: int) -> list[tuple[float, list[float]]]:
+        """Backtracked MAP trajectory (TurboTrack): (time_s, position m) pairs."""
     def stats(self, tag: int) -> dict[str, int]: ...
     def hypotheses(self, tag: int) -> list[tuple[list[float], float]]:
         """Live hypotheses: (position m, normalised log-likelihood)."""
     def latency(self) -> tuple[int, float, int]:
         """(count, mean_ns, max_ns) of step calls."""
+    def latency_percentiles(self, quantiles: list[float]) -> list[float]:
+        """Quantiles (0-1) of the per-step cost, ns."""
 
 def methods() -> list[str]: ...
-def default_params() -> dict[str, Any]: ...
+def default_params(method: str = "glac") -> dict[str, Any]:
+    """The parameters ``method`` accepts, with their defaults."""

@@ -367,7 +367,11 @@ def track_frames(args, scene, params: dict) -> int:
     line = f"  speed: {rate:,.0f} frames/s wall clock ({format_duration(wall_s)} for {frames.n_frames} frames)"
     if result.latency and result.latency[0]:
         _, mean_ns, max_ns = result.latency
-        line += f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(max_ns)} max per frame"
+        q = result.latency_quantiles_ns
+        line += (
+            f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(q.get('p50', 0))} p50, "
+            f"{format_nanoseconds(q.get('p99', 0))} p99, {format_nanoseconds(max_ns)} max per frame"
+        )
     say(line)
     return 0
 

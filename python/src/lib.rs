@@ -457,6 +457,12 @@ impl Engine {
         let l = self.inner.latency();
         (l.count, l.mean_ns(), l.max_ns)
     }
+
+    /// Quantiles (0–1) of the per-step cost, ns.
+    fn latency_percentiles(&self, quantiles: Vec<f64>) -> Vec<f64> {
+        let l = self.inner.latency();
+        quantiles.iter().map(|&q| l.percentile_ns(q)).collect()
+    }
 }
 
 /// Registered method names.

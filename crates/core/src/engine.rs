@@ -15,14 +15,40 @@ use crate::scene::Scene;
 use crate::track::{make, Estimate, Measurement, Params, Tracker, TrackerStats};
 
 /// Wall-clock cost of `step` calls, nanoseconds.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct Latency {
     pub count: u64,
     pub total_ns: u64,
     pub max_ns: u64,
+    /// Every step's cost (the first `MAX_LATENCY_SAMPLES`), for percentiles.
+    pub samples_ns: Vec<u32>,
 }
 
+/// Step costs kept for percentiles (4 bytes each: 40 MB at most).
+pub const MAX_LATENCY_SAMPLES: usize = 10_000_000;
+
 impl Latency {
+    /// Records one step's cost.
+    pub fn record(&mut self, ns: u64) {
+        self.count += 1;
+        self.total_ns += ns;
+        self.max_ns = self.max_ns.max(ns);
+        if self.samples_ns.len() < MAX_LATENCY_SAMPLES {
+            self.samples_ns.push(ns.min(u32::MAX as u64) as u32);
+        }
+    }
+
+    /// The `q`-quantile (0–1) of the recorded step costs, ns (nearest rank); 0 when empty.
+    pub fn percentile_ns(&self, q: f64) -> f64 {
+        if self.samples_ns.is_empty() {
+            return 0.0;
+        }
+        let mut sorted = self.samples_ns.clone();
+        sorted.sort_unstable();
+        let rank = ((q.clamp(0.0, 1.0) * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+        sorted[rank - 1] as f64
+    }
+
     pub fn mean_ns(&self) -> f64 {
         if self.count == 0 {
             0.0
@@ -61,10 +87,7 @@ impl Engine {
         let tracker = self.trackers[tag].as_mut()?;
         let start = Instant::now();
         let estimate = tracker.step(measurement);
-        let ns = start.elapsed().as_nanos() as u64;
-        self.latency.count += 1;
-        self.latency.total_ns += ns;
-        self.latency.max_ns = self.latency.max_ns.max(ns);
+        self.latency.record(start.elapsed().as_nanos() as u64);
         estimate
     }
 
@@ -83,8 +106,8 @@ impl Engine {
         self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(Vec::new, |t| t.trajectory())
     }
 
-    pub fn latency(&self) -> Latency {
-        self.latency
+    pub fn latency(&self) -> &Latency {
+        &self.latency
     }
 
     pub fn tags(&self) -> usize {
@@ -187,5 +210,17 @@ mod tests {
         let times: Vec<f64> = out.iter().map(|(_, m)| m.time_s()).collect();
         assert_eq!(times, vec![0.0, 0.03, 0.05, 0.12, 0.2, 0.4]);
         assert_eq!(w.late, 0);
+    }
+
+    #[test]
+    fn latency_percentiles() {
+        let mut l = Latency::default();
+        for ns in 1..=100 {
+            l.record(ns);
+        }
+        assert_eq!(l.percentile_ns(0.5), 50.0);
+        assert_eq!(l.percentile_ns(0.99), 99.0);
+        assert_eq!(l.max_ns, 100);
+        assert!((l.mean_ns() - 50.5).abs() < 1e-12);
     }
 }

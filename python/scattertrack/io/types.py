@@ -221,6 +221,8 @@ class Track:
     from a file."""
     latency: tuple | None = None
     """(steps, mean ns, max ns) of the Rust tracker steps, when tracked here."""
+    latency_quantiles_ns: dict = field(default_factory=dict)
+    """Per-step cost quantiles of the Rust tracker, ns (``{"p50": .., "p99": ..}``), when tracked here."""
     smoothed: dict = field(default_factory=dict)
     """Methods that revise the past (TurboTrack's backtracked MAP trajectory):
     ``epc -> (times s (n,), positions m (n, 3))``; empty otherwise."""

@@ -126,6 +126,8 @@ def run_frames(method: str, scene: Scene, frames: Frames, *, progress: bool = Fa
     )
     track.stats = stats
     track.latency = core.latency()
+    p50, p99 = core.latency_percentiles([0.5, 0.99])
+    track.latency_quantiles_ns = {"p50": p50, "p99": p99}
     track.smoothed = {}
     for i, n in enumerate(names):
         pairs = core.trajectory(i)

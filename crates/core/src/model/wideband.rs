@@ -73,7 +73,8 @@ pub enum CandidateWeighting {
 /// weights `w(n)` (eq. 5.1) and one noise level σ_w.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Candidates {
-    /// Candidate path lengths tx → tag → rx, ascending, m.
+    /// Candidate path lengths tx → tag → rx, ascending and exactly
+    /// `spacing_m` apart, m.
     pub distances_m: Vec<f64>,
     /// Mixture weights, summing to 1.
     pub weights: Vec<f64>,
@@ -129,8 +130,8 @@ pub fn beamform(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64) -> Complex<f
 /// multiply per subcarrier and step) finds the envelope peak; (2) the
 /// phase of `B` is zeroed by Newton steps (`∂ arg B / ∂d ≈ 2π f̄ / c`)
 /// near the peak: the phase-refined candidate; (3) the comb `d0 + n λ̄`
-/// is walked both ways while the envelope stays above the threshold, each
-/// tooth refined by one more Newton step. Returns None when the channel
+/// is walked both ways while the envelope stays above the threshold.
+/// Returns None when the channel
 /// has no finite, non-zero value or the interval is empty.
 pub fn distance_candidates(
     frequencies_hz: &[f64],
@@ -154,8 +155,10 @@ pub fn distance_candidates(
     let lambda = SPEED_OF_LIGHT / f_mean;
     let two_pi_over_c = 2.0 * std::f64::consts::PI / SPEED_OF_LIGHT;
 
-    // (1) Coarse envelope peak by phasor recurrence.
-    let step = lambda / 8.0;
+    // (1) Coarse envelope peak by phasor recurrence. |B| is a smooth
+    // envelope (the carrier cancels in the magnitude) with a c/B-wide main
+    // lobe, so a quarter-wavelength grid finds its top.
+    let step = lambda / 4.0;
     let n_grid = ((d_max - d_min) / step).ceil() as usize + 1;
     let mut phasor: Vec<Complex<f64>> = frequencies_hz
         .iter()
@@ -198,16 +201,40 @@ pub fn distance_candidates(
         return None;
     }
 
-    // (3) Walk the comb both ways.
+    // (3) Walk the comb both ways, exactly λ̄ apart: for subcarriers
+    // symmetric about f̄, arg B(d0 + n λ̄) = 0 for every n on a single path,
+    // so one refinement (at the peak) serves every tooth. Magnitudes by
+    // phasor recurrence: g_k = h_k e^{jω_k d0}, each tooth rotates g_k by
+    // e^{±jω_k λ̄} (one complex multiply per subcarrier and tooth).
+    let base: Vec<Complex<f64>> = frequencies_hz
+        .iter()
+        .zip(h)
+        .map(|(&f, &hk)| {
+            let (s, c) = (two_pi_over_c * f * d_peak).sin_cos();
+            hk * Complex::new(c, s)
+        })
+        .collect();
+    let tooth: Vec<Complex<f64>> = frequencies_hz
+        .iter()
+        .map(|&f| {
+            let (s, c) = (two_pi_over_c * f * lambda).sin_cos();
+            Complex::new(c, s)
+        })
+        .collect();
     let mut teeth: Vec<(f64, f64)> = vec![(d_peak, peak)];
-    for direction in [-1.0, 1.0] {
-        let mut d = d_peak;
+    for direction in [-1.0f64, 1.0] {
+        let mut g = base.clone();
+        let mut n = 0.0;
         loop {
-            d = refine(d + direction * lambda, 1);
+            n += direction;
+            let d = d_peak + n * lambda;
             if d < d_min - lambda / 2.0 || d > d_max + lambda / 2.0 || teeth.len() > 4 * params.max_candidates {
                 break;
             }
-            let mag = beamform(frequencies_hz, h, d).norm();
+            for (gk, r) in g.iter_mut().zip(&tooth) {
+                *gk *= if direction > 0.0 { *r } else { r.conj() };
+            }
+            let mag = g.iter().sum::<Complex<f64>>().norm();
             if mag < params.min_relative_weight * peak {
                 break;
             }
