@@ -27,6 +27,7 @@ pub use turbotrack::{InitialSampling, Proposal, TurboTrack, TurboTrackParams, Wi
 use crate::error::{Error, Result};
 use nalgebra::Complex;
 
+use crate::model::wideband::CandidateWeighting;
 use crate::model::StateMatrix;
 use crate::scene::Scene;
 
@@ -228,6 +229,8 @@ pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracke
             // a bootstrap (prior) proposal.
             w.likelihood = WidebandLikelihood::SingleGaussian { sigma_m: GAUSSIAN_PF_SIGMA_M };
             w.proposal = Proposal::Prior;
+            // §7.2(a): the strongest candidate by FFT amplitude.
+            w.candidates.weighting = CandidateWeighting::Amplitude;
             return Ok(Box::new(TurboTrack::new(scene.clone(), w)?));
         }
         "uniform-pf" => {
@@ -237,7 +240,11 @@ pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracke
             w.proposal = Proposal::Prior;
             return Ok(Box::new(TurboTrack::new(scene.clone(), w)?));
         }
-        "ellipse-intersection" => return Ok(Box::new(EllipseIntersection::new(scene.clone(), w)?)),
+        "ellipse-intersection" => {
+            // §7.2(a): "weights obtained from the amplitude of the interpolated FFT".
+            w.candidates.weighting = CandidateWeighting::Amplitude;
+            return Ok(Box::new(EllipseIntersection::new(scene.clone(), w)?));
+        }
         "rfind" => return Ok(Box::new(RFind::new(scene.clone(), w)?)),
         _ => return Err(Error::UnknownMethod(name.to_string(), METHODS.join(", "))),
     }
