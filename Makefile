@@ -26,13 +26,13 @@ demo: setup
 test: setup test-rust test-python
 
 test-rust:
-	cargo test -p scattertrack-core --release -q
+	cargo test -p scattertrack-core -p scattertrack-runtime --release -q
 
 test-python:
 	$(PY) -m pytest -q python/tests docs
 
 bench: setup
-	cargo bench -p scattertrack-core --bench glac -- --quick
+	cargo bench -p scattertrack-core --bench glac --bench turbotrack -- --quick
 	$(PY) bench/run.py
 
 clean:
