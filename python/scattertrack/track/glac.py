@@ -162,6 +162,30 @@ _DECLINED = {
 }
 
 
+def track_from_columns(columns: dict, epcs: np.ndarray, input_skipped: SkipReport, stats: dict, declined: dict) -> Track:
+    """A Track from the engine's output columns (lists of chunks; ``row``
+    indexes ``epcs``), carrying the input's skip report plus what the
+    trackers declined (``stats`` per tag, ``declined``: counter → reason)."""
+    rows = np.concatenate(columns["row"]) if columns["row"] else np.zeros(0, dtype=np.int64)
+    covariance = np.concatenate(columns["covariance"]) if rows.size else np.zeros((0, 36))
+    skipped = SkipReport(dict(input_skipped.counts), {k: list(v) for k, v in input_skipped.examples.items()})
+    for tag_stats in stats.values():
+        for key, reason in declined.items():
+            if tag_stats.get(key, 0):
+                skipped.add(reason, n=int(tag_stats[key]))
+    sigma = np.sqrt(np.clip(covariance[:, [0, 7, 14]], 0.0, None)) if rows.size else np.zeros((0, 3))
+    track = Track(
+        time_s=np.concatenate(columns["time_s"]) if rows.size else np.zeros(0),
+        epc=epcs[rows] if rows.size else np.zeros(0, dtype=str),
+        position=np.concatenate(columns["position"]) if rows.size else np.zeros((0, 3)),
+        velocity=np.concatenate(columns["velocity"]) if rows.size else np.zeros((0, 3)),
+        sigma=sigma,
+        skipped=skipped,
+    )
+    track.stats = stats
+    return track
+
+
 def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chunk: int = 50_000, **params) -> Track:
     """Tracks every tag in ``reads`` (time-ordered, as the readers return
     them) and returns one estimate row per update, in time order.
@@ -203,23 +227,7 @@ def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chun
             bar.update(len(time_s[sl]))
     if bar is not None:
         bar.close()
-    rows = np.concatenate(columns["row"]) if columns["row"] else np.zeros(0, dtype=np.int64)
-    covariance = np.concatenate(columns["covariance"]) if rows.size else np.zeros((0, 36))
-    skipped = SkipReport(dict(reads.skipped.counts), {k: list(v) for k, v in reads.skipped.examples.items()})
-    for name in names:
-        stats = tracker.stats(str(name))
-        for key, reason in _DECLINED.items():
-            if stats.get(key, 0):
-                skipped.add(reason, n=int(stats[key]))
-    sigma = np.sqrt(np.clip(covariance[:, [0, 7, 14]], 0.0, None)) if rows.size else np.zeros((0, 3))
-    track = Track(
-        time_s=np.concatenate(columns["time_s"]) if rows.size else np.zeros(0),
-        epc=epcs[rows] if rows.size else np.zeros(0, dtype=str),
-        position=np.concatenate(columns["position"]) if rows.size else np.zeros((0, 3)),
-        velocity=np.concatenate(columns["velocity"]) if rows.size else np.zeros((0, 3)),
-        sigma=sigma,
-        skipped=skipped,
-    )
-    track.stats = {str(n): tracker.stats(str(n)) for n in names}
+    stats = {str(n): tracker.stats(str(n)) for n in names}
+    track = track_from_columns(columns, epcs, reads.skipped, stats, _DECLINED)
     track.latency = tracker.latency()
     return track

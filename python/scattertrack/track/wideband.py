@@ -16,7 +16,8 @@ import numpy as np
 
 from scattertrack import _core
 from scattertrack.io.frames import Frames
-from scattertrack.io.types import Scene, SkipReport, Track
+from scattertrack.io.types import Scene, Track
+from scattertrack.track.glac import track_from_columns
 
 WIDEBAND_METHODS = ("turbotrack", "gaussian-pf", "uniform-pf", "ellipse-intersection", "rfind")
 
@@ -107,24 +108,8 @@ def run_frames(method: str, scene: Scene, frames: Frames, *, progress: bool = Fa
             bar.update(hi - lo)
     if bar is not None:
         bar.close()
-    rows = np.concatenate(columns["row"]) if columns["row"] else np.zeros(0, dtype=np.int64)
-    covariance = np.concatenate(columns["covariance"]) if rows.size else np.zeros((0, 36))
-    skipped = SkipReport(dict(frames.skipped.counts), {k: list(v) for k, v in frames.skipped.examples.items()})
     stats = {str(n): dict(core.stats(i)) for i, n in enumerate(names)}
-    for s in stats.values():
-        for key, reason in _DECLINED.items():
-            if s.get(key, 0):
-                skipped.add(reason, n=int(s[key]))
-    sigma = np.sqrt(np.clip(covariance[:, [0, 7, 14]], 0.0, None)) if rows.size else np.zeros((0, 3))
-    track = Track(
-        time_s=np.concatenate(columns["time_s"]) if rows.size else np.zeros(0),
-        epc=frame_epc[rows] if rows.size else np.zeros(0, dtype=str),
-        position=np.concatenate(columns["position"]) if rows.size else np.zeros((0, 3)),
-        velocity=np.concatenate(columns["velocity"]) if rows.size else np.zeros((0, 3)),
-        sigma=sigma,
-        skipped=skipped,
-    )
-    track.stats = stats
+    track = track_from_columns(columns, frame_epc, frames.skipped, stats, _DECLINED)
     track.latency = core.latency()
     p50, p99 = core.latency_percentiles([0.5, 0.99])
     track.latency_quantiles_ns = {"p50": p50, "p99": p99}

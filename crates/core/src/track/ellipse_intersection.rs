@@ -63,23 +63,7 @@ impl EllipseIntersection {
             self.stats.outliers += 1;
             return None;
         };
-        let mut covariance = [0.0; 36];
-        for r in 0..3 {
-            for k in 0..3 {
-                covariance[r * 6 + k] = g.covariance[(r, k)];
-            }
-        }
-        for k in 3..6 {
-            covariance[k * 6 + k] = f64::NAN;
-        }
-        Some(Estimate {
-            time_s: frame.time_s,
-            position: [g.mean.x, g.mean.y, g.mean.z],
-            velocity: [f64::NAN; 3],
-            covariance,
-            hypotheses: 1,
-            weight: 1.0,
-        })
+        Some(Estimate::from_position(frame.time_s, &g.mean, &g.covariance, [f64::NAN; 3], 1, 1.0))
     }
 }
 
@@ -87,11 +71,7 @@ impl Tracker for EllipseIntersection {
     fn step(&mut self, measurement: &Measurement) -> Option<Estimate> {
         match measurement {
             Measurement::Wideband(frame) => self.step_frame(frame),
-            Measurement::Phase(_) => {
-                self.stats.measurements += 1;
-                self.stats.invalid += 1;
-                None
-            }
+            Measurement::Phase(_) => self.stats.decline_invalid(),
         }
     }
 

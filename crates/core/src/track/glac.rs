@@ -887,12 +887,7 @@ impl Tracker for Glac {
     fn step(&mut self, measurement: &Measurement) -> Option<Estimate> {
         match measurement {
             Measurement::Phase(read) => self.step_read(read),
-            Measurement::Wideband(_) => {
-                // GLAC consumes single phase readings only.
-                self.stats.measurements += 1;
-                self.stats.invalid += 1;
-                None
-            }
+            Measurement::Wideband(_) => self.stats.decline_invalid(),
         }
     }
 

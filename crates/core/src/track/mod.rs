@@ -125,6 +125,28 @@ impl Estimate {
         c
     }
 
+    /// An estimate of methods whose state is a position: `covariance` is
+    /// its 3×3 covariance (m²); the velocity block stays NaN (unknown).
+    pub(crate) fn from_position(
+        time_s: f64,
+        position: &nalgebra::Vector3<f64>,
+        covariance: &nalgebra::Matrix3<f64>,
+        velocity: [f64; 3],
+        hypotheses: usize,
+        weight: f64,
+    ) -> Self {
+        let mut c = [0.0; 36];
+        for r in 0..3 {
+            for k in 0..3 {
+                c[r * 6 + k] = covariance[(r, k)];
+            }
+        }
+        for k in 3..6 {
+            c[k * 6 + k] = f64::NAN;
+        }
+        Self { time_s, position: [position.x, position.y, position.z], velocity, covariance: c, hypotheses, weight }
+    }
+
     /// 1-sigma position uncertainty per axis, metres.
     pub fn position_sigma(&self) -> [f64; 3] {
         [self.covariance[0].sqrt(), self.covariance[7].sqrt(), self.covariance[14].sqrt()]
@@ -151,6 +173,16 @@ pub struct TrackerStats {
     pub max_hypotheses: u64,
     /// EKF updates performed (all hypotheses), a measure of work.
     pub filter_updates: u64,
+}
+
+impl TrackerStats {
+    /// Counts a measurement of a kind this method does not consume
+    /// (declined as invalid; no estimate).
+    pub(crate) fn decline_invalid(&mut self) -> Option<Estimate> {
+        self.measurements += 1;
+        self.invalid += 1;
+        None
+    }
 }
 
 /// The causal tracking interface every method implements.

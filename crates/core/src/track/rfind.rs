@@ -168,24 +168,11 @@ impl RFind {
             self.stats.initialising += 1;
             return None;
         }
-        let (x, p) = self.localise()?;
-        let mut covariance = [0.0; 36];
-        for r in 0..3 {
-            for k in 0..3 {
-                covariance[r * 6 + k] = p[(r, k)];
-            }
+        let (mut x, p) = self.localise()?;
+        if self.scene.dimensions == 2 {
+            x.z = self.scene.plane_z;
         }
-        for k in 3..6 {
-            covariance[k * 6 + k] = f64::NAN;
-        }
-        Some(Estimate {
-            time_s: frame.time_s,
-            position: [x.x, x.y, if self.scene.dimensions == 2 { self.scene.plane_z } else { x.z }],
-            velocity: [f64::NAN; 3],
-            covariance,
-            hypotheses: 1,
-            weight: 1.0,
-        })
+        Some(Estimate::from_position(frame.time_s, &x, &p, [f64::NAN; 3], 1, 1.0))
     }
 }
 
@@ -193,11 +180,7 @@ impl Tracker for RFind {
     fn step(&mut self, measurement: &Measurement) -> Option<Estimate> {
         match measurement {
             Measurement::Wideband(frame) => self.step_frame(frame),
-            Measurement::Phase(_) => {
-                self.stats.measurements += 1;
-                self.stats.invalid += 1;
-                None
-            }
+            Measurement::Phase(_) => self.stats.decline_invalid(),
         }
     }
 

@@ -653,24 +653,7 @@ impl TurboTrack {
             self.recent.pop_front();
         }
         let velocity = slope(&self.recent);
-        let mut cov = [0.0; 36];
-        for r in 0..3 {
-            for k in 0..3 {
-                cov[r * 6 + k] = covariance[(r, k)];
-            }
-        }
-        // Velocity variance: unknown beyond the spread of the slope; NaN-free.
-        for k in 3..6 {
-            cov[k * 6 + k] = f64::NAN;
-        }
-        let e = Estimate {
-            time_s,
-            position: [mean.x, mean.y, mean.z],
-            velocity: [velocity.x, velocity.y, velocity.z],
-            covariance: cov,
-            hypotheses: self.positions.len(),
-            weight,
-        };
+        let e = Estimate::from_position(time_s, &mean, &covariance, [velocity.x, velocity.y, velocity.z], self.positions.len(), weight);
         self.last_estimate = Some(e.clone());
         Some(e)
     }
@@ -797,11 +780,7 @@ impl Tracker for TurboTrack {
     fn step(&mut self, measurement: &Measurement) -> Option<Estimate> {
         match measurement {
             Measurement::Wideband(frame) => self.step_frame(frame),
-            Measurement::Phase(_) => {
-                self.stats.measurements += 1;
-                self.stats.invalid += 1;
-                None
-            }
+            Measurement::Phase(_) => self.stats.decline_invalid(),
         }
     }
 
