@@ -26,14 +26,16 @@ demo: setup
 test: setup test-rust test-python
 
 test-rust:
-	cargo test -p scattertrack-core -p scattertrack-runtime --release -q
+	cargo test -p scattertrack-core -p scattertrack-dsp -p scattertrack-runtime --release -q
 
 test-python:
 	$(PY) -m pytest -q python/tests docs
 
 bench: setup
 	cargo bench -p scattertrack-core --bench glac --bench turbotrack -- --quick
+	cargo bench -p scattertrack-dsp --bench dsp -- --quick
 	$(PY) bench/run.py
+	$(PY) bench/turbotrack.py
 
 clean:
 	rm -rf target out $(VENV) python/scattertrack/*.so

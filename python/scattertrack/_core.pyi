@@ -67,3 +67,74 @@ class Engine:
 def methods() -> list[str]: ...
 def default_params(method: str = "glac") -> dict[str, Any]:
     """The parameters ``method`` accepts, with their defaults."""
+
+# --------------------------------------------------------------------------
+# scattertrack-dsp: the helper's one-shot wideband channel estimation (python/src/dsp.rs)
+
+class DspError(ValueError):
+    """A DSP error; the message starts with its kind: 'no-preamble', 'non-finite',
+    'too-short', 'no-clean-symbols', 'bad-config', 'shape' or 'bad-calibration'."""
+
+class OfdmDsp:
+    """One reply's processing over all rx antennas (crates/dsp ``reply::ReplyProcessor``):
+    symbol timing, per-symbol FFT, preamble detection, edge-flip elimination, tag channel."""
+
+    def __init__(
+        self,
+        bandwidth_hz: float,
+        subcarriers: int,
+        centre_hz: float,
+        blf_hz: float,
+        symbol: npt.NDArray[np.complex128],
+        encoding: str = "fm0",
+        trext: bool = False,
+        threshold: float = 0.5,
+        blf_tolerance: float = 0.05,
+        guard_symbols: float = 1.0,
+        feature: str = "projection",
+        use_payload: bool = True,
+        payload_bits: int = 17,
+        decision_margin: float = 0.5,
+    ) -> None:
+        """``symbol``: X (N,) FFT order, DC 0, unit magnitude. Raises DspError ('bad-config')
+        for N >= B/(2 BLF) and other bad values."""
+    def subcarrier_frequencies(self) -> npt.NDArray[np.float64]:
+        """Active subcarriers (N - 1), Hz, ascending: centre + k' B/N, k' != 0."""
+    timing_reference: list[int] | None
+    """Per-rx symbol timing reference (learnt from the first window processed with a tx_phase)."""
+    def process(self, windows: npt.NDArray[np.complex64], tx_phase: int | None = None) -> dict[str, Any]:
+        """One reply: ``windows`` (R, L) complex64; ``tx_phase`` = tx stream index of the first
+        sample mod N. Returns ``tag_channel`` (R, F) complex128 (NaN rows for failed antennas),
+        ``variance`` (R, F), ``antenna_errors`` (list of 'kind: message' or None),
+        ``start_sample`` (preamble start in window samples), ``start_symbol``, ``chip_symbols``,
+        ``blf_hz``, ``score``, ``correlations`` (per rx), ``first_samples`` (per rx),
+        ``payload_chips``, ``symbols``, ``states`` (R, symbols) uint8 (0 outside, 1 edge,
+        2 invalid, 3 low, 4 high) and ``counts`` (dict of per-rx lists: high, low, edge,
+        outside, invalid). Raises DspError for a reply-level failure."""
+
+class DspEma:
+    """Exponential moving average across replies with polarity alignment (``estimate::Ema``)."""
+
+    def __init__(self, alpha: float) -> None: ...
+    def update(self, h: npt.NDArray[np.complex128]) -> npt.NDArray[np.complex128]:
+        """Adds one reply's channel (R, F); returns the smoothed state (R, F)."""
+    @property
+    def updates(self) -> int: ...
+    @property
+    def flips(self) -> int: ...
+
+def dsp_known_symbol(subcarriers: int, seed: int) -> npt.NDArray[np.complex128]:
+    """X (N,), FFT order, DC 0, unit magnitude, deterministic from ``seed``."""
+
+def dsp_subcarrier_frequencies(
+    bandwidth_hz: float, subcarriers: int, centre_hz: float, blf_hz: float
+) -> npt.NDArray[np.float64]:
+    """Validates the design (N < B/(2 BLF)) and returns the active subcarriers, Hz."""
+
+def dsp_reply_chips(encoding: str, trext: bool, bits: list[int] | None = None) -> npt.NDArray[np.uint8]:
+    """Gen2 chip levels (one per half BLF period): the preamble, or a whole reply with ``bits``."""
+
+def dsp_calibration(
+    measured: npt.NDArray[np.complex128], reference: npt.NDArray[np.complex128]
+) -> npt.NDArray[np.complex128]:
+    """Correction C (R, F) from measured tag channels (K, R, F) and the reference (R, F)."""

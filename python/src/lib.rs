@@ -1,6 +1,8 @@
 //! Thin PyO3 bindings over `scattertrack-core`: argument conversion and
 //! nothing else. Type stubs: `python/scattertrack/_core.pyi`.
 
+mod dsp;
+
 use nalgebra::Vector3;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::exceptions::{PyKeyError, PyValueError};
@@ -548,6 +550,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Engine>()?;
     m.add_function(wrap_pyfunction!(methods, m)?)?;
     m.add_function(wrap_pyfunction!(default_params, m)?)?;
+    dsp::register(m)?;
     Ok(())
 }
 

@@ -23,6 +23,16 @@ from scattertrack.io.types import (
 from scattertrack.io.reads import read_reads, write_reads
 from scattertrack.io.frames import Frames, make_frames, read_frames, write_frames
 from scattertrack.io.scene import read_scene, write_scene
+from scattertrack.io.sigmf import (
+    Recording,
+    SigmfCalibration,
+    SigmfEstimate,
+    calibrate_sigmf,
+    estimate_sigmf,
+    read_sigmf,
+    read_sigmf_frames,
+    write_sigmf,
+)
 from scattertrack.io.track import read_track, write_track
 from scattertrack.io.truth import read_truth, write_truth
 
@@ -33,20 +43,28 @@ __all__ = [
     "Frames",
     "Reader",
     "Reads",
+    "Recording",
     "Region",
     "Scene",
+    "SigmfCalibration",
+    "SigmfEstimate",
     "SkipReport",
     "Track",
     "Truth",
+    "calibrate_sigmf",
+    "estimate_sigmf",
     "make_frames",
     "read_frames",
     "read_reads",
     "read_scene",
+    "read_sigmf",
+    "read_sigmf_frames",
     "read_track",
     "read_truth",
     "write_frames",
     "write_reads",
     "write_scene",
+    "write_sigmf",
     "write_track",
     "write_truth",
 ]
