@@ -148,19 +148,106 @@ pub struct ReplyEstimate {
     pub counts: Vec<StateCounts>,
 }
 
+/// One antenna's share of a reply (steps 1–3a of
+/// [`ReplyProcessor::process`]): symbol timing, per-symbol FFT and the
+/// smoothed detection feature — the expensive, independent part, so that a
+/// real-time runtime can run one worker per rx antenna (thesis §6) and
+/// leave only the joint preamble search and the tag channel to
+/// [`ReplyProcessor::finish`].
+#[derive(Debug, Clone, Default)]
+pub struct AntennaSymbols {
+    /// `H(f, n)` of every whole symbol.
+    pub channel: ChannelMatrix,
+    /// Running sums of the smoothed detection feature (valid when
+    /// `feature_error` is None).
+    pub sums: FeatureSums,
+    /// First sample of the first whole symbol used.
+    pub first_sample: usize,
+    /// The correlation timing, when it was computed (no known first sample).
+    pub timing: Option<SymbolTiming>,
+    /// Why the antenna has no channel (timing or demodulation failed).
+    pub error: Option<Error>,
+    /// Why the antenna cannot take part in the detection.
+    pub feature_error: Option<Error>,
+}
+
+/// Steps 1–3a for one antenna with its FFT plan and buffers (one per worker).
+pub struct AntennaFront {
+    symbol: KnownSymbol,
+    feature_kind: Feature,
+    demodulator: Demodulator,
+    /// Projection block and smoothing width, symbols (a quarter and an
+    /// eighth of a nominal chip: see [`ReplyProcessor::process`]).
+    block: usize,
+    smoothing: usize,
+    feature: Vec<f64>,
+    smoothed: Vec<f64>,
+}
+
+impl AntennaFront {
+    pub fn new(config: &OfdmConfig, symbol: &KnownSymbol, feature: Feature) -> Result<Self> {
+        config.validate()?;
+        let chip_nominal = config.chip_symbols();
+        Ok(Self {
+            symbol: symbol.clone(),
+            feature_kind: feature,
+            demodulator: Demodulator::new(config, symbol)?,
+            block: ((chip_nominal / 4.0).floor() as usize).max(1),
+            smoothing: ((chip_nominal / 8.0).floor() as usize).max(1),
+            feature: Vec::new(),
+            smoothed: Vec::new(),
+        })
+    }
+
+    /// Processes one antenna's window into `out` (buffers reused). With
+    /// `first_sample` (from [`ReplyProcessor::first_sample`]) the
+    /// correlation timing is skipped: the reference fixes the symbol grid.
+    pub fn process(&mut self, window: &[Complex32], first_sample: Option<usize>, out: &mut AntennaSymbols) {
+        out.error = None;
+        out.feature_error = None;
+        out.timing = None;
+        let first = match first_sample {
+            Some(first) => first,
+            None => match symbol_timing(window, &self.symbol) {
+                Ok(t) => {
+                    out.timing = Some(t);
+                    t.first_sample
+                }
+                Err(e) => {
+                    out.error = Some(e);
+                    out.first_sample = 0;
+                    return;
+                }
+            },
+        };
+        out.first_sample = first;
+        if let Err(e) = self.demodulator.demodulate(window, first, &mut out.channel) {
+            out.error = Some(e);
+            return;
+        }
+        self.feature(out);
+    }
+
+    /// The smoothed detection feature of `out.channel` into `out.sums`.
+    fn feature(&mut self, out: &mut AntennaSymbols) {
+        match self.feature_kind {
+            Feature::CombinedMagnitude => combined_magnitude(&out.channel, &mut self.feature),
+            Feature::Projection => combined_projection(&out.channel, self.block, &mut self.feature),
+        }
+        moving_average(&self.feature, self.smoothing, &mut self.smoothed);
+        out.feature_error = out.sums.reset(&self.smoothed).err();
+    }
+}
+
 /// Processes reply windows of `R` rx antennas with buffers reused across
 /// calls (one per worker).
 pub struct ReplyProcessor {
     config: OfdmConfig,
-    symbol: KnownSymbol,
     options: ReplyOptions,
-    demodulator: Demodulator,
+    front: AntennaFront,
     template: Template,
     timing_reference: Option<Vec<usize>>,
-    channels: Vec<ChannelMatrix>,
-    sums: Vec<FeatureSums>,
-    feature: Vec<f64>,
-    smoothed: Vec<f64>,
+    antennas: Vec<AntennaSymbols>,
     states: Vec<SymbolState>,
 }
 
@@ -170,19 +257,15 @@ impl ReplyProcessor {
     pub fn new(config: OfdmConfig, symbol: KnownSymbol, options: ReplyOptions) -> Result<Self> {
         config.validate()?;
         options.validate()?;
-        let demodulator = Demodulator::new(&config, &symbol)?;
+        let front = AntennaFront::new(&config, &symbol, options.feature)?;
         let template = Template::new(preamble_chips(options.encoding, options.trext)?)?;
         Ok(Self {
             config,
-            symbol,
             options,
-            demodulator,
+            front,
             template,
             timing_reference: None,
-            channels: Vec::new(),
-            sums: Vec::new(),
-            feature: Vec::new(),
-            smoothed: Vec::new(),
+            antennas: Vec::new(),
             states: Vec::new(),
         })
     }
@@ -252,41 +335,59 @@ impl ReplyProcessor {
     /// detection's ([`Error::NoPreamble`], [`Error::TooShort`]).
     pub fn process(&mut self, windows: &[&[Complex32]], tx_phase: Option<usize>) -> Result<ReplyEstimate> {
         let r = windows.len();
-        let n = self.config.subcarriers;
-        let f_count = self.config.active_count();
         if r == 0 {
             return Err(Error::Shape("no rx window given".into()));
         }
+        self.check_reference(r, tx_phase)?;
+        let mut antennas = std::mem::take(&mut self.antennas);
+        antennas.resize_with(r, AntennaSymbols::default);
+        for (a, (window, out)) in windows.iter().zip(antennas.iter_mut()).enumerate() {
+            let first = self.first_sample(a, tx_phase);
+            self.front.process(window, first, out);
+        }
+        let result = self.finish(&mut antennas, tx_phase);
+        self.antennas = antennas;
+        result
+    }
+
+    /// Where antenna `slot`'s first whole symbol starts when the window's
+    /// transmitter phase is `tx_phase` and a timing reference is known:
+    /// `(D_r − tx_phase) mod N`; None (→ correlation timing) otherwise.
+    /// What a per-antenna worker passes to [`AntennaFront::process`].
+    pub fn first_sample(&self, slot: usize, tx_phase: Option<usize>) -> Option<usize> {
+        let n = self.config.subcarriers;
+        match (tx_phase, &self.timing_reference) {
+            (Some(phase), Some(reference)) => reference.get(slot).map(|&d| (d + n - phase % n) % n),
+            _ => None,
+        }
+    }
+
+    fn check_reference(&self, r: usize, tx_phase: Option<usize>) -> Result<()> {
         if let Some(reference) = &self.timing_reference {
             if tx_phase.is_some() && reference.len() != r {
                 return Err(Error::Shape(format!("timing reference has {} antennas, reply has {r}", reference.len())));
             }
         }
-        self.channels.resize_with(r, ChannelMatrix::default);
-        self.sums.resize_with(r, FeatureSums::default);
-        let mut errors: Vec<Option<Error>> = vec![None; r];
-        let mut timings = vec![None; r];
-        let mut first_samples = vec![0usize; r];
+        Ok(())
+    }
 
-        // 1–2: timing and per-symbol FFT.
-        for a in 0..r {
-            let timing = match symbol_timing(windows[a], &self.symbol) {
-                Ok(t) => t,
-                Err(e) => {
-                    errors[a] = Some(e);
-                    continue;
-                }
-            };
-            timings[a] = Some(timing);
-            let first = match (tx_phase, &self.timing_reference) {
-                (Some(phase), Some(reference)) => (reference[a] + n - phase % n) % n,
-                _ => timing.first_sample,
-            };
-            first_samples[a] = first;
-            if let Err(e) = self.demodulator.demodulate(windows[a], first, &mut self.channels[a]) {
-                errors[a] = Some(e);
-            }
+    /// Steps 3 (joint preamble search) to 5 of [`ReplyProcessor::process`]
+    /// on the per-antenna results of [`AntennaFront::process`] (one per rx
+    /// antenna, in order; computed by this processor or by per-antenna
+    /// workers). With `tx_phase` and no timing reference yet, the reference
+    /// is learnt from the antennas' correlation timing when all succeeded.
+    /// The antennas' matrices may be truncated to a common symbol count.
+    pub fn finish(&mut self, antennas: &mut [AntennaSymbols], tx_phase: Option<usize>) -> Result<ReplyEstimate> {
+        let r = antennas.len();
+        let n = self.config.subcarriers;
+        let f_count = self.config.active_count();
+        if r == 0 {
+            return Err(Error::Shape("no rx window given".into()));
         }
+        self.check_reference(r, tx_phase)?;
+        let mut errors: Vec<Option<Error>> = antennas.iter().map(|a| a.error.clone()).collect();
+        let timings: Vec<Option<SymbolTiming>> = antennas.iter().map(|a| a.timing).collect();
+        let first_samples: Vec<usize> = antennas.iter().map(|a| a.first_sample).collect();
         let good: Vec<usize> = (0..r).filter(|&a| errors[a].is_none()).collect();
         if good.is_empty() {
             return Err(errors.into_iter().flatten().next().unwrap_or(Error::Shape("no antenna".into())));
@@ -296,32 +397,26 @@ impl ReplyProcessor {
                 self.timing_reference = Some(first_samples.iter().map(|&m| (m + phase) % n).collect());
             }
         }
-        let symbols = good.iter().map(|&a| self.channels[a].symbols).min().unwrap_or(0);
+        let symbols = good.iter().map(|&a| antennas[a].channel.symbols).min().unwrap_or(0);
         for &a in &good {
-            let h = &mut self.channels[a];
-            h.resize(symbols, f_count); // row-major: keeps the first `symbols` rows
-        }
-
-        // 3: detection features and the joint preamble search.
-        let chip_nominal = self.config.chip_symbols();
-        let block = ((chip_nominal / 4.0).floor() as usize).max(1);
-        let smoothing = ((chip_nominal / 8.0).floor() as usize).max(1);
-        let mut detecting = Vec::with_capacity(good.len());
-        for &a in &good {
-            match self.options.feature {
-                Feature::CombinedMagnitude => combined_magnitude(&self.channels[a], &mut self.feature),
-                Feature::Projection => combined_projection(&self.channels[a], block, &mut self.feature),
-            }
-            moving_average(&self.feature, smoothing, &mut self.smoothed);
-            match self.sums[a].reset(&self.smoothed) {
-                Ok(()) => detecting.push(a),
-                Err(e) => errors[a] = Some(e),
+            if antennas[a].channel.symbols != symbols {
+                // Unequal windows: truncate and recompute the feature on the
+                // common span (row-major: keeps the first `symbols` rows).
+                antennas[a].channel.resize(symbols, f_count);
+                self.front.feature(&mut antennas[a]);
             }
         }
+        for &a in &good {
+            if let Some(e) = &antennas[a].feature_error {
+                errors[a] = Some(e.clone());
+            }
+        }
+        let detecting: Vec<usize> = good.iter().copied().filter(|&a| antennas[a].feature_error.is_none()).collect();
         if detecting.is_empty() {
             return Err(errors.into_iter().flatten().next().unwrap_or(Error::Shape("no antenna".into())));
         }
-        let features: Vec<FeatureSums> = detecting.iter().map(|&a| self.sums[a].clone()).collect();
+        let chip_nominal = self.config.chip_symbols();
+        let features: Vec<FeatureSums> = detecting.iter().map(|&a| antennas[a].sums.clone()).collect();
         let mut detection = detect_preamble(&features, &self.template, chip_nominal, &self.options.detection)?;
 
         // 4: edge elimination and tag channel on the preamble.
@@ -336,8 +431,8 @@ impl ReplyProcessor {
         let mut levels: Vec<Option<u8>> = self.template.levels.iter().map(|&l| Some(l)).collect();
         let mut estimates: Vec<Option<TagChannel>> = vec![None; r];
         for &a in &detecting {
-            symbol_states(&grid, &levels, &self.channels[a].valid, &mut self.states);
-            match tag_channel(&self.channels[a], &self.states) {
+            symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
+            match tag_channel(&antennas[a].channel, &self.states) {
                 Ok(t) => estimates[a] = Some(t),
                 Err(e) => errors[a] = Some(e),
             }
@@ -348,7 +443,7 @@ impl ReplyProcessor {
         if self.options.use_payload && estimates.iter().any(|e| e.is_some()) {
             let limit = self.options.payload_bits * self.options.encoding.chips_per_bit();
             for i in k..k + limit {
-                match self.decide_chip(&grid, i, symbols, &estimates) {
+                match self.decide_chip(antennas, &grid, i, symbols, &estimates) {
                     Some(level) => levels.push(Some(level)),
                     None => break,
                 }
@@ -384,8 +479,8 @@ impl ReplyProcessor {
                     if estimates[a].is_none() {
                         continue;
                     }
-                    symbol_states(&grid, &levels, &self.channels[a].valid, &mut self.states);
-                    match tag_channel(&self.channels[a], &self.states) {
+                    symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
+                    match tag_channel(&antennas[a].channel, &self.states) {
                         Ok(t) => estimates[a] = Some(t),
                         Err(e) => {
                             errors[a] = Some(e);
@@ -409,7 +504,7 @@ impl ReplyProcessor {
             };
             channel[a * f_count..(a + 1) * f_count].copy_from_slice(&t.h);
             variance[a * f_count..(a + 1) * f_count].copy_from_slice(&t.variance);
-            symbol_states(&grid, &levels, &self.channels[a].valid, &mut self.states);
+            symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
             states[a * symbols..(a + 1) * symbols].copy_from_slice(&self.states);
             counts[a] = StateCounts::of(&self.states);
         }
@@ -437,7 +532,14 @@ impl ReplyProcessor {
 
     /// Reads payload chip `i`: `Some(level)` when its clean symbols decide
     /// clearly, `None` to stop (see [`ReplyProcessor::process`], step 5).
-    fn decide_chip(&self, grid: &ChipGrid, i: usize, symbols: usize, estimates: &[Option<TagChannel>]) -> Option<u8> {
+    fn decide_chip(
+        &self,
+        antennas: &[AntennaSymbols],
+        grid: &ChipGrid,
+        i: usize,
+        symbols: usize,
+        estimates: &[Option<TagChannel>],
+    ) -> Option<u8> {
         let end = grid.boundary(i + 1);
         if end > symbols as f64 {
             return None;
@@ -451,7 +553,7 @@ impl ReplyProcessor {
         let (mut numerator, mut denominator) = (0.0, 0.0);
         for (a, estimate) in estimates.iter().enumerate() {
             let Some(t) = estimate else { continue };
-            let h = &self.channels[a];
+            let h = &antennas[a].channel;
             let energy: f64 = t.h.iter().map(|v| v.norm_sqr()).sum();
             for n in (from..to).filter(|&n| h.valid[n]) {
                 let projection: f64 =
