@@ -14,16 +14,28 @@ use std::collections::{BTreeMap, VecDeque};
 use nalgebra::{Complex, Matrix3, Vector3};
 
 use crate::error::{Error, Result};
-use crate::geometry::bistatic_distance;
+use crate::geometry::{bistatic_distance, bistatic_intersections};
 use crate::model::wideband::distance_candidates;
 use crate::scene::{Role, Scene};
 
 use super::bistatic::{tuple_gaussian, usable_subsets, HelperGeometry, Receiver};
 use super::{Estimate, Measurement, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
 
+/// Iterations of the least-squares fit (it stops earlier once converged).
+const MAX_ITERATIONS: usize = 50;
+
 /// Frequencies are pooled per 1 kHz bin.
 fn bin(frequency_hz: f64) -> i64 {
     (frequency_hz / 1e3).round() as i64
+}
+
+/// Why a full window gave no position.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum NoFix {
+    /// Fewer receivers with a usable pooled channel than a fix needs.
+    NoChannel,
+    /// The least-squares fit has no finite solution (singular geometry).
+    NoFit,
 }
 
 /// The RFind-style static localiser.
@@ -87,9 +99,10 @@ impl RFind {
             && frame.rx.iter().all(|&a| a < self.scene.antennas.len() && self.scene.antennas[a].role == Role::Rx)
     }
 
-    /// Localises from the pooled channels; None when too few receivers
-    /// have a usable channel or the loci do not meet.
-    fn localise(&self) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+    /// Localises from the pooled channels: the strongest candidate of each
+    /// receiver, intersected for a starting point, then the weighted
+    /// least-squares fit of every receiver's path length.
+    fn localise(&self) -> std::result::Result<(Vector3<f64>, Matrix3<f64>), NoFix> {
         let mut receivers = Vec::new();
         for &antenna in &self.scene.receivers() {
             let (freqs, h): (Vec<f64>, Vec<Complex<f64>>) = self
@@ -106,43 +119,100 @@ impl RFind {
             }
         }
         if receivers.len() < self.geometry.needed() {
-            return None;
+            return Err(NoFix::NoChannel);
         }
         let indices: Vec<i64> = receivers.iter().map(|r| r.candidates.best as i64).collect();
-        let seed = match &self.scene.region {
+        let near = match &self.scene.region {
             Some(r) => (r.min + r.max) / 2.0,
             None => self.geometry.tx_position + Vector3::new(0.0, 0.0, 1.0),
         };
         let subset_list = usable_subsets(&self.geometry, &receivers);
-        let g = tuple_gaussian(&self.geometry, &receivers, &indices, &subset_list, &seed, self.params.intersection_tolerance_m)?;
-        // Gauss–Newton on every receiver's path length (weighted by σ_w).
-        let mut x = g.mean;
-        let mut covariance = g.covariance;
-        for _ in 0..5 {
+        let tolerance = self.params.intersection_tolerance_m;
+        // Starting point: the centroid of the subsets' intersections. When
+        // the strongest candidates' loci do not all meet — the pooled
+        // channel of a tag that moved during the window is a smear of
+        // paths, and its strongest teeth need not be consistent — the
+        // subsets that do meet, else the region's centre; the fit below
+        // then finds the position that best explains those path lengths.
+        let start = match tuple_gaussian(&self.geometry, &receivers, &indices, &subset_list, &near, tolerance) {
+            Some(g) => g.mean,
+            None => {
+                let points: Vec<Vector3<f64>> = subset_list
+                    .iter()
+                    .filter_map(|subset| {
+                        let positions: Vec<Vector3<f64>> = subset.iter().map(|&j| receivers[j].position).collect();
+                        let distances: Vec<f64> = subset.iter().map(|&j| receivers[j].candidates.distance(indices[j])).collect();
+                        bistatic_intersections(&self.geometry.tx_position, &positions, &distances, self.geometry.plane(), tolerance)
+                            .into_iter()
+                            .min_by(|a, b| (a - near).norm_squared().total_cmp(&(b - near).norm_squared()))
+                    })
+                    .collect();
+                if points.is_empty() {
+                    near
+                } else {
+                    points.iter().sum::<Vector3<f64>>() / points.len() as f64
+                }
+            }
+        };
+        let mut x = start;
+        if self.scene.dimensions == 2 {
+            x.z = self.scene.plane_z;
+        }
+        // Weighted least squares on every receiver's path length (weights
+        // 1/σ_w²): Gauss–Newton, with Levenberg–Marquardt damping only when
+        // a full step does not lower the cost (far starts, inconsistent
+        // path lengths).
+        let fit = |x: &Vector3<f64>| -> (f64, Matrix3<f64>, Vector3<f64>) {
+            let mut cost = 0.0;
             let mut info = Matrix3::zeros();
             let mut gradient = Vector3::zeros();
             for (rx, &n) in receivers.iter().zip(&indices) {
-                let (d, mut j) = bistatic_distance(&x, &self.geometry.tx_position, &rx.position);
+                let (d, mut j) = bistatic_distance(x, &self.geometry.tx_position, &rx.position);
                 if self.scene.dimensions == 2 {
                     j.z = 0.0;
                 }
                 let w = 1.0 / rx.candidates.sigma_m.powi(2);
                 let residual = rx.candidates.distance(n) - d;
+                cost += residual * residual * w;
                 info += j * j.transpose() * w;
                 gradient += j * (residual * w);
             }
             if self.scene.dimensions == 2 {
                 info[(2, 2)] = 1.0;
             }
-            let Some(inverse) = info.try_inverse() else { break };
+            (cost, info, gradient)
+        };
+        let (mut cost, mut info, mut gradient) = fit(&x);
+        let mut damping = 0.0;
+        for _ in 0..MAX_ITERATIONS {
+            let damped = info + Matrix3::identity() * (damping * info.trace() / 3.0);
+            let Some(inverse) = damped.try_inverse() else { break };
             let dx = inverse * gradient;
-            x += dx;
-            covariance = inverse;
+            let (c, i, g) = fit(&(x + dx));
+            if c.is_finite() && c <= cost {
+                x += dx;
+                (cost, info, gradient) = (c, i, g);
+                damping /= 10.0;
+            } else if damping < 1e8 {
+                damping = (damping * 10.0).max(1e-3);
+            } else {
+                break;
+            }
             if dx.norm() < 1e-7 {
                 break;
             }
         }
-        Some((x, covariance))
+        let Some(mut covariance) = info.try_inverse() else { return Err(NoFix::NoFit) };
+        if !(x.iter().all(|v| v.is_finite()) && covariance.iter().all(|v| v.is_finite())) {
+            return Err(NoFix::NoFit);
+        }
+        // Path lengths that no position explains (a smeared window): widen
+        // the reported covariance by the fit's reduced χ² (when above 1).
+        let unknowns = if self.scene.dimensions == 2 { 2 } else { 3 };
+        if receivers.len() > unknowns {
+            covariance *= (cost / (receivers.len() - unknowns) as f64).max(1.0);
+        }
+        Ok((x, covariance))
     }
 
     fn step_frame(&mut self, frame: &WidebandFrame) -> Option<Estimate> {
@@ -168,7 +238,18 @@ impl RFind {
             self.stats.initialising += 1;
             return None;
         }
-        let (mut x, p) = self.localise()?;
+        let (mut x, p) = match self.localise() {
+            Ok(fix) => fix,
+            Err(reason) => {
+                // Declined, and counted: too few receivers with a usable
+                // pooled channel (`invalid`), or no finite fit (`outliers`).
+                match reason {
+                    NoFix::NoChannel => self.stats.invalid += 1,
+                    NoFix::NoFit => self.stats.outliers += 1,
+                }
+                return None;
+            }
+        };
         if self.scene.dimensions == 2 {
             x.z = self.scene.plane_z;
         }
