@@ -2,10 +2,11 @@
 
 Subcommands::
 
-    scattertrack simulate --scenario NAME|FILE --out DIR [--seed N] [--duration S] [--pipeline glac|turbotrack]
+    scattertrack simulate --scenario NAME|FILE --out DIR [--seed N] [--duration S] [--pipeline glac|turbotrack] [--iq]
     scattertrack scenarios
     scattertrack methods
-    scattertrack track --scene S --reads R [--method glac] --out T [--param name=value ...]
+    scattertrack track --scene S --reads R|--frames F|--sigmf R [--calibration C] [--method glac] --out T [--param name=value ...]
+    scattertrack stream --scene S --sigmf R [--calibration C] [--method turbotrack] --out T [--speed X | --fast]
     scattertrack eval --truth T --track K [--out DIR] [--json FILE] [--threshold-m 0.02]
     scattertrack demo [--out DIR] [--scenario NAME] [--seed N]
 
@@ -236,6 +237,8 @@ def simulate_and_write(args):
 
 
 def command_simulate(args) -> int:
+    if getattr(args, "iq", False):
+        return simulate_iq_and_write(args)
     simulation, out = simulate_and_write(args)
     if simulation.frames is not None:
         return report_frames(simulation, out, args)
@@ -245,6 +248,28 @@ def command_simulate(args) -> int:
     say(f"wrote {out}: scene.toml, reads.csv, truth.csv, simulation.json")
     say(f"  scenario {simulation.scenario.get('name', args.scenario)}, seed {simulation.seed}, {duration:g} s")
     say(f"  {plural(len(reads), 'read')} of {plural(len(tags), 'tag')}: {read_rates(len(reads), len(tags), duration)}")
+    return 0
+
+
+def simulate_iq_and_write(args) -> int:
+    """``simulate --iq``: the helper's raw IQ (SigMF) for a turbotrack scenario."""
+    from scattertrack import sim
+
+    scenario = sim.load_scenario(args.scenario)
+    declared = scenario.get("pipeline", "glac")
+    if declared != "turbotrack" or (args.pipeline not in (None, "turbotrack")):
+        raise UsageError(f"--iq simulates the localization helper: scenario {args.scenario} is for the {declared} pipeline")
+    if args.duration is not None and not args.duration > 0:
+        raise UsageError(f"--duration must be > 0, got {args.duration}")
+    simulation = sim.simulate_iq_scenario(scenario, seed=args.seed, duration_s=args.duration)
+    out = sim.write_iq_simulation(simulation, args.out)
+    replies = len(simulation.recording.meta["captures"])
+    duration = sim.iq.IQ_DEFAULT_DURATION_S if args.duration is None else args.duration
+    size = sum(f.stat().st_size for f in Path(out).glob("*.sigmf-data"))
+    say(f"wrote {out}: recording.sigmf-meta/-data, calibration.sigmf-meta/-data, scene.toml, truth.csv, simulation.json")
+    say(f"  scenario {scenario.get('name', args.scenario)} (turbotrack, IQ), seed {simulation.seed}, {duration:g} s")
+    say(f"  {plural(replies, 'reply window')}, {size / 1e6:.1f} MB of samples; "
+        f"track with: scattertrack stream --scene {out}/scene.toml --sigmf {out}/recording.sigmf-meta --out TRACK.csv")
     return 0
 
 
@@ -343,7 +368,8 @@ def track_frames(args, scene, params: dict) -> int:
     if args.sigmf:
         from scattertrack.io import sigmf
 
-        frames = sigmf.read_sigmf_frames(args.sigmf, scene)
+        calibration = calibration_for(args)
+        frames = sigmf.read_sigmf_frames(args.sigmf, scene, calibration)
         source = args.sigmf
     else:
         frames = io.read_frames(args.frames, scene)
@@ -373,6 +399,64 @@ def track_frames(args, scene, params: dict) -> int:
             f"{format_nanoseconds(q.get('p99', 0))} p99, {format_nanoseconds(max_ns)} max per frame"
         )
     say(line)
+    return 0
+
+
+def calibration_for(args) -> Path:
+    """The calibration recording of ``--sigmf``: ``--calibration``, else a
+    ``calibration.sigmf-meta`` beside the recording (as ``simulate --iq``
+    writes it); without either a UsageError (uncalibrated channels carry the
+    hardware response, which no tracker can use)."""
+    if getattr(args, "calibration", None):
+        return Path(args.calibration)
+    beside = Path(args.sigmf).with_name("calibration.sigmf-meta")
+    if beside.is_file() and beside.resolve() != Path(args.sigmf).resolve():
+        say(f"  calibration: {beside}")
+        return beside
+    raise UsageError("give --calibration: a recording of a tag at rest at a known position (SigMF)")
+
+
+def command_stream(args) -> int:
+    """``stream``: a helper recording through the real-time runtime."""
+    from scattertrack import io
+    from scattertrack import track as tracking
+    from scattertrack.track.stream import stream_sigmf
+
+    scene = io.read_scene(args.scene)
+    params = dict(args.param or [])
+    if args.method not in tracking.WIDEBAND_METHODS:
+        raise UsageError(f"stream runs the localization-helper methods ({', '.join(tracking.WIDEBAND_METHODS)}), not '{args.method}'")
+    check_parameters(args.method, scene, params)
+    if args.speed is not None and not args.speed > 0:
+        raise UsageError(f"--speed must be > 0, got {args.speed}")
+    if args.workers_per_antenna < 1:
+        raise UsageError(f"--workers-per-antenna must be >= 1, got {args.workers_per_antenna}")
+    calibration = calibration_for(args)
+    speed = None if args.fast else (1.0 if args.speed is None else args.speed)
+    result = stream_sigmf(
+        args.sigmf, scene, calibration, args.method, speed=speed,
+        workers_per_antenna=args.workers_per_antenna, ema_alpha=args.ema_alpha, **params,
+    )
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    io.write_track(out, result.track)
+    pacing = "as fast as possible" if speed is None else f"{speed:g} x the recording's timing"
+    say(f"streamed {plural(result.replies, 'reply')} from {args.sigmf} ({pacing}), {args.method}: "
+        f"wrote {plural(len(result.track), 'row')} to {out}")
+    say(f"  {result.track.skipped.summary()}")
+    q = result.latency_percentile_ns
+    say(f"  throughput: {result.frames_per_s:,.0f} frames/s ({format_duration(result.wall_s)} wall clock)")
+    say(f"  latency, reply arrival to position: p50 {format_nanoseconds(q(0.5))}, p90 {format_nanoseconds(q(0.9))}, "
+        f"p99 {format_nanoseconds(q(0.99))}, max {format_nanoseconds(q(1.0))}")
+    if result.stage_ns.size:
+        import numpy as np
+
+        p50 = np.percentile(result.stage_ns, 50, axis=0)
+        p99 = np.percentile(result.stage_ns, 99, axis=0)
+        parts = ", ".join(
+            f"{name} {format_nanoseconds(lo)}/{format_nanoseconds(hi)}" for name, lo, hi in zip(result.stages, p50, p99)
+        )
+        say(f"  where it went, p50/p99: {parts}")
     return 0
 
 
@@ -496,6 +580,12 @@ def build_parser() -> argparse.ArgumentParser:
         default=None,
         help="check that the scenario is for this pipeline (default: the scenario's own)",
     )
+    simulate.add_argument(
+        "--iq",
+        action="store_true",
+        help="turbotrack scenarios: write the helper's raw IQ as SigMF (recording + calibration) instead of "
+        "frames.csv (default duration 1 s: IQ is about 144 MB per second)",
+    )
     simulate.set_defaults(run=command_simulate)
 
     scenarios = commands.add_parser("scenarios", help="list the named simulation scenarios and their pipeline")
@@ -516,6 +606,10 @@ def build_parser() -> argparse.ArgumentParser:
     source.add_argument("--reads", help="reads.csv (COTS reader methods: glac...)")
     source.add_argument("--frames", help="frames.csv (localization-helper methods: turbotrack...)")
     source.add_argument("--sigmf", help="a SigMF IQ recording of the helper (.sigmf-meta), turned into frames first")
+    track.add_argument(
+        "--calibration",
+        help="with --sigmf: the calibration recording (default: calibration.sigmf-meta beside the recording)",
+    )
     track.add_argument("--method", default="glac", help="tracking method (see 'scattertrack methods'; default glac)")
     track.add_argument("--out", required=True, help="track.csv to write")
     track.add_argument(
@@ -527,6 +621,26 @@ def build_parser() -> argparse.ArgumentParser:
     )
     track.add_argument("--no-progress", action="store_true", help="no progress bar")
     track.set_defaults(run=command_track)
+
+    stream = commands.add_parser(
+        "stream",
+        help="run a helper's SigMF recording through the real-time runtime, with per-reply latency",
+        description="Stream a SigMF recording of the localization helper through the multi-threaded runtime "
+        "(capture -> per-antenna DSP workers -> fusion -> tracker) at the recording's speed or as fast as "
+        "possible; write track.csv and print throughput and the latency from each reply's arrival to its position.",
+    )
+    stream.add_argument("--scene", required=True, help="scene.toml (a helper scene)")
+    stream.add_argument("--sigmf", required=True, help="the recording (.sigmf-meta)")
+    stream.add_argument("--calibration", help="calibration recording (default: calibration.sigmf-meta beside it)")
+    stream.add_argument("--method", default="turbotrack", help="tracking method (default turbotrack)")
+    stream.add_argument("--out", required=True, help="track.csv to write")
+    pace = stream.add_mutually_exclusive_group()
+    pace.add_argument("--speed", type=float, help="replay at this multiple of the recorded timing (default 1: live)")
+    pace.add_argument("--fast", action="store_true", help="as fast as possible (throughput; latency then includes queueing)")
+    stream.add_argument("--workers-per-antenna", type=int, default=1, help="DSP worker threads per receive antenna (default 1)")
+    stream.add_argument("--ema-alpha", type=float, help="EMA factor across each tag's channels (default: off)")
+    stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
+    stream.set_defaults(run=command_stream)
 
     evaluate = commands.add_parser(
         "eval",

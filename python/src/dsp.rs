@@ -34,7 +34,7 @@ fn dsp_error(e: Error) -> PyErr {
 /// One reply's processing for all rx antennas (`reply::ReplyProcessor`).
 #[pyclass(module = "scattertrack._core")]
 pub struct OfdmDsp {
-    inner: ReplyProcessor,
+    pub(crate) inner: ReplyProcessor,
 }
 
 #[pymethods]

@@ -4,7 +4,7 @@
 mod dsp;
 
 use nalgebra::Vector3;
-use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::exceptions::{PyKeyError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -437,6 +437,117 @@ impl Engine {
             c
         });
         columns.into_dict(py)
+    }
+
+    /// Streams helper IQ through the real-time runtime (`scattertrack-runtime`):
+    /// capture → per-antenna DSP workers → fusion (joint detection, tag
+    /// channel, calibration, EMA) → this engine, with every reply's
+    /// latency from arrival to output.
+    ///
+    /// `windows` (K, R, S) complex64: reply k's window on rx slot r;
+    /// `tag` (K,), `time_s` (K,) (s), `tx_phase` (K,) (the window's first
+    /// transmitter sample mod N, −1 unknown); `dsp` the helper design and
+    /// options; `tx` and `rx` (R) antenna indices in this engine's scene;
+    /// `timing_reference` (R) per-rx D_r; `correction` (R, F) complex128;
+    /// `speed` None: as fast as possible, else × the recording's timing.
+    /// Returns the columns of `run` plus `latency_ns`, `receivers` (per
+    /// reply), `stage_ns` (K, 5; `stages` names the columns),
+    /// `wall_s`, `declined` {reason: count}, `no_channel`.
+    #[pyo3(signature = (windows, tag, time_s, tx_phase, dsp, tx, rx, timing_reference=None, correction=None,
+        ema_alpha=None, workers_per_antenna=2, queue_depth=64, speed=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn run_stream<'py>(
+        &mut self,
+        py: Python<'py>,
+        windows: PyReadonlyArray3<num_complex::Complex32>,
+        tag: PyReadonlyArray1<i64>,
+        time_s: PyReadonlyArray1<f64>,
+        tx_phase: PyReadonlyArray1<i64>,
+        dsp: PyRef<'py, dsp::OfdmDsp>,
+        tx: usize,
+        rx: Vec<usize>,
+        timing_reference: Option<Vec<usize>>,
+        correction: Option<PyReadonlyArray2<num_complex::Complex64>>,
+        ema_alpha: Option<f64>,
+        workers_per_antenna: usize,
+        queue_depth: usize,
+        speed: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use scattertrack_runtime::dsp::DspSetup;
+        use scattertrack_runtime::{Pacing, Reply, RuntimeConfig};
+        let array = windows.as_array();
+        let (k, r, _) = array.dim();
+        let (tag, t, phase) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx_phase.as_array().to_vec());
+        if tag.len() != k || t.len() != k || phase.len() != k {
+            return Err(value_error("tag, time_s and tx_phase need one entry per reply (windows' first axis)"));
+        }
+        if rx.len() != r {
+            return Err(value_error(format!("{} rx antennas for windows of {r} rx", rx.len())));
+        }
+        if tag.iter().any(|&x| x < 0) {
+            return Err(value_error("tag indices must be non-negative"));
+        }
+        if let Some(bad) = rx.iter().chain(std::iter::once(&tx)).find(|&&x| x >= self.antennas) {
+            return Err(value_error(format!("antenna index {bad} out of range")));
+        }
+        if let Some(s) = speed {
+            if !(s > 0.0 && s.is_finite()) {
+                return Err(value_error(format!("speed must be > 0, got {s}")));
+            }
+        }
+        let processor = &dsp.inner;
+        let setup = DspSetup {
+            config: processor.config().clone(),
+            symbol: processor.symbol().clone(),
+            options: processor.options().clone(),
+            timing_reference,
+            correction: correction.map(|c| c.as_array().iter().copied().collect()),
+            ema_alpha,
+        };
+        setup.validate(r).map_err(|e| value_error(e.to_string()))?;
+        let mut fusion = setup.fusion().map_err(|e| value_error(e.to_string()))?;
+        let config = RuntimeConfig {
+            workers_per_antenna,
+            queue_depth,
+            pacing: speed.map_or(Pacing::AsFastAsPossible, |speed| Pacing::Recorded { speed }),
+            tx,
+            rx,
+            frequencies_hz: setup.config.subcarrier_frequencies(),
+        };
+        let replies: Vec<Reply> = (0..k)
+            .map(|i| Reply {
+                tag: tag[i] as usize,
+                time_s: t[i],
+                tx_phase: (phase[i] >= 0).then_some(phase[i] as usize),
+                windows: (0..r).map(|a| array.slice(numpy::ndarray::s![i, a, ..]).to_vec()).collect(),
+            })
+            .collect();
+        let inner = &mut self.inner;
+        let report = py.detach(move || {
+            scattertrack_runtime::run(replies, |slot| setup.worker(slot).expect("validated"), &mut fusion, inner, &config)
+        });
+        let mut c = Columns::default();
+        for o in &report.outputs {
+            if let Some(e) = &o.estimate {
+                c.push(o.index as usize, e);
+            }
+        }
+        let d = c.into_dict(py)?;
+        let latency: Vec<u64> = report.outputs.iter().map(|o| o.latency_ns).collect();
+        let receivers: Vec<i64> = report.outputs.iter().map(|o| o.receivers as i64).collect();
+        let stages: Vec<u64> = report.stage_ns.iter().flat_map(|s| s.iter().copied()).collect();
+        d.set_item("latency_ns", latency.into_pyarray(py))?;
+        d.set_item("receivers", receivers.into_pyarray(py))?;
+        d.set_item("stage_ns", stages.into_pyarray(py).reshape([report.stage_ns.len(), 5]).map_err(value_error)?)?;
+        d.set_item("stages", scattertrack_runtime::STAGES.to_vec())?;
+        d.set_item("wall_s", report.wall_s)?;
+        d.set_item("no_channel", report.no_channel)?;
+        let declined = PyDict::new(py);
+        for (reason, count) in &report.declined {
+            declined.set_item(reason, count)?;
+        }
+        d.set_item("declined", declined)?;
+        Ok(d)
     }
 
     /// Smoothed (backtracked MAP) trajectory of tag `tag`: (time_s, position) pairs.

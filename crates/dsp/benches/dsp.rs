@@ -28,7 +28,7 @@ use scattertrack_dsp::detect::{
 };
 use scattertrack_dsp::estimate::{symbol_states, tag_channel, ChipGrid};
 use scattertrack_dsp::ofdm::{symbol_timing, ChannelMatrix, Demodulator};
-use scattertrack_dsp::reply::{ReplyOptions, ReplyProcessor};
+use scattertrack_dsp::reply::{AntennaFront, AntennaSymbols, ReplyOptions, ReplyProcessor};
 
 fn bench(c: &mut Criterion) {
     let reply = Reply::paper(1);
@@ -84,6 +84,24 @@ fn bench(c: &mut Criterion) {
     let mut states = Vec::new();
     symbol_states(&grid, &levels, &h.valid, &mut states);
     group.bench_function("tag_channel", |b| b.iter(|| black_box(tag_channel(black_box(&h), &states).unwrap())));
+
+    // The runtime's split: one antenna's front with the symbol grid known
+    // (a worker's job), and the joint finish over 4 antennas (fusion).
+    let options = ReplyOptions::default();
+    let mut processor = ReplyProcessor::new(reply.config.clone(), reply.symbol.clone(), options.clone()).unwrap();
+    processor.process(&refs, Some(7)).unwrap(); // learns the timing reference
+    let mut front = AntennaFront::new(&reply.config, &reply.symbol, options.feature).unwrap();
+    let mut one = AntennaSymbols::default();
+    let first = processor.first_sample(0, Some(7));
+    group.bench_function("front_known_grid", |b| b.iter(|| front.process(black_box(refs[0]), first, &mut one)));
+    let mut antennas: Vec<AntennaSymbols> = (0..refs.len())
+        .map(|a| {
+            let mut out = AntennaSymbols::default();
+            front.process(refs[a], processor.first_sample(a, Some(7)), &mut out);
+            out
+        })
+        .collect();
+    group.bench_function("finish_4rx", |b| b.iter(|| black_box(processor.finish(&mut antennas, Some(7)).unwrap())));
     group.finish();
 }
 

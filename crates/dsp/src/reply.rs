@@ -8,11 +8,11 @@ use num_complex::{Complex32, Complex64};
 
 use crate::backscatter::{preamble_chips, Encoding};
 use crate::detect::{
-    combined_magnitude, combined_projection, detect_preamble, moving_average, refine_detection, Detection, DetectionOptions, Feature,
+    combined_magnitude, combined_projection_from_sums, detect_preamble, moving_average, refine_detection, Detection, DetectionOptions, Feature,
     FeatureSums, Template,
 };
 use crate::error::{Error, Result};
-use crate::estimate::{symbol_states, tag_channel, ChipGrid, SymbolState, TagChannel};
+use crate::estimate::{symbol_states, tag_channel_from_sums, ChipGrid, SymbolState, SymbolSums, TagChannel};
 use crate::ofdm::{symbol_timing, ChannelMatrix, Demodulator, KnownSymbol, OfdmConfig, SymbolTiming};
 
 /// How replies are detected and which symbols are used.
@@ -158,6 +158,9 @@ pub struct ReplyEstimate {
 pub struct AntennaSymbols {
     /// `H(f, n)` of every whole symbol.
     pub channel: ChannelMatrix,
+    /// Prefix sums of `channel` over symbols: the fusion stage sums runs
+    /// of symbols from these, never touching the matrix.
+    pub symbol_sums: SymbolSums,
     /// Running sums of the smoothed detection feature (valid when
     /// `feature_error` is None).
     pub sums: FeatureSums,
@@ -225,6 +228,7 @@ impl AntennaFront {
             out.error = Some(e);
             return;
         }
+        out.symbol_sums.reset(&out.channel);
         self.feature(out);
     }
 
@@ -232,7 +236,9 @@ impl AntennaFront {
     fn feature(&mut self, out: &mut AntennaSymbols) {
         match self.feature_kind {
             Feature::CombinedMagnitude => combined_magnitude(&out.channel, &mut self.feature),
-            Feature::Projection => combined_projection(&out.channel, self.block, &mut self.feature),
+            Feature::Projection => {
+                combined_projection_from_sums(&out.channel, &out.symbol_sums, self.block, &mut self.feature)
+            }
         }
         moving_average(&self.feature, self.smoothing, &mut self.smoothed);
         out.feature_error = out.sums.reset(&self.smoothed).err();
@@ -273,6 +279,11 @@ impl ReplyProcessor {
     /// The OFDM configuration.
     pub fn config(&self) -> &OfdmConfig {
         &self.config
+    }
+
+    /// The known OFDM symbol.
+    pub fn symbol(&self) -> &KnownSymbol {
+        &self.front.symbol
     }
 
     /// The reply options.
@@ -403,6 +414,7 @@ impl ReplyProcessor {
                 // Unequal windows: truncate and recompute the feature on the
                 // common span (row-major: keeps the first `symbols` rows).
                 antennas[a].channel.resize(symbols, f_count);
+                antennas[a].symbol_sums.truncate(symbols);
                 self.front.feature(&mut antennas[a]);
             }
         }
@@ -432,7 +444,7 @@ impl ReplyProcessor {
         let mut estimates: Vec<Option<TagChannel>> = vec![None; r];
         for &a in &detecting {
             symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
-            match tag_channel(&antennas[a].channel, &self.states) {
+            match tag_channel_from_sums(&antennas[a].channel, &antennas[a].symbol_sums, &self.states) {
                 Ok(t) => estimates[a] = Some(t),
                 Err(e) => errors[a] = Some(e),
             }
@@ -480,7 +492,7 @@ impl ReplyProcessor {
                         continue;
                     }
                     symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
-                    match tag_channel(&antennas[a].channel, &self.states) {
+                    match tag_channel_from_sums(&antennas[a].channel, &antennas[a].symbol_sums, &self.states) {
                         Ok(t) => estimates[a] = Some(t),
                         Err(e) => {
                             errors[a] = Some(e);
@@ -551,16 +563,27 @@ impl ReplyProcessor {
         }
         let to = to as usize;
         let (mut numerator, mut denominator) = (0.0, 0.0);
+        let mut interval = Vec::new();
         for (a, estimate) in estimates.iter().enumerate() {
             let Some(t) = estimate else { continue };
-            let h = &antennas[a].channel;
-            let energy: f64 = t.h.iter().map(|v| v.norm_sqr()).sum();
-            for n in (from..to).filter(|&n| h.valid[n]) {
-                let projection: f64 =
-                    h.row(n).iter().zip(&t.midpoint).zip(&t.h).map(|((v, m), d)| ((v - m) * d.conj()).re).sum();
-                numerator += projection;
-                denominator += energy / 2.0;
+            // Σ_n (H_n − m)·d̄ over the chip's clean symbols, from the sums of
+            // x = H − r: Σ x − k (m − r).
+            let sums = &antennas[a].symbol_sums;
+            interval.clear();
+            interval.resize(sums.subcarriers, Complex64::new(0.0, 0.0));
+            let k = sums.add_interval(&antennas[a].channel, from, to, &mut interval, None) as f64;
+            if k == 0.0 {
+                continue;
             }
+            let energy: f64 = t.h.iter().map(|v| v.norm_sqr()).sum();
+            let projection: f64 = interval
+                .iter()
+                .zip(t.midpoint.iter().zip(&sums.reference))
+                .zip(&t.h)
+                .map(|((x, (m, r)), d)| ((x - (m - r) * k) * d.conj()).re)
+                .sum();
+            numerator += projection;
+            denominator += k * energy / 2.0;
         }
         if denominator <= 0.0 {
             return None;

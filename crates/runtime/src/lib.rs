@@ -4,11 +4,13 @@
 //!
 //! ```text
 //!  capture ──► per-antenna queues ──► workers (k per antenna) ──► fusion ──► tracker ──► outputs
-//!  (paced:      one reply window        channel estimation:        all rx of   engine.step
-//!   recorded    per rx antenna          IQ → tag channel h(f)      one reply   per tag
-//!   speed or                            (any `ChannelEstimator`)   → frame,
-//!   as fast as                                                    in reply
-//!   possible)                                                     order
+//!  (paced:      one reply window        timing, FFT per symbol,    joint       engine.step
+//!   recorded    per rx antenna          detection feature          preamble    per tag
+//!   speed or                            (`AntennaWorker`)          search, tag
+//!   as fast as                                                    channel,
+//!   possible)                                                     calibration
+//!                                                                 (`ReplyFusion`),
+//!                                                                 in reply order
 //! ```
 //!
 //! Contract: [`run`] consumes [`Reply`]s (one tag reply: the IQ window of
@@ -16,10 +18,17 @@
 //! reply, in the same order, with the latency from the reply's *arrival*
 //! (the moment capture hands it to the pipeline) to the tracker's output.
 //! Replies whose channel no antenna could estimate are counted, never
-//! dropped silently. The crate knows nothing of Python or file formats;
-//! the DSP sits behind [`ChannelEstimator`] (implemented over
-//! `scattertrack-dsp` by the caller), so the pipeline is tested alone.
+//! dropped silently; replies the fusion declines are counted by reason.
+//! The crate knows nothing of Python or file formats. The stages are
+//! traits ([`AntennaWorker`], [`ReplyFusion`]) so the pipeline is tested
+//! alone with stand-ins; [`dsp`] implements them over `scattertrack-dsp`
+//! (the per-antenna half of the DSP on the workers, the joint half on the
+//! fusion thread).
 
+pub mod dsp;
 mod pipeline;
 
-pub use pipeline::{run, ChannelEstimator, Output, Pacing, Reply, RunReport, RuntimeConfig};
+pub use pipeline::{
+    run, AntennaWorker, ChannelEstimator, Output, Pacing, PassThroughFusion, PerAntenna, Reply, ReplyFusion, ReplyHeader,
+    RunReport, RuntimeConfig, STAGES,
+};

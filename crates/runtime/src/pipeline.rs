@@ -16,16 +16,65 @@ pub struct Reply {
     pub tag: usize,
     /// Reply time on the recording's clock, s (frame time of the output).
     pub time_s: f64,
+    /// Index of the windows' first sample in the transmitter's sample
+    /// stream modulo `N` (tx and rx share one clock), when recorded.
+    pub tx_phase: Option<usize>,
     /// One IQ window per receive antenna, in `RuntimeConfig::rx` order.
     pub windows: Vec<Vec<Complex32>>,
 }
 
-/// Channel estimation for one receive antenna's window of one reply
-/// (the helper's DSP, thesis ch. 4): the calibrated tag channel at
-/// `RuntimeConfig::frequencies_hz`, or None when no reply is detected.
-/// One instance per worker thread (it may keep FFT plans and buffers).
+/// The per-antenna stage (thesis §6: a worker pool per receive antenna):
+/// whatever one antenna's window alone allows — for the helper's DSP the
+/// symbol timing, the per-symbol FFTs and the detection feature, most of
+/// the cost. One instance per worker thread (it may keep FFT plans and
+/// buffers).
+pub trait AntennaWorker: Send {
+    /// What one antenna's window becomes (sent to the fusion stage).
+    type Output: Send;
+    /// Processes antenna `slot`'s window of `reply`.
+    fn process(&mut self, slot: usize, reply: &Reply) -> Self::Output;
+}
+
+/// The joint stage, on the fusion thread: the per-antenna outputs of one
+/// reply (in slot order) → the calibrated tag channel of each receive
+/// antenna at `RuntimeConfig::frequencies_hz` (None where it could not be
+/// estimated), or the reason the whole reply is declined (counted).
+pub trait ReplyFusion<T> {
+    fn fuse(&mut self, reply: &ReplyHeader, antennas: Vec<T>) -> Result<Vec<Option<Vec<Complex64>>>, String>;
+}
+
+/// What fusion knows of a reply besides its antennas' outputs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReplyHeader {
+    pub index: u64,
+    pub tag: usize,
+    pub time_s: f64,
+    pub tx_phase: Option<usize>,
+}
+
+/// Channel estimation antenna by antenna, nothing joint: each worker
+/// returns its antenna's channel and fusion passes them through.
 pub trait ChannelEstimator: Send {
     fn estimate(&mut self, rx_slot: usize, window: &[Complex32]) -> Option<Vec<Complex64>>;
+}
+
+/// Adapts a [`ChannelEstimator`] to an [`AntennaWorker`].
+pub struct PerAntenna<E>(pub E);
+
+impl<E: ChannelEstimator> AntennaWorker for PerAntenna<E> {
+    type Output = Option<Vec<Complex64>>;
+    fn process(&mut self, slot: usize, reply: &Reply) -> Self::Output {
+        self.0.estimate(slot, &reply.windows[slot])
+    }
+}
+
+/// The fusion of independent per-antenna channels: passes them through.
+pub struct PassThroughFusion;
+
+impl ReplyFusion<Option<Vec<Complex64>>> for PassThroughFusion {
+    fn fuse(&mut self, _reply: &ReplyHeader, antennas: Vec<Option<Vec<Complex64>>>) -> Result<Vec<Option<Vec<Complex64>>>, String> {
+        Ok(antennas)
+    }
 }
 
 /// How fast capture hands replies to the pipeline.
@@ -83,6 +132,15 @@ pub struct RunReport {
     /// Replies where no receive antenna detected the tag (counted, passed
     /// to no tracker).
     pub no_channel: u64,
+    /// Replies the fusion stage declined, by reason (counted, passed to no
+    /// tracker; also in `no_channel`).
+    pub declined: BTreeMap<String, u64>,
+    /// Where each reply's latency went, ns (capture order), see [`STAGES`]:
+    /// arrival → the last antenna worker starting it (queueing and thread
+    /// wake-up), the slowest worker's processing, the last worker's result
+    /// → fusion starting it (hand-off, waiting for earlier replies), fusion,
+    /// tracker.
+    pub stage_ns: Vec<[u64; 5]>,
 }
 
 impl RunReport {
@@ -97,14 +155,26 @@ impl RunReport {
 
     /// The `q`-quantile (0–1) of the per-reply latency, ns (nearest rank).
     pub fn latency_percentile_ns(&self, q: f64) -> f64 {
-        let mut l: Vec<u64> = self.outputs.iter().map(|o| o.latency_ns).collect();
-        if l.is_empty() {
-            return 0.0;
-        }
-        l.sort_unstable();
-        let rank = ((q.clamp(0.0, 1.0) * l.len() as f64).ceil() as usize).clamp(1, l.len());
-        l[rank - 1] as f64
+        percentile(self.outputs.iter().map(|o| o.latency_ns).collect(), q)
     }
+
+    /// The `q`-quantile of stage `stage` (an index into [`STAGES`]), ns.
+    pub fn stage_percentile_ns(&self, stage: usize, q: f64) -> f64 {
+        percentile(self.stage_ns.iter().map(|s| s[stage.min(STAGES.len() - 1)]).collect(), q)
+    }
+}
+
+/// The parts of a reply's latency in [`RunReport::stage_ns`].
+pub const STAGES: [&str; 5] = ["dispatch", "antenna", "hand-off", "fusion", "tracker"];
+
+/// Nearest-rank quantile of `values` (0 when empty).
+fn percentile(mut values: Vec<u64>, q: f64) -> f64 {
+    if values.is_empty() {
+        return 0.0;
+    }
+    values.sort_unstable();
+    let rank = ((q.clamp(0.0, 1.0) * values.len() as f64).ceil() as usize).clamp(1, values.len());
+    values[rank - 1] as f64
 }
 
 struct Job {
@@ -113,33 +183,53 @@ struct Job {
     reply: Arc<Reply>,
 }
 
-enum Event {
+enum Event<T> {
     /// Capture announces a reply (so fusion knows how many results to await).
-    Arrived { index: u64, tag: usize, time_s: f64, arrival: Instant },
-    /// A worker's channel estimate for one antenna.
-    Estimated { index: u64, slot: usize, channel: Option<Vec<Complex64>> },
+    Arrived { header: ReplyHeader, arrival: Instant },
+    /// A worker's output for one antenna: when it started and finished.
+    Processed { index: u64, slot: usize, output: T, started: Instant, finished: Instant },
 }
 
-struct Pending {
-    tag: usize,
-    time_s: f64,
+struct Pending<T> {
+    header: Option<ReplyHeader>,
     arrival: Option<Instant>,
-    channels: Vec<Option<Vec<Complex64>>>,
+    outputs: Vec<Option<T>>,
     done: usize,
+    /// Latest worker start, longest worker run, latest worker finish.
+    last_start: Option<Instant>,
+    busy_ns: u64,
+    last_finish: Option<Instant>,
 }
 
-/// Runs the pipeline over `replies` with one estimator per worker (from
-/// `make_estimator`, called with the antenna slot) and the tracker(s) in
-/// `engine`; returns when every reply has an output.
-pub fn run<I, F>(replies: I, make_estimator: F, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
+impl<T> Pending<T> {
+    fn new(antennas: usize) -> Self {
+        Self {
+            header: None,
+            arrival: None,
+            outputs: (0..antennas).map(|_| None).collect(),
+            done: 0,
+            last_start: None,
+            busy_ns: 0,
+            last_finish: None,
+        }
+    }
+}
+
+/// Runs the pipeline over `replies` with one worker per thread (from
+/// `make_worker`, called with the antenna slot; `workers_per_antenna` per
+/// antenna), `fusion` and the tracker(s) in `engine` on the calling
+/// thread; returns when every reply has an output.
+pub fn run<I, W, F, U>(replies: I, make_worker: F, fusion: &mut U, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
 where
     I: IntoIterator<Item = Reply>,
     I::IntoIter: Send,
-    F: Fn(usize) -> Box<dyn ChannelEstimator>,
+    W: AntennaWorker,
+    F: Fn(usize) -> W,
+    U: ReplyFusion<W::Output>,
 {
     let antennas = config.rx.len();
     let workers = config.workers_per_antenna.max(1);
-    let (events_tx, events_rx) = channel::<Event>();
+    let (events_tx, events_rx) = channel::<Event<W::Output>>();
     let mut queues: Vec<std::sync::mpsc::SyncSender<Job>> = Vec::with_capacity(antennas);
     let mut worker_inputs: Vec<Arc<Mutex<Receiver<Job>>>> = Vec::with_capacity(antennas);
     for _ in 0..antennas {
@@ -147,14 +237,13 @@ where
         queues.push(q_tx);
         worker_inputs.push(Arc::new(Mutex::new(q_rx)));
     }
-    let estimators: Vec<Vec<Box<dyn ChannelEstimator>>> =
-        (0..antennas).map(|slot| (0..workers).map(|_| make_estimator(slot)).collect()).collect();
+    let pools: Vec<Vec<W>> = (0..antennas).map(|slot| (0..workers).map(|_| make_worker(slot)).collect()).collect();
     let replies = replies.into_iter();
     let pacing = config.pacing;
     std::thread::scope(|scope| {
         // Workers: k per antenna, each pulling from its antenna's queue.
-        for (slot, pool) in estimators.into_iter().enumerate() {
-            for mut estimator in pool {
+        for (slot, pool) in pools.into_iter().enumerate() {
+            for mut worker in pool {
                 let input = Arc::clone(&worker_inputs[slot]);
                 let events = events_tx.clone();
                 scope.spawn(move || loop {
@@ -163,8 +252,10 @@ where
                         guard.recv()
                     };
                     let Ok(job) = job else { break };
-                    let channel = estimator.estimate(job.slot, &job.reply.windows[job.slot]);
-                    if events.send(Event::Estimated { index: job.index, slot: job.slot, channel }).is_err() {
+                    let started = Instant::now();
+                    let output = worker.process(job.slot, &job.reply);
+                    let finished = Instant::now();
+                    if events.send(Event::Processed { index: job.index, slot: job.slot, output, started, finished }).is_err() {
                         break;
                     }
                 });
@@ -175,11 +266,16 @@ where
         let capture_events = events_tx.clone();
         scope.spawn(move || capture(replies, queues, capture_events, pacing));
         drop(events_tx);
-        fuse_and_track(events_rx, engine, config)
+        fuse_and_track(events_rx, fusion, engine, config)
     })
 }
 
-fn capture<I: Iterator<Item = Reply>>(replies: I, queues: Vec<std::sync::mpsc::SyncSender<Job>>, events: Sender<Event>, pacing: Pacing) {
+fn capture<I: Iterator<Item = Reply>, T>(
+    replies: I,
+    queues: Vec<std::sync::mpsc::SyncSender<Job>>,
+    events: Sender<Event<T>>,
+    pacing: Pacing,
+) {
     let start = Instant::now();
     let mut first_time: Option<f64> = None;
     for (index, reply) in replies.enumerate() {
@@ -194,7 +290,8 @@ fn capture<I: Iterator<Item = Reply>>(replies: I, queues: Vec<std::sync::mpsc::S
         }
         let reply = Arc::new(reply);
         let arrival = Instant::now();
-        if events.send(Event::Arrived { index, tag: reply.tag, time_s: reply.time_s, arrival }).is_err() {
+        let header = ReplyHeader { index, tag: reply.tag, time_s: reply.time_s, tx_phase: reply.tx_phase };
+        if events.send(Event::Arrived { header, arrival }).is_err() {
             return;
         }
         for (slot, queue) in queues.iter().enumerate() {
@@ -205,72 +302,87 @@ fn capture<I: Iterator<Item = Reply>>(replies: I, queues: Vec<std::sync::mpsc::S
     }
 }
 
-/// Collects every antenna's estimate of a reply, releases replies in
+/// Collects every antenna's output of a reply, releases replies in
 /// capture order (the tracker is causal: frames must arrive in time order),
-/// steps the engine and stamps the latency.
-fn fuse_and_track(events: Receiver<Event>, engine: &mut Engine, config: &RuntimeConfig) -> RunReport {
+/// fuses them, steps the engine and stamps the latency.
+fn fuse_and_track<T, U: ReplyFusion<T>>(
+    events: Receiver<Event<T>>,
+    fusion: &mut U,
+    engine: &mut Engine,
+    config: &RuntimeConfig,
+) -> RunReport {
     let antennas = config.rx.len();
-    let mut pending: BTreeMap<u64, Pending> = BTreeMap::new();
+    let f_count = config.frequencies_hz.len();
+    let mut pending: BTreeMap<u64, Pending<T>> = BTreeMap::new();
     let mut next: u64 = 0;
     let mut report = RunReport::default();
     let mut first_arrival: Option<Instant> = None;
     for event in events {
         match event {
-            Event::Arrived { index, tag, time_s, arrival } => {
+            Event::Arrived { header, arrival } => {
                 first_arrival.get_or_insert(arrival);
-                let p = pending.entry(index).or_insert_with(|| Pending {
-                    tag,
-                    time_s,
-                    arrival: None,
-                    channels: vec![None; antennas],
-                    done: 0,
-                });
-                p.tag = tag;
-                p.time_s = time_s;
+                let p = pending.entry(header.index).or_insert_with(|| Pending::new(antennas));
+                p.header = Some(header);
                 p.arrival = Some(arrival);
             }
-            Event::Estimated { index, slot, channel } => {
-                let p = pending.entry(index).or_insert_with(|| Pending {
-                    tag: 0,
-                    time_s: f64::NAN,
-                    arrival: None,
-                    channels: vec![None; antennas],
-                    done: 0,
-                });
-                p.channels[slot] = channel;
+            Event::Processed { index, slot, output, started, finished } => {
+                let p = pending.entry(index).or_insert_with(|| Pending::new(antennas));
+                p.outputs[slot] = Some(output);
                 p.done += 1;
+                p.last_start = Some(p.last_start.map_or(started, |t| t.max(started)));
+                p.last_finish = Some(p.last_finish.map_or(finished, |t| t.max(finished)));
+                p.busy_ns = p.busy_ns.max(finished.duration_since(started).as_nanos() as u64);
             }
         }
         // Release every complete reply at the head, in order.
         while pending.get(&next).is_some_and(|p| p.done == antennas && p.arrival.is_some()) {
             let p = pending.remove(&next).expect("present");
+            let header = p.header.expect("arrived");
+            let outputs: Vec<T> = p.outputs.into_iter().map(|o| o.expect("every slot done")).collect();
+            let fusion_start = Instant::now();
+            let arrival = p.arrival.expect("checked");
+            let since = |later: Option<Instant>, earlier: Instant| {
+                later.map_or(0, |t| t.saturating_duration_since(earlier).as_nanos() as u64)
+            };
+            let dispatch_ns = since(p.last_start, arrival);
+            let handoff_ns = p.last_finish.map_or(0, |t| fusion_start.saturating_duration_since(t).as_nanos() as u64);
+            let fused = fusion.fuse(&header, outputs);
+            let fusion_ns = fusion_start.elapsed().as_nanos() as u64;
             let mut rx = Vec::with_capacity(antennas);
-            let mut h = Vec::with_capacity(antennas * config.frequencies_hz.len());
-            for (slot, channel) in p.channels.into_iter().enumerate() {
-                if let Some(c) = channel {
-                    if c.len() == config.frequencies_hz.len() {
-                        rx.push(config.rx[slot]);
-                        h.extend(c.into_iter().map(|v| nalgebra::Complex::new(v.re, v.im)));
+            let mut h = Vec::with_capacity(antennas * f_count);
+            match fused {
+                Ok(channels) => {
+                    for (slot, channel) in channels.into_iter().enumerate().take(antennas) {
+                        if let Some(c) = channel {
+                            if c.len() == f_count && c.iter().all(|v| v.is_finite()) {
+                                rx.push(config.rx[slot]);
+                                h.extend(c.into_iter().map(|v| nalgebra::Complex::new(v.re, v.im)));
+                            }
+                        }
                     }
                 }
+                Err(reason) => *report.declined.entry(reason).or_insert(0) += 1,
             }
             let receivers = rx.len();
+            let track_start = Instant::now();
             let estimate = if receivers == 0 {
                 report.no_channel += 1;
                 None
             } else {
-                let frame = WidebandFrame { time_s: p.time_s, tx: config.tx, rx, frequencies_hz: config.frequencies_hz.clone(), h };
-                engine.step(p.tag, &Measurement::Wideband(frame))
+                let frame =
+                    WidebandFrame { time_s: header.time_s, tx: config.tx, rx, frequencies_hz: config.frequencies_hz.clone(), h };
+                engine.step(header.tag, &Measurement::Wideband(frame))
             };
-            let arrival = p.arrival.expect("checked");
+            let track_ns = track_start.elapsed().as_nanos() as u64;
             report.outputs.push(Output {
                 index: next,
-                tag: p.tag,
-                time_s: p.time_s,
+                tag: header.tag,
+                time_s: header.time_s,
                 estimate,
                 receivers,
                 latency_ns: arrival.elapsed().as_nanos() as u64,
             });
+            report.stage_ns.push([dispatch_ns, p.busy_ns, handoff_ns, fusion_ns, track_ns]);
             next += 1;
         }
     }

@@ -9,7 +9,7 @@ use num_complex::{Complex32, Complex64};
 use scattertrack_core::engine::Engine;
 use scattertrack_core::scene::{Antenna, Region, Role, Scene, SPEED_OF_LIGHT};
 use scattertrack_core::track::Params;
-use scattertrack_runtime::{run, ChannelEstimator, Pacing, Reply, RuntimeConfig};
+use scattertrack_runtime::{run, ChannelEstimator, Pacing, PassThroughFusion, PerAntenna, Reply, RuntimeConfig};
 
 fn scene() -> Scene {
     let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
@@ -51,7 +51,7 @@ fn replies(n: usize) -> (Vec<Reply>, Vec<Vector3<f64>>) {
                     .collect()
             })
             .collect();
-        out.push(Reply { tag: 0, time_s: t, windows });
+        out.push(Reply { tag: 0, time_s: t, tx_phase: None, windows });
         truth.push(p);
     }
     (out, truth)
@@ -76,7 +76,7 @@ fn config() -> RuntimeConfig {
 fn every_reply_comes_out_in_order_with_its_latency() {
     let (input, truth) = replies(300);
     let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
-    let report = run(input, |_| Box::new(PassThrough { delay: Duration::from_micros(50) }), &mut engine, &config());
+    let report = run(input, |_| PerAntenna(PassThrough { delay: Duration::from_micros(50) }), &mut PassThroughFusion, &mut engine, &config());
     assert_eq!(report.outputs.len(), 300);
     assert!(report.outputs.iter().enumerate().all(|(i, o)| o.index == i as u64));
     assert_eq!(report.no_channel, 30, "every 10th reply has no channel on any antenna");
@@ -95,7 +95,7 @@ fn recorded_pacing_takes_the_recording_time() {
     let (input, _) = replies(60); // 0.2 s of replies
     let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
     let cfg = RuntimeConfig { pacing: Pacing::Recorded { speed: 1.0 }, workers_per_antenna: 1, ..config() };
-    let report = run(input, |_| Box::new(PassThrough { delay: Duration::ZERO }), &mut engine, &cfg);
+    let report = run(input, |_| PerAntenna(PassThrough { delay: Duration::ZERO }), &mut PassThroughFusion, &mut engine, &cfg);
     assert_eq!(report.outputs.len(), 60);
     // 59 intervals of 1/300 s: the run cannot be faster than the recording.
     assert!(report.wall_s >= 59.0 / 300.0 * 0.95, "{}", report.wall_s);

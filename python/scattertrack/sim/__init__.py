@@ -54,7 +54,7 @@ from scattertrack.sim.scenario import (
 )
 from scattertrack.sim.trajectory import positions_velocities
 from scattertrack.sim.scenario import PIPELINES, resolve_helper_model, scenario_pipeline
-from scattertrack.sim.iq import IQ_MODEL_DEFAULTS, IqSimulation, simulate_iq, write_iq_simulation
+from scattertrack.sim.iq import IQ_MODEL_DEFAULTS, IqSimulation, simulate_iq, simulate_iq_scenario, write_iq_simulation
 from scattertrack.sim.wideband import (
     HELPER_MODEL_DEFAULTS,
     bistatic_path_lengths,
@@ -70,6 +70,7 @@ __all__ = [
     "IQ_MODEL_DEFAULTS",
     "IqSimulation",
     "simulate_iq",
+    "simulate_iq_scenario",
     "write_iq_simulation",
     "PIPELINES",
     "bistatic_path_lengths",

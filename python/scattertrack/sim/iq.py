@@ -567,3 +567,37 @@ def write_iq_simulation(sim: IqSimulation, out_dir) -> Path:
     }
     (out / "simulation.json").write_text(json.dumps(record, indent=2) + "\n")
     return out
+
+
+IQ_DEFAULT_DURATION_S = 1.0
+"""Seconds of IQ a scenario is simulated for unless told otherwise (IQ is
+bulky: 480 kB per reply, about 144 MB per second at 300 replies/s)."""
+
+
+def simulate_iq_scenario(scenario: dict, seed: int | None = None, duration_s: float | None = None, model: dict | None = None) -> IqSimulation:
+    """A turbotrack scenario at IQ level: its helper, antennas, region and
+    tag trajectories, the OFDM design (``centre_frequency_hz``,
+    ``bandwidth_hz``, ``n_subcarriers``, ``blf_hz``) and reflectors of its
+    ``[helper_model]``, every other IQ key at :data:`IQ_MODEL_DEFAULTS`
+    unless the scenario has an ``[iq_model]`` table or ``model`` overrides
+    it. ``duration_s``: default :data:`IQ_DEFAULT_DURATION_S` (not the
+    scenario's, usually tens of seconds). Same inputs, same output.
+    """
+    from scattertrack.sim.scenario import _simulate_helper, resolve_scenario
+
+    if seed is not None:
+        scenario = {**scenario, "seed": seed}
+    data = resolve_scenario(scenario)
+    if data["pipeline"] != "turbotrack":
+        raise ValueError(f"scenario {data.get('name', '?')!r} is for the {data['pipeline']} pipeline; IQ needs a turbotrack scenario")
+    # The frame-level run builds the helper scene and seeds random trajectories.
+    frame_level = _simulate_helper({**data, "duration_s": min(float(data["duration_s"]), 0.05)})
+    helper = data["helper_model"]
+    iq_model = {key: helper[key] for key in wideband.OFDM_KEYS}
+    if helper.get("reflectors"):
+        iq_model["reflectors"] = helper["reflectors"]
+    iq_model.update(scenario.get("iq_model", {}))
+    iq_model.update(model or {})
+    tags = {tag["epc"]: tag["trajectory"] for tag in data["tags"]}
+    duration = IQ_DEFAULT_DURATION_S if duration_s is None else float(duration_s)
+    return simulate_iq(frame_level.scene, tags, iq_model, int(data["seed"]), duration_s=duration)

@@ -384,3 +384,60 @@ def test_scenarios_lists_the_pipeline(capsys):
     lines = {line.split()[0]: line.split()[1] for line in out.splitlines()}
     assert lines["turbotrack-3d-arm"] == "turbotrack" and lines["turbotrack-2d-speed-50"] == "turbotrack"
     assert lines[SHORT_SCENARIO] == "glac"
+
+
+@pytest.fixture(scope="module")
+def iq_session(tmp_path_factory) -> Path:
+    """0.1 s of the thesis arm at IQ level (30 replies), SigMF + calibration."""
+    folder = tmp_path_factory.mktemp("iq")
+    code = main(["simulate", "--scenario", "turbotrack-3d-arm", "--iq", "--duration", "0.1", "--out", str(folder)])
+    assert code == 0
+    return folder
+
+
+def test_simulate_iq_writes_sigmf_and_its_calibration(iq_session):
+    for name in ("recording.sigmf-meta", "recording.sigmf-data", "calibration.sigmf-meta", "scene.toml", "truth.csv"):
+        assert (iq_session / name).is_file(), name
+
+
+def test_track_sigmf_finds_the_calibration_beside_it(capsys, iq_session, tmp_path):
+    code, out, err = run(
+        capsys, "track", "--scene", iq_session / "scene.toml", "--sigmf", iq_session / "recording.sigmf-meta",
+        "--method", "turbotrack", "--out", tmp_path / "track.csv", "--no-progress",
+    )
+    assert code == 0, err
+    assert "calibration.sigmf-meta" in out
+    assert len(read_track(tmp_path / "track.csv")) > 20
+
+
+def test_stream_prints_throughput_and_latency(capsys, iq_session, tmp_path):
+    code, out, err = run(
+        capsys, "stream", "--scene", iq_session / "scene.toml", "--sigmf", iq_session / "recording.sigmf-meta",
+        "--calibration", iq_session / "calibration.sigmf-meta", "--fast", "--out", tmp_path / "track.csv",
+    )
+    assert code == 0, err
+    assert "frames/s" in out and "p99" in out and "dispatch" in out
+    assert len(read_track(tmp_path / "track.csv")) > 20
+
+
+def test_stream_and_track_without_calibration_are_usage_errors(capsys, iq_session, tmp_path):
+    lone = tmp_path / "lone"
+    lone.mkdir()
+    for suffix in ("sigmf-meta", "sigmf-data"):
+        shutil.copy(iq_session / f"recording.{suffix}", lone / f"recording.{suffix}")
+    for command in ("stream", "track"):
+        code, _, err = run(
+            capsys, command, "--scene", iq_session / "scene.toml", "--sigmf", lone / "recording.sigmf-meta",
+            "--method", "turbotrack", "--out", tmp_path / "track.csv",
+        )
+        assert code == 2 and "--calibration" in err
+
+
+def test_stream_a_cots_method_and_iq_of_a_glac_scenario_are_usage_errors(capsys, iq_session, tmp_path):
+    code, _, err = run(
+        capsys, "stream", "--scene", iq_session / "scene.toml", "--sigmf", iq_session / "recording.sigmf-meta",
+        "--method", "glac", "--out", tmp_path / "track.csv",
+    )
+    assert code == 2 and "glac" in err
+    code, _, err = run(capsys, "simulate", "--scenario", "glac-2d-10cms", "--iq", "--out", tmp_path / "x")
+    assert code == 2 and "glac pipeline" in err

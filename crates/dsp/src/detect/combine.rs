@@ -1,5 +1,6 @@
 use num_complex::Complex64;
 
+use crate::estimate::SymbolSums;
 use crate::ofdm::ChannelMatrix;
 
 /// The paper's subcarrier-combined magnitude `H_combined(n) = Σ_f |H(f, n)|`
@@ -41,50 +42,58 @@ pub fn combined_magnitude(h: &ChannelMatrix, out: &mut Vec<f64>) {
 /// the result is arbitrary; the correlation takes care of it. Cost
 /// `O(symbols × subcarriers)` per iteration.
 pub fn combined_projection(h: &ChannelMatrix, block: usize, out: &mut Vec<f64>) {
+    let mut sums = SymbolSums::default();
+    sums.reset(h);
+    combined_projection_from_sums(h, &sums, block, out);
+}
+
+/// [`combined_projection`] with the antenna's [`SymbolSums`] already built
+/// (the block sums and the window mean come from them: one pass over the
+/// matrix instead of three).
+pub fn combined_projection_from_sums(h: &ChannelMatrix, sums: &SymbolSums, block: usize, out: &mut Vec<f64>) {
     out.clear();
     let f_count = h.subcarriers;
-    let valid = h.valid_count();
+    let valid = sums.count_in(0, h.symbols);
     if valid == 0 || f_count == 0 {
         out.resize(h.symbols, f64::NAN);
         return;
     }
     let zero = Complex64::new(0.0, 0.0);
-    let mut mean = vec![zero; f_count];
-    for n in (0..h.symbols).filter(|&n| h.valid[n]) {
-        mean.iter_mut().zip(h.row(n)).for_each(|(m, v)| *m += v);
-    }
-    mean.iter_mut().for_each(|m| *m /= valid as f64);
+    // Window mean of x = H − r (r: the sums' reference row).
+    let mut mean_x = vec![zero; f_count];
+    sums.add_interval(h, 0, h.symbols, &mut mean_x, None);
+    mean_x.iter_mut().for_each(|m| *m /= valid as f64);
 
-    // Block sums of the centred rows.
+    // Block sums of the centred rows: Σ (x − x̄) = Σ x − m x̄.
     let block = block.max(1);
-    let blocks: Vec<Vec<Complex64>> = (0..h.symbols)
-        .step_by(block)
-        .map(|start| {
-            let mut sum = vec![zero; f_count];
-            for n in (start..(start + block).min(h.symbols)).filter(|&n| h.valid[n]) {
-                for ((s, v), m) in sum.iter_mut().zip(h.row(n)).zip(&mean) {
-                    *s += v - m;
-                }
-            }
-            sum
-        })
-        .collect();
+    let count = h.symbols.div_ceil(block);
+    let mut blocks = vec![zero; count * f_count];
+    for (b, sum) in blocks.chunks_exact_mut(f_count).enumerate() {
+        let (from, to) = (b * block, ((b + 1) * block).min(h.symbols));
+        let m = sums.add_interval(h, from, to, sum, None) as f64;
+        sum.iter_mut().zip(&mean_x).for_each(|(s, x)| *s -= x * m);
+    }
     let norm = |x: &[Complex64]| x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
     // Start from the block that deviates most (never orthogonal to T when a
     // reply is present), then power-iterate v ← Σ_m b_m (b_mᴴ v).
-    let mut v = blocks.iter().max_by(|a, b| norm(a).total_cmp(&norm(b))).cloned().unwrap_or_default();
+    let mut v: Vec<Complex64> = blocks
+        .chunks_exact(f_count)
+        .max_by(|a, b| norm(a).total_cmp(&norm(b)))
+        .map(|b| b.to_vec())
+        .unwrap_or_default();
+    let mut next = vec![zero; f_count];
     for _ in 0..6 {
         let length = norm(&v);
         if !(length > 0.0 && length.is_finite()) {
             break;
         }
         v.iter_mut().for_each(|x| *x /= length);
-        let mut next = vec![zero; f_count];
-        for b in &blocks {
+        next.iter_mut().for_each(|x| *x = zero);
+        for b in blocks.chunks_exact(f_count) {
             let coefficient: Complex64 = b.iter().zip(&v).map(|(x, y)| x.conj() * y).sum();
             next.iter_mut().zip(b).for_each(|(o, x)| *o += x * coefficient);
         }
-        v = next;
+        std::mem::swap(&mut v, &mut next);
     }
     let length = norm(&v);
     if !(length > 0.0 && length.is_finite()) {
@@ -93,14 +102,14 @@ pub fn combined_projection(h: &ChannelMatrix, block: usize, out: &mut Vec<f64>) 
         return;
     }
     v.iter_mut().for_each(|x| *x /= length);
-    let projections: Vec<Complex64> = (0..h.symbols)
-        .map(|n| {
-            if h.valid[n] {
-                h.row(n).iter().zip(&mean).zip(&v).map(|((x, m), w)| w.conj() * (x - m)).sum()
-            } else {
-                zero
-            }
-        })
+    // u(n) = vᴴ(H_n − H̄) = vᴴH_n − vᴴ(r + x̄).
+    let offset: Complex64 = v.iter().zip(sums.reference.iter().zip(&mean_x)).map(|(w, (r, x))| w.conj() * (r + x)).sum();
+    let v_conj: Vec<Complex64> = v.iter().map(|w| w.conj()).collect();
+    let projections: Vec<Complex64> = h
+        .data
+        .chunks_exact(f_count)
+        .zip(&h.valid)
+        .map(|(row, &ok)| if ok { row.iter().zip(&v_conj).map(|(x, w)| w * x).sum::<Complex64>() - offset } else { zero })
         .collect();
     let square: Complex64 = projections.iter().map(|u| u * u).sum();
     let rotation = Complex64::from_polar(1.0, -0.5 * square.arg());

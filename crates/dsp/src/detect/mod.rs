@@ -25,7 +25,7 @@ mod combine;
 mod correlate;
 mod search;
 
-pub use combine::{combined_magnitude, combined_projection, moving_average};
+pub use combine::{combined_magnitude, combined_projection, combined_projection_from_sums, moving_average};
 pub use correlate::{normalised_correlation, FeatureSums, Template};
 pub use search::{detect_preamble, refine_detection, Detection, DetectionOptions};
 

@@ -28,9 +28,11 @@
 mod calibration;
 mod edges;
 mod ema;
+mod sums;
 mod tag_channel;
 
 pub use calibration::{path_channel, Calibration};
 pub use edges::{symbol_states, ChipGrid, SymbolState};
 pub use ema::Ema;
-pub use tag_channel::{tag_channel, TagChannel};
+pub use sums::SymbolSums;
+pub use tag_channel::{tag_channel, tag_channel_from_sums, TagChannel};

@@ -1,6 +1,6 @@
 use num_complex::Complex64;
 
-use super::SymbolState;
+use super::{SymbolState, SymbolSums};
 use crate::error::{Error, Result};
 use crate::ofdm::ChannelMatrix;
 
@@ -79,6 +79,53 @@ pub fn tag_channel(h: &ChannelMatrix, states: &[SymbolState]) -> Result<TagChann
     })
 }
 
+/// [`tag_channel`] from an antenna's [`SymbolSums`]: the same estimate
+/// (to rounding), in `O(symbols + runs × subcarriers)`: each maximal run of
+/// one state adds its interval sums. The variance comes from the per-state
+/// first and second moments of `H − r` (see [`SymbolSums`] on why that is
+/// numerically safe). Errors as [`tag_channel`].
+pub fn tag_channel_from_sums(h: &ChannelMatrix, sums: &SymbolSums, states: &[SymbolState]) -> Result<TagChannel> {
+    if states.len() != sums.symbols {
+        return Err(Error::Shape(format!("{} states for {} symbols", states.len(), sums.symbols)));
+    }
+    let f_count = sums.subcarriers;
+    let zero = Complex64::new(0.0, 0.0);
+    let (mut sum_high, mut sum_low) = (vec![zero; f_count], vec![zero; f_count]);
+    let (mut sq_high, mut sq_low) = (vec![0.0; f_count], vec![0.0; f_count]);
+    let (mut high, mut low) = (0usize, 0usize);
+    let mut n = 0;
+    while n < states.len() {
+        let state = states[n];
+        let mut end = n + 1;
+        while end < states.len() && states[end] == state {
+            end += 1;
+        }
+        match state {
+            SymbolState::High => high += sums.add_interval(h, n, end, &mut sum_high, Some(&mut sq_high)),
+            SymbolState::Low => low += sums.add_interval(h, n, end, &mut sum_low, Some(&mut sq_low)),
+            _ => {}
+        }
+        n = end;
+    }
+    if high == 0 || low == 0 {
+        return Err(Error::NoCleanSymbols { high, low });
+    }
+    let (nh, nl) = (high as f64, low as f64);
+    let dof = nh + nl - 2.0;
+    let factor = 1.0 / nh + 1.0 / nl;
+    let mut h = Vec::with_capacity(f_count);
+    let mut variance = Vec::with_capacity(f_count);
+    let mut midpoint = Vec::with_capacity(f_count);
+    for f in 0..f_count {
+        let (mh, ml) = (sum_high[f] / nh, sum_low[f] / nl);
+        h.push(mh - ml);
+        midpoint.push(sums.reference[f] + (mh + ml) * 0.5);
+        let scatter = ((sq_high[f] - sum_high[f].norm_sqr() / nh) + (sq_low[f] - sum_low[f].norm_sqr() / nl)).max(0.0);
+        variance.push(if dof > 0.0 { scatter / dof * factor } else { f64::INFINITY });
+    }
+    Ok(TagChannel { h, variance, midpoint, high, low })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -116,6 +163,48 @@ mod tests {
 
     fn zero() -> Complex64 {
         Complex64::new(0.0, 0.0)
+    }
+
+    #[test]
+    fn sums_give_the_direct_estimate_with_60_db_of_leakage() {
+        use crate::estimate::SymbolSums;
+        // Leakage 1e3, tag 1e-0, noise 0.3 (deterministic pseudo-noise),
+        // one invalid symbol, runs of both states broken by edges.
+        let mut state = 7u64;
+        let mut noise = || {
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.6
+        };
+        let (symbols, f_count) = (400, 7);
+        let states: Vec<SymbolState> = (0..symbols)
+            .map(|n| match (n / 13) % 4 {
+                _ if n == 77 => SymbolState::Invalid,
+                _ if n % 13 == 0 => SymbolState::Edge,
+                0 | 1 => SymbolState::High,
+                2 => SymbolState::Low,
+                _ => SymbolState::Outside,
+            })
+            .collect();
+        let mut h = ChannelMatrix::new(symbols, f_count);
+        for n in 0..symbols {
+            for f in 0..f_count {
+                let on = if states[n] == SymbolState::High { 1.0 } else { 0.0 };
+                h.row_mut(n)[f] = Complex64::from_polar(1e3, f as f64) + Complex64::from_polar(on, -0.4 * f as f64)
+                    + Complex64::new(noise(), noise());
+            }
+        }
+        h.valid[77] = false;
+        let direct = tag_channel(&h, &states).unwrap();
+        let mut sums = SymbolSums::default();
+        sums.reset(&h);
+        let fast = tag_channel_from_sums(&h, &sums, &states).unwrap();
+        assert_eq!((fast.high, fast.low), (direct.high, direct.low));
+        for f in 0..f_count {
+            assert!((fast.h[f] - direct.h[f]).norm() < 1e-9, "{f}");
+            assert!((fast.midpoint[f] - direct.midpoint[f]).norm() < 1e-9, "{f}");
+            assert!((fast.variance[f] / direct.variance[f] - 1.0).abs() < 1e-6, "{f}");
+        }
+        assert!(matches!(tag_channel_from_sums(&h, &sums, &states[1..]), Err(Error::Shape(_))));
     }
 
     #[test]
