@@ -90,7 +90,7 @@ fn bench(c: &mut Criterion) {
     let options = ReplyOptions::default();
     let mut processor = ReplyProcessor::new(reply.config.clone(), reply.symbol.clone(), options.clone()).unwrap();
     processor.process(&refs, Some(7)).unwrap(); // learns the timing reference
-    let mut front = AntennaFront::new(&reply.config, &reply.symbol, options.feature).unwrap();
+    let mut front = AntennaFront::new(&reply.config, &reply.symbol, &options).unwrap();
     let mut one = AntennaSymbols::default();
     let first = processor.first_sample(0, Some(7));
     group.bench_function("front_known_grid", |b| b.iter(|| front.process(black_box(refs[0]), first, &mut one)));

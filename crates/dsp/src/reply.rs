@@ -8,7 +8,7 @@ use num_complex::{Complex32, Complex64};
 
 use crate::backscatter::{preamble_chips, Encoding};
 use crate::detect::{
-    combined_magnitude, combined_projection_from_sums, detect_preamble, moving_average, refine_detection, Detection, DetectionOptions, Feature,
+    combined_magnitude, combined_projection_from_sums, detect_on_grid, detect_preamble, CoarseGrid, moving_average, refine_detection, Detection, DetectionOptions, Feature,
     FeatureSums, Template,
 };
 use crate::error::{Error, Result};
@@ -172,12 +172,22 @@ pub struct AntennaSymbols {
     pub error: Option<Error>,
     /// Why the antenna cannot take part in the detection.
     pub feature_error: Option<Error>,
+    /// This antenna's `ρ²` on the stage-1 detection grid (see
+    /// [`CoarseGrid`]), for a window of `coarse_symbols` symbols.
+    pub coarse: Vec<f64>,
+    pub coarse_symbols: usize,
 }
 
 /// Steps 1–3a for one antenna with its FFT plan and buffers (one per worker).
 pub struct AntennaFront {
     symbol: KnownSymbol,
     feature_kind: Feature,
+    template: Template,
+    nominal_chip_symbols: f64,
+    blf_tolerance: f64,
+    /// The stage-1 grid of the last window length seen (windows of one
+    /// helper all have the same length, so it is built once).
+    grid: Option<CoarseGrid>,
     demodulator: Demodulator,
     /// Projection block and smoothing width, symbols (a quarter and an
     /// eighth of a nominal chip: see [`ReplyProcessor::process`]).
@@ -188,12 +198,17 @@ pub struct AntennaFront {
 }
 
 impl AntennaFront {
-    pub fn new(config: &OfdmConfig, symbol: &KnownSymbol, feature: Feature) -> Result<Self> {
+    pub fn new(config: &OfdmConfig, symbol: &KnownSymbol, options: &ReplyOptions) -> Result<Self> {
         config.validate()?;
+        options.validate()?;
         let chip_nominal = config.chip_symbols();
         Ok(Self {
             symbol: symbol.clone(),
-            feature_kind: feature,
+            feature_kind: options.feature,
+            template: Template::new(preamble_chips(options.encoding, options.trext)?)?,
+            nominal_chip_symbols: chip_nominal,
+            blf_tolerance: options.detection.blf_tolerance,
+            grid: None,
             demodulator: Demodulator::new(config, symbol)?,
             block: ((chip_nominal / 4.0).floor() as usize).max(1),
             smoothing: ((chip_nominal / 8.0).floor() as usize).max(1),
@@ -224,11 +239,10 @@ impl AntennaFront {
             },
         };
         out.first_sample = first;
-        if let Err(e) = self.demodulator.demodulate(window, first, &mut out.channel) {
+        if let Err(e) = self.demodulator.demodulate_with_sums(window, first, &mut out.channel, Some(&mut out.symbol_sums)) {
             out.error = Some(e);
             return;
         }
-        out.symbol_sums.reset(&out.channel);
         self.feature(out);
     }
 
@@ -242,6 +256,18 @@ impl AntennaFront {
         }
         moving_average(&self.feature, self.smoothing, &mut self.smoothed);
         out.feature_error = out.sums.reset(&self.smoothed).err();
+        out.coarse.clear();
+        out.coarse_symbols = 0;
+        if out.feature_error.is_none() {
+            let symbols = out.sums.len();
+            if self.grid.as_ref().is_none_or(|g| g.symbols != symbols) {
+                self.grid = Some(CoarseGrid::new(symbols, self.template.len(), self.nominal_chip_symbols, self.blf_tolerance));
+            }
+            let grid = self.grid.as_ref().expect("just built");
+            out.coarse.resize(grid.len(), 0.0);
+            grid.add_scores(&out.sums, &self.template, &mut out.coarse);
+            out.coarse_symbols = symbols;
+        }
     }
 }
 
@@ -263,7 +289,7 @@ impl ReplyProcessor {
     pub fn new(config: OfdmConfig, symbol: KnownSymbol, options: ReplyOptions) -> Result<Self> {
         config.validate()?;
         options.validate()?;
-        let front = AntennaFront::new(&config, &symbol, options.feature)?;
+        let front = AntennaFront::new(&config, &symbol, &options)?;
         let template = Template::new(preamble_chips(options.encoding, options.trext)?)?;
         Ok(Self {
             config,
@@ -429,7 +455,19 @@ impl ReplyProcessor {
         }
         let chip_nominal = self.config.chip_symbols();
         let features: Vec<FeatureSums> = detecting.iter().map(|&a| antennas[a].sums.clone()).collect();
-        let mut detection = detect_preamble(&features, &self.template, chip_nominal, &self.options.detection)?;
+        // Stage 1 of the search was done per antenna (by the fronts) when all
+        // windows had the same length; the shares add up.
+        let precomputed = detecting.iter().all(|&a| antennas[a].coarse_symbols == symbols && !antennas[a].coarse.is_empty());
+        let mut detection = if precomputed {
+            let grid = CoarseGrid::new(symbols, self.template.len(), chip_nominal, self.options.detection.blf_tolerance);
+            let mut summed = vec![0.0; grid.len()];
+            for &a in &detecting {
+                summed.iter_mut().zip(&antennas[a].coarse).for_each(|(s, c)| *s += c);
+            }
+            detect_on_grid(&features, &self.template, chip_nominal, &self.options.detection, &grid, &summed)?
+        } else {
+            detect_preamble(&features, &self.template, chip_nominal, &self.options.detection)?
+        };
 
         // 4: edge elimination and tag channel on the preamble.
         let k = self.template.len();

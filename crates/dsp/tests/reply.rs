@@ -288,7 +288,7 @@ fn per_antenna_fronts_then_finish_equal_process() {
     let options = ReplyOptions { encoding: reply.encoding, trext: reply.trext, ..Default::default() };
     let mut whole = processor(&reply, options.clone());
     let mut joint = processor(&reply, options.clone());
-    let mut front = AntennaFront::new(&reply.config, &reply.symbol, options.feature).unwrap();
+    let mut front = AntennaFront::new(&reply.config, &reply.symbol, &options).unwrap();
     for tx_phase in [Some(3usize), Some(11), None] {
         let expected = whole.process(&refs, tx_phase).unwrap();
         let mut antennas: Vec<AntennaSymbols> = (0..refs.len())

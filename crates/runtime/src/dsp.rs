@@ -62,7 +62,7 @@ impl DspSetup {
     /// The worker of antenna slot `slot` (`make_worker` of [`crate::run`]).
     pub fn worker(&self, slot: usize) -> Result<DspWorker> {
         Ok(DspWorker {
-            front: AntennaFront::new(&self.config, &self.symbol, self.options.feature)?,
+            front: AntennaFront::new(&self.config, &self.symbol, &self.options)?,
             reference: self.timing_reference.as_ref().map(|r| r[slot]),
             n: self.config.subcarriers,
         })

@@ -27,7 +27,7 @@ mod search;
 
 pub use combine::{combined_magnitude, combined_projection, combined_projection_from_sums, moving_average};
 pub use correlate::{normalised_correlation, FeatureSums, Template};
-pub use search::{detect_preamble, refine_detection, Detection, DetectionOptions};
+pub use search::{detect_on_grid, detect_preamble, refine_detection, CoarseGrid, Detection, DetectionOptions};
 
 use crate::error::{Error, Result};
 

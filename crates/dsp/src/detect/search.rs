@@ -84,38 +84,109 @@ pub fn detect_preamble(
     if features.is_empty() {
         return Err(Error::Shape("no detection feature given".into()));
     }
-    let symbols = features.iter().map(|f| f.len()).min().unwrap_or(0) as f64;
-    let k = template.len() as f64;
-    let tolerance = options.blf_tolerance;
+    let symbols = features.iter().map(|f| f.len()).min().unwrap_or(0);
+    let grid = CoarseGrid::new(symbols, template.len(), nominal_chip_symbols, options.blf_tolerance);
+    let mut summed = vec![0.0; grid.len()];
+    for feature in features {
+        grid.add_scores(feature, template, &mut summed);
+    }
+    detect_on_grid(features, template, nominal_chip_symbols, options, &grid, &summed)
+}
 
-    // Stage 1: grid over scale and centre.
-    let step1 = 1.0 / (2.0 * k);
-    let reach = (tolerance / step1).floor() as i64;
-    let centre_step = (nominal_chip_symbols / 8.0).max(0.25);
-    let mut best: Option<(f64, f64, f64)> = None; // (score, centre, scale)
-    for i in -reach..=reach {
-        let scale = 1.0 + i as f64 * step1;
-        let half = k * nominal_chip_symbols / scale / 2.0;
-        if 2.0 * half > symbols {
-            continue;
+/// Stage 1 of [`detect_preamble`]: the alignments searched, scales
+/// `1 ± i/(2K)` within the tolerance × centres every eighth of a chip, for
+/// features of `symbols` values. The combined score is a sum over antennas
+/// of `ρ_a²`, so each antenna's share ([`CoarseGrid::add_scores`]) can be
+/// computed apart — by that antenna's worker in the real-time runtime —
+/// and summed before [`detect_on_grid`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct CoarseGrid {
+    /// Feature length the grid was made for, symbols.
+    pub symbols: usize,
+    /// Template length, chips.
+    pub template_len: usize,
+    /// Nominal chip length, symbols.
+    pub nominal_chip_symbols: f64,
+    /// (centre, scale) of each alignment, symbols and true/nominal BLF.
+    pub points: Vec<(f64, f64)>,
+    /// Stage 2's scale step (a quarter of stage 1's).
+    pub fine_scale_step: f64,
+    /// Symbols needed for the shortest alignment.
+    pub needed: usize,
+}
+
+impl CoarseGrid {
+    pub fn new(symbols: usize, template_len: usize, nominal_chip_symbols: f64, blf_tolerance: f64) -> Self {
+        let k = template_len as f64;
+        let step1 = 1.0 / (2.0 * k);
+        let reach = (blf_tolerance / step1).floor() as i64;
+        let centre_step = (nominal_chip_symbols / 8.0).max(0.25);
+        let mut points = Vec::new();
+        let length = symbols as f64;
+        for i in -reach..=reach {
+            let scale = 1.0 + i as f64 * step1;
+            let half = k * nominal_chip_symbols / scale / 2.0;
+            if 2.0 * half > length {
+                continue;
+            }
+            let centres = ((length - 2.0 * half) / centre_step).floor() as usize;
+            points.extend((0..=centres).map(|c| (half + c as f64 * centre_step, scale)));
         }
-        let centres = ((symbols - 2.0 * half) / centre_step).floor() as usize;
-        for c in 0..=centres {
-            let centre = half + c as f64 * centre_step;
-            let s = centred_score(features, template, nominal_chip_symbols, centre, scale, symbols);
-            if best.is_none_or(|b| s > b.0) {
-                best = Some((s, centre, scale));
+        let needed = (k * nominal_chip_symbols / (1.0 + blf_tolerance)).ceil() as usize;
+        Self { symbols, template_len, nominal_chip_symbols, points, fine_scale_step: step1 / 4.0, needed }
+    }
+
+    /// Alignments searched.
+    pub fn len(&self) -> usize {
+        self.points.len()
+    }
+
+    /// Whether no alignment fits in the window.
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Adds one antenna's `ρ²` at every alignment to `summed` (−∞ where
+    /// the template leaves this feature).
+    pub fn add_scores(&self, feature: &FeatureSums, template: &Template, summed: &mut [f64]) {
+        let symbols = feature.len().min(self.symbols) as f64;
+        for (out, &(centre, scale)) in summed.iter_mut().zip(&self.points) {
+            let chip = self.nominal_chip_symbols / scale;
+            let start = centre - template.len() as f64 * chip / 2.0;
+            if start < 0.0 || start + template.len() as f64 * chip > symbols + 1e-9 {
+                *out = f64::NEG_INFINITY;
+            } else {
+                *out += normalised_correlation(feature, template, start, chip).powi(2);
             }
         }
     }
+}
+
+/// Stages 2 and 3 of [`detect_preamble`] given the antennas' summed
+/// stage-1 scores on `grid` ([`CoarseGrid::add_scores`] over every feature
+/// in `features`): the best alignment, refined, then the threshold.
+pub fn detect_on_grid(
+    features: &[FeatureSums],
+    template: &Template,
+    nominal_chip_symbols: f64,
+    options: &DetectionOptions,
+    grid: &CoarseGrid,
+    summed: &[f64],
+) -> Result<Detection> {
+    let k = template.len() as f64;
+    let mut best: Option<(f64, f64, f64)> = None; // (score, centre, scale)
+    for (&s, &(centre, scale)) in summed.iter().zip(&grid.points) {
+        if best.is_none_or(|b| s > b.0) {
+            best = Some((s, centre, scale));
+        }
+    }
     let Some((_, centre, scale)) = best else {
-        let needed = (k * nominal_chip_symbols / (1.0 + tolerance)).ceil() as usize;
-        return Err(Error::TooShort { what: "preamble search (symbols in the window)", needed, got: symbols as usize });
+        return Err(Error::TooShort { what: "preamble search (symbols in the window)", needed: grid.needed, got: grid.symbols });
     };
 
     // Stage 2: finer around the coarse point.
     let start = centre - k * nominal_chip_symbols / scale / 2.0;
-    let detection = refine_detection(features, template, nominal_chip_symbols, start, scale, step1 / 4.0);
+    let detection = refine_detection(features, template, nominal_chip_symbols, start, scale, grid.fine_scale_step);
     if detection.score < options.threshold {
         return Err(Error::NoPreamble { score: detection.score, threshold: options.threshold });
     }

@@ -35,6 +35,9 @@ pub struct SymbolSums {
     pub sum_sq: Vec<f64>,
     /// `symbols + 1`: valid symbols before `n`.
     pub count: Vec<u32>,
+    /// Running sums while rows are pushed.
+    acc: Vec<Complex64>,
+    acc_sq: Vec<f64>,
 }
 
 impl SymbolSums {
@@ -43,45 +46,69 @@ impl SymbolSums {
 
     /// The sums of `h` (buffers reused).
     pub fn reset(&mut self, h: &ChannelMatrix) {
-        let (s, f) = (h.symbols, h.subcarriers);
-        self.symbols = s;
-        self.subcarriers = f;
+        self.begin(h.symbols, h.subcarriers);
+        for (row, &valid) in h.data.chunks_exact(h.subcarriers.max(1)).zip(&h.valid) {
+            self.push_row(row, valid);
+        }
+        self.finish();
+    }
+
+    /// Starts sums over `symbols` rows of `subcarriers` values, to be given
+    /// in order with [`SymbolSums::push_row`] (e.g. by the demodulator as it
+    /// writes each row, while the row is in cache) and closed with
+    /// [`SymbolSums::finish`].
+    pub fn begin(&mut self, symbols: usize, subcarriers: usize) {
+        self.symbols = symbols;
+        self.subcarriers = subcarriers;
         let zero = Complex64::new(0.0, 0.0);
         self.reference.clear();
-        match (0..s).find(|&n| h.valid[n]) {
-            Some(n) => self.reference.extend_from_slice(h.row(n)),
-            None => self.reference.resize(f, zero),
-        }
-        let blocks = s / Self::STRIDE + 1;
+        let blocks = symbols / Self::STRIDE + 1;
         self.sum.clear();
-        self.sum.reserve(blocks * f);
+        self.sum.reserve(blocks * subcarriers);
         self.sum_sq.clear();
-        self.sum_sq.reserve(blocks * f);
+        self.sum_sq.reserve(blocks * subcarriers);
         self.count.clear();
-        self.count.reserve(s + 1);
-        let mut acc = vec![zero; f];
-        let mut acc_sq = vec![0.0; f];
-        let mut count = 0u32;
-        for (n, (row, &valid)) in h.data.chunks_exact(f.max(1)).zip(&h.valid).enumerate() {
-            if n % Self::STRIDE == 0 {
-                self.sum.extend_from_slice(&acc);
-                self.sum_sq.extend_from_slice(&acc_sq);
-            }
-            self.count.push(count);
-            if valid {
-                for ((a, q), (v, r)) in acc.iter_mut().zip(acc_sq.iter_mut()).zip(row.iter().zip(&self.reference)) {
-                    let x = v - r;
-                    *a += x;
-                    *q += x.norm_sqr();
-                }
-                count += 1;
-            }
+        self.count.reserve(symbols + 1);
+        self.count.push(0);
+        self.acc.clear();
+        self.acc.resize(subcarriers, zero);
+        self.acc_sq.clear();
+        self.acc_sq.resize(subcarriers, 0.0);
+    }
+
+    /// Adds the next row (symbol `count.len() − 1`).
+    #[inline]
+    pub fn push_row(&mut self, row: &[Complex64], valid: bool) {
+        let n = self.count.len() - 1;
+        if n % Self::STRIDE == 0 {
+            self.sum.extend_from_slice(&self.acc);
+            self.sum_sq.extend_from_slice(&self.acc_sq);
         }
-        if s % Self::STRIDE == 0 {
-            self.sum.extend_from_slice(&acc);
-            self.sum_sq.extend_from_slice(&acc_sq);
+        let mut count = self.count[n];
+        if valid {
+            if self.reference.is_empty() {
+                // The first valid row is the reference: it adds x = 0.
+                self.reference.extend_from_slice(row);
+            }
+            for ((a, q), (v, r)) in self.acc.iter_mut().zip(self.acc_sq.iter_mut()).zip(row.iter().zip(&self.reference)) {
+                let x = v - r;
+                *a += x;
+                *q += x.norm_sqr();
+            }
+            count += 1;
         }
         self.count.push(count);
+    }
+
+    /// Closes the sums after the last row.
+    pub fn finish(&mut self) {
+        if self.symbols % Self::STRIDE == 0 {
+            self.sum.extend_from_slice(&self.acc);
+            self.sum_sq.extend_from_slice(&self.acc_sq);
+        }
+        if self.reference.is_empty() {
+            self.reference.resize(self.subcarriers, Complex64::new(0.0, 0.0));
+        }
     }
 
     /// Keeps the first `symbols` symbols (no-op when already shorter).
