@@ -24,7 +24,10 @@ def _bench_turbotrack():
 
 bench = _bench_turbotrack()
 
-ARGV = ["--seeds", "1", "--duration-s", "4", "--particles", "10,100", "--throughput-duration-s", "1", "--no-progress"]
+ARGV = [
+    "--seeds", "1", "--duration-s", "4", "--particles", "10,100", "--throughput-duration-s", "1",
+    "--runtime-duration-s", "0.2", "--no-progress",
+]
 
 
 @pytest.fixture(scope="module")
@@ -48,10 +51,10 @@ def _finite(*values):
 
 def test_every_table_is_printed_under_its_command(smoke):
     text, result = smoke
-    for number in range(1, 7):
+    for number in range(1, 8):
         assert f"\n{number}. " in text
     # Every table is headed by the command that produced it.
-    assert text.count(f"$ {result['command']}") == 6
+    assert text.count(f"$ {result['command']}") == 7
     assert "bench/turbotrack.py" in result["command"] and "--seeds 1" in result["command"]
     assert "\nSummary\n" in text
 
@@ -164,3 +167,13 @@ def test_unknown_blocks_and_bad_particle_counts_are_refused():
     with pytest.raises(SystemExit):
         bench.parse_args(["--particles", "10,many"])
     assert bench.parse_args(["--skip", "static, particles"]).particle_counts == list(bench.PARTICLE_COUNTS)
+
+
+def test_runtime_block_streams_iq_and_reports_latency(smoke):
+    _, result = smoke
+    r = result["runtime"]
+    assert r["replies"] == 60 and r["receivers"] == 4
+    assert _finite(r["fast_frames_per_s"], r["latency_p50_us"], r["latency_p99_us"], r["median_3d_mm"])
+    assert 0 < r["latency_p50_us"] <= r["latency_p99_us"] <= r["latency_max_us"]
+    assert r["stages"] == ["dispatch", "antenna", "hand-off", "fusion", "tracker"]
+    assert isinstance(r["target_met"], bool)
