@@ -1,6 +1,8 @@
 use num_complex::Complex64;
 
-use crate::ofdm::ChannelMatrix;
+use num_complex::Complex32;
+
+use crate::ofdm::{widen, ChannelMatrix};
 
 /// Prefix sums over the symbols of one antenna's per-symbol channels
 /// `H(f, n)`, so that the sum over any run of symbols costs
@@ -78,7 +80,7 @@ impl SymbolSums {
 
     /// Adds the next row (symbol `count.len() − 1`).
     #[inline]
-    pub fn push_row(&mut self, row: &[Complex64], valid: bool) {
+    pub fn push_row(&mut self, row: &[Complex32], valid: bool) {
         let n = self.count.len() - 1;
         if n % Self::STRIDE == 0 {
             self.sum.extend_from_slice(&self.acc);
@@ -88,10 +90,10 @@ impl SymbolSums {
         if valid {
             if self.reference.is_empty() {
                 // The first valid row is the reference: it adds x = 0.
-                self.reference.extend_from_slice(row);
+                self.reference.extend(row.iter().map(|&v| widen(v)));
             }
-            for ((a, q), (v, r)) in self.acc.iter_mut().zip(self.acc_sq.iter_mut()).zip(row.iter().zip(&self.reference)) {
-                let x = v - r;
+            for ((a, q), (&v, r)) in self.acc.iter_mut().zip(self.acc_sq.iter_mut()).zip(row.iter().zip(&self.reference)) {
+                let x = widen(v) - r;
                 *a += x;
                 *q += x.norm_sqr();
             }
@@ -161,8 +163,8 @@ impl SymbolSums {
 
     fn add_rows(&self, h: &ChannelMatrix, a: usize, b: usize, sum: &mut [Complex64], mut sum_sq: Option<&mut [f64]>) {
         for n in (a..b).filter(|&n| h.valid[n]) {
-            for (i, (v, r)) in h.row(n).iter().zip(&self.reference).enumerate() {
-                let x = v - r;
+            for (i, (&v, r)) in h.row(n).iter().zip(&self.reference).enumerate() {
+                let x = widen(v) - r;
                 sum[i] += x;
                 if let Some(sq) = sum_sq.as_deref_mut() {
                     sq[i] += x.norm_sqr();
@@ -181,22 +183,22 @@ mod tests {
         let mut h = ChannelMatrix::new(9, 3);
         for n in 0..9 {
             for f in 0..3 {
-                h.row_mut(n)[f] = Complex64::new(1e3 + n as f64 * 0.1 + f as f64, (n * f) as f64 * 0.01);
+                h.row_mut(n)[f] = Complex32::new(1e3 + n as f32 * 0.1 + f as f32, (n * f) as f32 * 0.01);
             }
         }
         h.valid[0] = false;
         h.valid[5] = false;
-        h.row_mut(0).iter_mut().for_each(|v| *v = Complex64::new(f64::NAN, f64::NAN));
+        h.row_mut(0).iter_mut().for_each(|v| *v = Complex32::new(f32::NAN, f32::NAN));
         let mut sums = SymbolSums::default();
         sums.reset(&h);
-        assert_eq!(sums.reference, h.row(1).to_vec());
+        assert_eq!(sums.reference, h.row(1).iter().map(|&v| widen(v)).collect::<Vec<_>>());
         let mut s = vec![Complex64::new(0.0, 0.0); 3];
         let mut q = vec![0.0; 3];
         let m = sums.add_interval(&h, 0, 7, &mut s, Some(&mut q));
         assert_eq!(m, 5);
         for f in 0..3 {
-            let direct: Complex64 = [1, 2, 3, 4, 6].iter().map(|&n| h.row(n)[f] - sums.reference[f]).sum();
-            let direct_sq: f64 = [1, 2, 3, 4, 6].iter().map(|&n| (h.row(n)[f] - sums.reference[f]).norm_sqr()).sum();
+            let direct: Complex64 = [1, 2, 3, 4, 6].iter().map(|&n| h.at(n, f) - sums.reference[f]).sum();
+            let direct_sq: f64 = [1, 2, 3, 4, 6].iter().map(|&n| (h.at(n, f) - sums.reference[f]).norm_sqr()).sum();
             assert!((s[f] - direct).norm() < 1e-9 && (q[f] - direct_sq).abs() < 1e-9);
         }
         assert_eq!(sums.count_in(4, 100), 4);
@@ -204,8 +206,8 @@ mod tests {
         let long = {
             let mut m = ChannelMatrix::new(45, 2);
             for n in 0..45 {
-                m.row_mut(n)[0] = Complex64::new(n as f64, 1.0);
-                m.row_mut(n)[1] = Complex64::new(-2.0 * n as f64, 0.5 * n as f64);
+                m.row_mut(n)[0] = Complex32::new(n as f32, 1.0);
+                m.row_mut(n)[1] = Complex32::new(-2.0 * n as f32, 0.5 * n as f32);
             }
             m.valid[17] = false;
             m
@@ -220,8 +222,8 @@ mod tests {
                 let rows: Vec<usize> = (a..b.min(45)).filter(|&n| long.valid[n]).collect();
                 assert_eq!(m, rows.len());
                 for f in 0..2 {
-                    let d: Complex64 = rows.iter().map(|&n| long.row(n)[f] - sums_long.reference[f]).sum();
-                    let dq: f64 = rows.iter().map(|&n| (long.row(n)[f] - sums_long.reference[f]).norm_sqr()).sum();
+                    let d: Complex64 = rows.iter().map(|&n| long.at(n, f) - sums_long.reference[f]).sum();
+                    let dq: f64 = rows.iter().map(|&n| (long.at(n, f) - sums_long.reference[f]).norm_sqr()).sum();
                     assert!((s[f] - d).norm() < 1e-9 && (q[f] - dq).abs() < 1e-9, "{a}..{b}");
                 }
             }

@@ -1,4 +1,10 @@
-use num_complex::Complex64;
+use num_complex::{Complex32, Complex64};
+
+/// A single-precision value widened to double.
+#[inline]
+pub fn widen(v: Complex32) -> Complex64 {
+    Complex64::new(v.re as f64, v.im as f64)
+}
 
 /// Per-symbol channel estimates `H(f, n)` of one rx antenna in one window.
 ///
@@ -11,8 +17,12 @@ pub struct ChannelMatrix {
     pub symbols: usize,
     /// Number of active subcarriers (columns), `N − 1`.
     pub subcarriers: usize,
-    /// `H(f, n)`, unitless (received / transmitted), row-major.
-    pub data: Vec<Complex64>,
+    /// `H(f, n)`, unitless (received / transmitted), row-major. Single
+    /// precision like the samples and the FFT: per-symbol values are far
+    /// noisier than its rounding, and every sum over symbols is taken in
+    /// `f64` (half the memory traffic of a double matrix, twice the SIMD
+    /// width).
+    pub data: Vec<Complex32>,
     /// Whether symbol `n` was demodulated from finite samples.
     pub valid: Vec<bool>,
 }
@@ -23,7 +33,7 @@ impl ChannelMatrix {
         Self {
             symbols,
             subcarriers,
-            data: vec![Complex64::new(0.0, 0.0); symbols * subcarriers],
+            data: vec![Complex32::new(0.0, 0.0); symbols * subcarriers],
             valid: vec![true; symbols],
         }
     }
@@ -32,20 +42,26 @@ impl ChannelMatrix {
     pub fn resize(&mut self, symbols: usize, subcarriers: usize) {
         self.symbols = symbols;
         self.subcarriers = subcarriers;
-        self.data.resize(symbols * subcarriers, Complex64::new(0.0, 0.0));
+        self.data.resize(symbols * subcarriers, Complex32::new(0.0, 0.0));
         self.valid.resize(symbols, true);
     }
 
     /// The row of symbol `n` (all subcarriers).
     #[inline]
-    pub fn row(&self, n: usize) -> &[Complex64] {
+    pub fn row(&self, n: usize) -> &[Complex32] {
         &self.data[n * self.subcarriers..(n + 1) * self.subcarriers]
     }
 
     /// The mutable row of symbol `n`.
     #[inline]
-    pub fn row_mut(&mut self, n: usize) -> &mut [Complex64] {
+    pub fn row_mut(&mut self, n: usize) -> &mut [Complex32] {
         &mut self.data[n * self.subcarriers..(n + 1) * self.subcarriers]
+    }
+
+    /// Entry `(n, f)` widened to `f64`.
+    #[inline]
+    pub fn at(&self, n: usize, f: usize) -> Complex64 {
+        widen(self.data[n * self.subcarriers + f])
     }
 
     /// Number of valid symbols.

@@ -101,12 +101,11 @@ impl Demodulator {
         if let Some(s) = sums.as_deref_mut() {
             s.begin(symbols, f_count);
         }
-        let nan = Complex64::new(f64::NAN, f64::NAN);
+        let nan = Complex32::new(f32::NAN, f32::NAN);
         for ((spectrum, row), &valid) in self.buffer.chunks_exact(n).zip(out.data.chunks_exact_mut(f_count)).zip(&out.valid) {
             if valid {
                 for ((h, &k), &inv) in row.iter_mut().zip(&self.bins).zip(&self.inverse) {
-                    let v = spectrum[k] * inv;
-                    *h = Complex64::new(v.re as f64, v.im as f64);
+                    *h = spectrum[k] * inv;
                 }
             } else {
                 row.iter_mut().for_each(|h| *h = nan);
@@ -152,7 +151,7 @@ mod tests {
         assert_eq!((h.symbols, h.subcarriers), (7, 19));
         for j in 0..7 {
             for (f, &k) in config.active_bins().iter().enumerate() {
-                assert!((h.row(j)[f] - channel[k]).norm() < 1e-5, "symbol {j} bin {k}");
+                assert!((h.at(j, f) - channel[k]).norm() < 1e-5, "symbol {j} bin {k}");
             }
         }
     }
@@ -168,7 +167,7 @@ mod tests {
         demodulator.demodulate(&samples, 0, &mut h).unwrap();
         assert_eq!(h.valid, vec![true, false, true, true]);
         assert!(h.row(1).iter().all(|v| v.re.is_nan()));
-        assert!((h.row(2)[0] - Complex64::new(1.0, 0.0)).norm() < 1e-5);
+        assert!((h.at(2, 0) - Complex64::new(1.0, 0.0)).norm() < 1e-5);
         let all_nan = vec![Complex32::new(f32::NAN, f32::NAN); 32];
         assert!(matches!(demodulator.demodulate(&all_nan, 0, &mut h), Err(Error::NonFinite(_))));
         assert!(matches!(demodulator.demodulate(&samples[..7], 0, &mut h), Err(Error::TooShort { .. })));

@@ -23,7 +23,7 @@ mod demodulate;
 mod symbol;
 mod timing;
 
-pub use channel::ChannelMatrix;
+pub use channel::{widen, ChannelMatrix};
 pub use config::OfdmConfig;
 pub use demodulate::Demodulator;
 pub use symbol::KnownSymbol;
