@@ -11,7 +11,10 @@
 //!   feature.
 //! * `stage/*`: the stages alone — one antenna's timing and per-symbol
 //!   FFTs (30 000 samples), its projection and magnitude features, the
-//!   preamble search over 4 antennas' features, one antenna's tag channel.
+//!   preamble search over 4 antennas' features, one antenna's tag channel;
+//!   the real-time path's time-domain symbol sums and projection from them;
+//!   `front_known_grid` (one antenna's worker job) and `finish_4rx` (the
+//!   fusion's).
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -24,10 +27,11 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use num_complex::Complex32;
 use scattertrack_dsp::backscatter::{preamble_chips, Encoding};
 use scattertrack_dsp::detect::{
-    combined_magnitude, combined_projection, detect_preamble, DetectionOptions, Feature, FeatureSums, Template,
+    combined_magnitude, combined_projection, combined_projection_from_sums, detect_preamble, DetectionOptions, Feature,
+    FeatureSums, Template,
 };
-use scattertrack_dsp::estimate::{symbol_states, tag_channel, ChipGrid};
-use scattertrack_dsp::ofdm::{symbol_timing, ChannelMatrix, Demodulator};
+use scattertrack_dsp::estimate::{symbol_states, tag_channel, ChipGrid, SymbolSums};
+use scattertrack_dsp::ofdm::{symbol_timing, ChannelMatrix, ChannelTransform, Demodulator};
 use scattertrack_dsp::reply::{AntennaFront, AntennaSymbols, ReplyOptions, ReplyProcessor};
 
 fn bench(c: &mut Criterion) {
@@ -64,6 +68,15 @@ fn bench(c: &mut Criterion) {
     demodulator.demodulate(refs[0], 3, &mut h).unwrap();
     let mut feature = Vec::new();
     group.bench_function("projection", |b| b.iter(|| combined_projection(black_box(&h), 15, &mut feature)));
+    // The real-time path: time-domain symbol sums, and the projection from
+    // them (no per-symbol FFT).
+    let mut sums = SymbolSums::default();
+    group.bench_function("symbol_sums", |b| b.iter(|| sums.reset(black_box(refs[0]), 3, 20).unwrap()));
+    sums.reset(refs[0], 3, 20).unwrap();
+    let mut transform = ChannelTransform::new(&reply.config, &reply.symbol).unwrap();
+    group.bench_function("projection_from_sums", |b| {
+        b.iter(|| combined_projection_from_sums(black_box(&sums), &mut transform, 15, &mut feature))
+    });
     group.bench_function("magnitude", |b| b.iter(|| combined_magnitude(black_box(&h), &mut feature)));
     combined_projection(&h, 15, &mut feature);
     let sums: Vec<FeatureSums> = (0..4).map(|_| FeatureSums::new(&feature).unwrap()).collect();

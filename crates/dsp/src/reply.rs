@@ -13,7 +13,7 @@ use crate::detect::{
 };
 use crate::error::{Error, Result};
 use crate::estimate::{symbol_states, tag_channel_from_sums, ChipGrid, SymbolState, SymbolSums, TagChannel};
-use crate::ofdm::{symbol_timing, ChannelMatrix, Demodulator, KnownSymbol, OfdmConfig, SymbolTiming};
+use crate::ofdm::{symbol_timing, ChannelMatrix, ChannelTransform, Demodulator, KnownSymbol, OfdmConfig, SymbolTiming};
 
 /// How replies are detected and which symbols are used.
 #[derive(Debug, Clone, PartialEq)]
@@ -156,10 +156,9 @@ pub struct ReplyEstimate {
 /// [`ReplyProcessor::finish`].
 #[derive(Debug, Clone, Default)]
 pub struct AntennaSymbols {
-    /// `H(f, n)` of every whole symbol.
-    pub channel: ChannelMatrix,
-    /// Prefix sums of `channel` over symbols: the fusion stage sums runs
-    /// of symbols from these, never touching the matrix.
+    /// The whole symbols (time domain) with prefix sums over symbols: the
+    /// fusion stage sums runs of symbols from these and demodulates only
+    /// the sums (see [`SymbolSums`]).
     pub symbol_sums: SymbolSums,
     /// Running sums of the smoothed detection feature (valid when
     /// `feature_error` is None).
@@ -188,7 +187,12 @@ pub struct AntennaFront {
     /// The stage-1 grid of the last window length seen (windows of one
     /// helper all have the same length, so it is built once).
     grid: Option<CoarseGrid>,
+    /// The linear demodulation map (sums, projection filter).
+    transform: ChannelTransform,
+    /// Per-symbol demodulation, only for the magnitude feature (it is not
+    /// linear in the samples).
     demodulator: Demodulator,
+    matrix: ChannelMatrix,
     /// Projection block and smoothing width, symbols (a quarter and an
     /// eighth of a nominal chip: see [`ReplyProcessor::process`]).
     block: usize,
@@ -209,7 +213,9 @@ impl AntennaFront {
             nominal_chip_symbols: chip_nominal,
             blf_tolerance: options.detection.blf_tolerance,
             grid: None,
+            transform: ChannelTransform::new(config, symbol)?,
             demodulator: Demodulator::new(config, symbol)?,
+            matrix: ChannelMatrix::default(),
             block: ((chip_nominal / 4.0).floor() as usize).max(1),
             smoothing: ((chip_nominal / 8.0).floor() as usize).max(1),
             feature: Vec::new(),
@@ -239,20 +245,24 @@ impl AntennaFront {
             },
         };
         out.first_sample = first;
-        if let Err(e) = self.demodulator.demodulate_with_sums(window, first, &mut out.channel, Some(&mut out.symbol_sums)) {
+        if let Err(e) = out.symbol_sums.reset(window, first, self.transform.symbol_len()) {
             out.error = Some(e);
             return;
         }
         self.feature(out);
     }
 
-    /// The smoothed detection feature of `out.channel` into `out.sums`.
+    /// The smoothed detection feature of `out`'s symbols into `out.sums`.
     fn feature(&mut self, out: &mut AntennaSymbols) {
+        let sums = &out.symbol_sums;
         match self.feature_kind {
-            Feature::CombinedMagnitude => combined_magnitude(&out.channel, &mut self.feature),
-            Feature::Projection => {
-                combined_projection_from_sums(&out.channel, &out.symbol_sums, self.block, &mut self.feature)
+            Feature::CombinedMagnitude => {
+                // Σ_f |H(f, n)| needs every symbol demodulated.
+                let _ = self.demodulator.demodulate(&sums.samples, 0, &mut self.matrix);
+                self.matrix.valid.copy_from_slice(&sums.valid);
+                combined_magnitude(&self.matrix, &mut self.feature)
             }
+            Feature::Projection => combined_projection_from_sums(sums, &mut self.transform, self.block, &mut self.feature),
         }
         moving_average(&self.feature, self.smoothing, &mut self.smoothed);
         out.feature_error = out.sums.reset(&self.smoothed).err();
@@ -277,6 +287,8 @@ pub struct ReplyProcessor {
     config: OfdmConfig,
     options: ReplyOptions,
     front: AntennaFront,
+    /// Demodulates the sums of runs of symbols (tag channels, payload chips).
+    transform: ChannelTransform,
     template: Template,
     timing_reference: Option<Vec<usize>>,
     antennas: Vec<AntennaSymbols>,
@@ -290,11 +302,13 @@ impl ReplyProcessor {
         config.validate()?;
         options.validate()?;
         let front = AntennaFront::new(&config, &symbol, &options)?;
+        let transform = ChannelTransform::new(&config, &symbol)?;
         let template = Template::new(preamble_chips(options.encoding, options.trext)?)?;
         Ok(Self {
             config,
             options,
             front,
+            transform,
             template,
             timing_reference: None,
             antennas: Vec::new(),
@@ -434,12 +448,11 @@ impl ReplyProcessor {
                 self.timing_reference = Some(first_samples.iter().map(|&m| (m + phase) % n).collect());
             }
         }
-        let symbols = good.iter().map(|&a| antennas[a].channel.symbols).min().unwrap_or(0);
+        let symbols = good.iter().map(|&a| antennas[a].symbol_sums.symbols).min().unwrap_or(0);
         for &a in &good {
-            if antennas[a].channel.symbols != symbols {
+            if antennas[a].symbol_sums.symbols != symbols {
                 // Unequal windows: truncate and recompute the feature on the
                 // common span (row-major: keeps the first `symbols` rows).
-                antennas[a].channel.resize(symbols, f_count);
                 antennas[a].symbol_sums.truncate(symbols);
                 self.front.feature(&mut antennas[a]);
             }
@@ -481,8 +494,8 @@ impl ReplyProcessor {
         let mut levels: Vec<Option<u8>> = self.template.levels.iter().map(|&l| Some(l)).collect();
         let mut estimates: Vec<Option<TagChannel>> = vec![None; r];
         for &a in &detecting {
-            symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
-            match tag_channel_from_sums(&antennas[a].channel, &antennas[a].symbol_sums, &self.states) {
+            symbol_states(&grid, &levels, &antennas[a].symbol_sums.valid, &mut self.states);
+            match tag_channel_from_sums(&antennas[a].symbol_sums, &self.states, &mut self.transform) {
                 Ok(t) => estimates[a] = Some(t),
                 Err(e) => errors[a] = Some(e),
             }
@@ -529,8 +542,8 @@ impl ReplyProcessor {
                     if estimates[a].is_none() {
                         continue;
                     }
-                    symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
-                    match tag_channel_from_sums(&antennas[a].channel, &antennas[a].symbol_sums, &self.states) {
+                    symbol_states(&grid, &levels, &antennas[a].symbol_sums.valid, &mut self.states);
+                    match tag_channel_from_sums(&antennas[a].symbol_sums, &self.states, &mut self.transform) {
                         Ok(t) => estimates[a] = Some(t),
                         Err(e) => {
                             errors[a] = Some(e);
@@ -554,7 +567,7 @@ impl ReplyProcessor {
             };
             channel[a * f_count..(a + 1) * f_count].copy_from_slice(&t.h);
             variance[a * f_count..(a + 1) * f_count].copy_from_slice(&t.variance);
-            symbol_states(&grid, &levels, &antennas[a].channel.valid, &mut self.states);
+            symbol_states(&grid, &levels, &antennas[a].symbol_sums.valid, &mut self.states);
             states[a * symbols..(a + 1) * symbols].copy_from_slice(&self.states);
             counts[a] = StateCounts::of(&self.states);
         }
@@ -583,7 +596,7 @@ impl ReplyProcessor {
     /// Reads payload chip `i`: `Some(level)` when its clean symbols decide
     /// clearly, `None` to stop (see [`ReplyProcessor::process`], step 5).
     fn decide_chip(
-        &self,
+        &mut self,
         antennas: &[AntennaSymbols],
         grid: &ChipGrid,
         i: usize,
@@ -601,25 +614,25 @@ impl ReplyProcessor {
         }
         let to = to as usize;
         let (mut numerator, mut denominator) = (0.0, 0.0);
-        let mut interval = Vec::new();
+        let zero = Complex64::new(0.0, 0.0);
+        let mut time = Vec::new();
+        let mut channel = vec![zero; self.transform.subcarriers()];
         for (a, estimate) in estimates.iter().enumerate() {
             let Some(t) = estimate else { continue };
-            // Σ_n (H_n − m)·d̄ over the chip's clean symbols, from the sums of
-            // x = H − r: Σ x − k (m − r).
+            // Σ_n (H_n − m)·d̄ over the chip's clean symbols: the chip's
+            // samples summed (Σ x + k r), demodulated once, minus k m.
             let sums = &antennas[a].symbol_sums;
-            interval.clear();
-            interval.resize(sums.subcarriers, Complex64::new(0.0, 0.0));
-            let k = sums.add_interval(&antennas[a].channel, from, to, &mut interval, None) as f64;
+            time.clear();
+            time.resize(sums.n, zero);
+            let k = sums.add_interval(from, to, &mut time, None) as f64;
             if k == 0.0 {
                 continue;
             }
+            time.iter_mut().zip(&sums.reference).for_each(|(x, r)| *x += r * k);
+            self.transform.apply(&time, &mut channel);
             let energy: f64 = t.h.iter().map(|v| v.norm_sqr()).sum();
-            let projection: f64 = interval
-                .iter()
-                .zip(t.midpoint.iter().zip(&sums.reference))
-                .zip(&t.h)
-                .map(|((x, (m, r)), d)| ((x - (m - r) * k) * d.conj()).re)
-                .sum();
+            let projection: f64 =
+                channel.iter().zip(&t.midpoint).zip(&t.h).map(|((h, m), d)| ((h - m * k) * d.conj()).re).sum();
             numerator += projection;
             denominator += k * energy / 2.0;
         }

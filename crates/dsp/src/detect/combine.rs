@@ -1,7 +1,7 @@
 use num_complex::{Complex32, Complex64};
 
 use crate::estimate::SymbolSums;
-use crate::ofdm::{widen, ChannelMatrix};
+use crate::ofdm::{widen, ChannelMatrix, ChannelTransform};
 
 /// The paper's subcarrier-combined magnitude `H_combined(n) = Σ_f |H(f, n)|`
 /// (thesis ch. 4.3 (a)), one value per symbol into `out` (NaN for invalid
@@ -42,45 +42,154 @@ pub fn combined_magnitude(h: &ChannelMatrix, out: &mut Vec<f64>) {
 /// the result is arbitrary; the correlation takes care of it. Cost
 /// `O(symbols × subcarriers)` per iteration.
 pub fn combined_projection(h: &ChannelMatrix, block: usize, out: &mut Vec<f64>) {
-    let mut sums = SymbolSums::default();
-    sums.reset(h);
-    combined_projection_from_sums(h, &sums, block, out);
-}
-
-/// [`combined_projection`] with the antenna's [`SymbolSums`] already built
-/// (the block sums and the window mean come from them: one pass over the
-/// matrix instead of three).
-pub fn combined_projection_from_sums(h: &ChannelMatrix, sums: &SymbolSums, block: usize, out: &mut Vec<f64>) {
     out.clear();
     let f_count = h.subcarriers;
-    let valid = sums.count_in(0, h.symbols);
+    let valid = h.valid_count();
     if valid == 0 || f_count == 0 {
         out.resize(h.symbols, f64::NAN);
         return;
     }
     let zero = Complex64::new(0.0, 0.0);
-    // Window mean of x = H − r (r: the sums' reference row).
-    let mut mean_x = vec![zero; f_count];
-    sums.add_interval(h, 0, h.symbols, &mut mean_x, None);
+    let mut mean = vec![zero; f_count];
+    for n in (0..h.symbols).filter(|&n| h.valid[n]) {
+        mean.iter_mut().zip(h.row(n)).for_each(|(m, &v)| *m += widen(v));
+    }
+    mean.iter_mut().for_each(|m| *m /= valid as f64);
+    // Block sums of the centred rows.
+    let block = block.max(1);
+    let mut blocks = Vec::with_capacity(h.symbols.div_ceil(block) * f_count);
+    for start in (0..h.symbols).step_by(block) {
+        let mut sum = vec![zero; f_count];
+        for n in (start..(start + block).min(h.symbols)).filter(|&n| h.valid[n]) {
+            for ((s, &v), m) in sum.iter_mut().zip(h.row(n)).zip(&mean) {
+                *s += widen(v) - m;
+            }
+        }
+        blocks.extend(sum);
+    }
+    let Some(v) = dominant_direction(&blocks, f_count) else {
+        // A window without any change (e.g. noiseless and no reply): flat feature.
+        out.extend(h.valid.iter().map(|&ok| if ok { 0.0 } else { f64::NAN }));
+        return;
+    };
+    let projections: Vec<Complex64> = (0..h.symbols)
+        .map(|n| {
+            if h.valid[n] {
+                h.row(n).iter().zip(&mean).zip(&v).map(|((&x, m), w)| w.conj() * (widen(x) - m)).sum()
+            } else {
+                zero
+            }
+        })
+        .collect();
+    real_part_after_rotation(&projections, &h.valid, out);
+}
+
+/// [`combined_projection`] without demodulating every symbol: the block
+/// sums come from the antenna's time-domain [`SymbolSums`] through the
+/// (linear) [`ChannelTransform`], and `u(n) = vᴴ(H_n − H̄)` is the dot
+/// product of the raw symbol with the time-domain filter of `v`
+/// ([`ChannelTransform::projection_filter`]) minus `vᴴH̄`: per symbol `N`
+/// single-precision multiply-adds instead of an FFT and `N − 1` more.
+/// Blocks are `block` symbols rounded to a multiple of
+/// [`SymbolSums::STRIDE`], so each is a difference of two prefixes.
+pub fn combined_projection_from_sums(
+    sums: &SymbolSums,
+    transform: &mut ChannelTransform,
+    block: usize,
+    out: &mut Vec<f64>,
+) {
+    out.clear();
+    let symbols = sums.symbols;
+    let f_count = transform.subcarriers();
+    let n = sums.n;
+    let valid = sums.count_in(0, symbols);
+    if valid == 0 || f_count == 0 {
+        out.resize(symbols, f64::NAN);
+        return;
+    }
+    let zero = Complex64::new(0.0, 0.0);
+    // Window mean of x = y − r in the time domain.
+    let mut mean_x = vec![zero; n];
+    sums.add_interval(0, symbols, &mut mean_x, None);
     mean_x.iter_mut().for_each(|m| *m /= valid as f64);
 
-    // Block sums of the centred rows: Σ (x − x̄) = Σ x − m x̄.
-    let block = block.max(1);
-    let count = h.symbols.div_ceil(block);
+    let stride = SymbolSums::STRIDE;
+    let block = ((block + stride / 2) / stride).max(1) * stride;
+    let count = symbols.div_ceil(block);
     let mut blocks = vec![zero; count * f_count];
+    let mut time = vec![zero; n];
     for (b, sum) in blocks.chunks_exact_mut(f_count).enumerate() {
-        let (from, to) = (b * block, ((b + 1) * block).min(h.symbols));
-        let m = sums.add_interval(h, from, to, sum, None) as f64;
-        sum.iter_mut().zip(&mean_x).for_each(|(s, x)| *s -= x * m);
+        time.iter_mut().for_each(|t| *t = zero);
+        let (from, to) = (b * block, ((b + 1) * block).min(symbols));
+        let m = sums.add_interval(from, to, &mut time, None) as f64;
+        time.iter_mut().zip(&mean_x).for_each(|(t, x)| *t -= x * m);
+        transform.apply(&time, sum);
     }
+    let Some(v) = dominant_direction(&blocks, f_count) else {
+        out.extend(sums.valid.iter().map(|&ok| if ok { 0.0 } else { f64::NAN }));
+        return;
+    };
+    // offset = vᴴ H̄ with H̄ = T(r + x̄).
+    let absolute: Vec<Complex64> = sums.reference.iter().zip(&mean_x).map(|(r, x)| r + x).collect();
+    let mut mean_h = vec![zero; f_count];
+    transform.apply(&absolute, &mut mean_h);
+    let offset: Complex64 = v.iter().zip(&mean_h).map(|(v, h)| v.conj() * h).sum();
+    let w = transform.projection_filter(&v);
+    let projections: Vec<Complex64> = sums
+        .samples
+        .chunks_exact(n)
+        .zip(&sums.valid)
+        .map(|(y, &ok)| if ok { widen(dot(&w, y)) - offset } else { zero })
+        .collect();
+    real_part_after_rotation(&projections, &sums.valid, out);
+}
+
+/// `Σ_t w(t) y(t)` in four independent lanes (a single running sum would
+/// chain every multiply-add and not vectorise).
+#[inline]
+fn dot(w: &[Complex32], y: &[Complex32]) -> Complex32 {
+    let mut lanes = [Complex32::new(0.0, 0.0); 4];
+    let (wc, yc) = (w.chunks_exact(4), y.chunks_exact(4));
+    let (w_rest, y_rest) = (wc.remainder(), yc.remainder());
+    for (w4, y4) in wc.zip(yc) {
+        for l in 0..4 {
+            lanes[l] += w4[l] * y4[l];
+        }
+    }
+    let mut total = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+    for (a, b) in w_rest.iter().zip(y_rest) {
+        total += a * b;
+    }
+    total
+}
+
+/// `Σ conj(x) y` in four independent lanes.
+#[inline]
+fn dot_conj(x: &[Complex64], y: &[Complex64]) -> Complex64 {
+    let mut lanes = [Complex64::new(0.0, 0.0); 4];
+    let (xc, yc) = (x.chunks_exact(4), y.chunks_exact(4));
+    let (x_rest, y_rest) = (xc.remainder(), yc.remainder());
+    for (x4, y4) in xc.zip(yc) {
+        for l in 0..4 {
+            lanes[l] += x4[l].conj() * y4[l];
+        }
+    }
+    let mut total = (lanes[0] + lanes[1]) + (lanes[2] + lanes[3]);
+    for (a, b) in x_rest.iter().zip(y_rest) {
+        total += a.conj() * b;
+    }
+    total
+}
+
+/// The dominant direction of the rows of `blocks` (`count × f_count`,
+/// unit norm), by a few power iterations `v ← Σ_m b_m (b_mᴴ v)` started
+/// from the block that deviates most (never orthogonal to T when a reply is
+/// present); None when nothing changes.
+fn dominant_direction(blocks: &[Complex64], f_count: usize) -> Option<Vec<Complex64>> {
+    let zero = Complex64::new(0.0, 0.0);
     let norm = |x: &[Complex64]| x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-    // Start from the block that deviates most (never orthogonal to T when a
-    // reply is present), then power-iterate v ← Σ_m b_m (b_mᴴ v).
-    let mut v: Vec<Complex64> = blocks
-        .chunks_exact(f_count)
-        .max_by(|a, b| norm(a).total_cmp(&norm(b)))
-        .map(|b| b.to_vec())
-        .unwrap_or_default();
+    let mut v: Vec<Complex64> =
+        blocks.chunks_exact(f_count).max_by(|a, b| norm(a).total_cmp(&norm(b))).map(|b| b.to_vec())?;
     let mut next = vec![zero; f_count];
     for _ in 0..6 {
         let length = norm(&v);
@@ -90,32 +199,25 @@ pub fn combined_projection_from_sums(h: &ChannelMatrix, sums: &SymbolSums, block
         v.iter_mut().for_each(|x| *x /= length);
         next.iter_mut().for_each(|x| *x = zero);
         for b in blocks.chunks_exact(f_count) {
-            let coefficient: Complex64 = b.iter().zip(&v).map(|(x, y)| x.conj() * y).sum();
+            let coefficient = dot_conj(b, &v);
             next.iter_mut().zip(b).for_each(|(o, x)| *o += x * coefficient);
         }
         std::mem::swap(&mut v, &mut next);
     }
     let length = norm(&v);
     if !(length > 0.0 && length.is_finite()) {
-        // A window without any change (e.g. noiseless and no reply): flat feature.
-        out.extend(h.valid.iter().map(|&ok| if ok { 0.0 } else { f64::NAN }));
-        return;
+        return None;
     }
     v.iter_mut().for_each(|x| *x /= length);
-    // u(n) = vᴴ(H_n − H̄) = vᴴH_n − vᴴ(r + x̄).
-    let offset: Complex64 = v.iter().zip(sums.reference.iter().zip(&mean_x)).map(|(w, (r, x))| w.conj() * (r + x)).sum();
-    // vᴴH_n in single precision like H (|vᴴH| ≤ the leakage, whose rounding
-    // is far below the per-symbol noise), the offset in double.
-    let v_conj: Vec<Complex32> = v.iter().map(|w| Complex32::new(w.re as f32, -w.im as f32)).collect();
-    let projections: Vec<Complex64> = h
-        .data
-        .chunks_exact(f_count)
-        .zip(&h.valid)
-        .map(|(row, &ok)| if ok { widen(row.iter().zip(&v_conj).map(|(x, w)| w * x).sum::<Complex32>()) - offset } else { zero })
-        .collect();
+    Some(v)
+}
+
+/// `u(n)` is a complex constant times a real waveform: rotate by
+/// `½ arg Σ u(n)²` and keep the real part (NaN for invalid symbols).
+fn real_part_after_rotation(projections: &[Complex64], valid: &[bool], out: &mut Vec<f64>) {
     let square: Complex64 = projections.iter().map(|u| u * u).sum();
     let rotation = Complex64::from_polar(1.0, -0.5 * square.arg());
-    out.extend(projections.iter().zip(&h.valid).map(|(u, &ok)| if ok { (u * rotation).re } else { f64::NAN }));
+    out.extend(projections.iter().zip(valid).map(|(u, &ok)| if ok { (u * rotation).re } else { f64::NAN }));
 }
 
 /// Centred moving average of `width` symbols (NaN values skipped; NaN

@@ -1,116 +1,133 @@
-use num_complex::Complex64;
+use num_complex::{Complex32, Complex64};
 
-use num_complex::Complex32;
+use crate::error::{Error, Result};
+use crate::ofdm::widen;
 
-use crate::ofdm::{widen, ChannelMatrix};
-
-/// Prefix sums over the symbols of one antenna's per-symbol channels
-/// `H(f, n)`, so that the sum over any run of symbols costs
-/// `O(subcarriers × STRIDE)` instead of `O(run × subcarriers)`.
+/// One antenna's whole symbols in the time domain, with prefix sums over
+/// symbols, so that the sum of any run of symbols costs `O(N × STRIDE)`
+/// instead of `O(run × N)`.
 ///
-/// Why: after detection every later step — the tag channel per state
-/// (thesis ch. 4.3 (c)), its variance, each payload chip's decision — sums
-/// `H` over runs of symbols (chips minus their edge guards). A reply has
-/// ~1500 symbols but only a few dozen runs, so one pass building these
-/// sums (done by the antenna's worker in the real-time runtime) replaces
-/// several passes over the whole matrix on the fusion thread. Prefixes are
-/// kept every [`SymbolSums::STRIDE`] symbols (the rest of a run is summed
-/// from the matrix): a prefix per symbol would write 1.5 times the
-/// matrix's size, and that memory traffic cost more than it saved.
+/// Why time domain: demodulation (`H = FFT(y) / (√N X)`) is linear, so the
+/// channel summed over a run of symbols is the demodulated *sum* of the
+/// run's samples ([`crate::ofdm::ChannelTransform`]). After detection every
+/// step — the tag channel per state (thesis ch. 4.3 (c)), each payload
+/// chip's decision — needs only such sums, and a reply has ~1500 symbols
+/// but a few dozen runs (chips minus their edge guards): summing raw
+/// samples once and transforming a few sums replaces 1500 FFTs per
+/// antenna. Prefixes are kept every [`SymbolSums::STRIDE`] symbols (a
+/// prefix per symbol would write more memory than it saves); the rest of a
+/// run is summed from the samples.
 ///
-/// Numerics: the sums are of `x_n = H(·, n) − r` with `r` the first valid
-/// row, which removes the tx → rx leakage (up to 60 dB above the tag), so
-/// second moments `Σ|x|² − |Σx|²/m` do not cancel catastrophically.
-/// Invalid symbols add nothing and are not counted. The methods take the
-/// matrix the sums were built from.
+/// Numerics: the sums are of `x_n = y_n − r` with `r` the first valid
+/// symbol, which removes the periodic tx → rx leakage (up to 60 dB above
+/// the tag), so second moments `Σ‖x‖² − ‖Σx‖²/m` do not cancel
+/// catastrophically; within a stride they are accumulated in `f32` (the
+/// samples' precision), across strides in `f64`. Invalid symbols (a
+/// non-finite sample) add nothing and are not counted.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SymbolSums {
-    /// Symbols covered (rows of the matrix).
+    /// Whole symbols covered.
     pub symbols: usize,
-    /// Active subcarriers.
-    pub subcarriers: usize,
-    /// `r(f)`: the first valid row (zeros without one).
+    /// Samples per symbol `N`.
+    pub n: usize,
+    /// The symbols' samples, `symbols × N` (zeros for invalid symbols).
+    pub samples: Vec<Complex32>,
+    /// Whether symbol `s` had only finite samples.
+    pub valid: Vec<bool>,
+    /// `r`: the first valid symbol (zeros without one).
     pub reference: Vec<Complex64>,
-    /// `(⌊symbols / STRIDE⌋ + 1) × subcarriers`: `Σ_{m < j·STRIDE, valid} x_m(f)`.
+    /// `(⌊symbols / STRIDE⌋ + 1) × N`: `Σ_{m < j·STRIDE, valid} x_m`.
     pub sum: Vec<Complex64>,
-    /// The same for `|x_m(f)|²`.
-    pub sum_sq: Vec<f64>,
-    /// `symbols + 1`: valid symbols before `n`.
+    /// `⌊symbols / STRIDE⌋ + 1`: `Σ_{m < j·STRIDE, valid} ‖x_m‖²`.
+    pub energy: Vec<f64>,
+    /// `symbols + 1`: valid symbols before `s`.
     pub count: Vec<u32>,
-    /// Running sums while rows are pushed.
-    acc: Vec<Complex64>,
-    acc_sq: Vec<f64>,
 }
 
 impl SymbolSums {
     /// Symbols between stored prefixes.
     pub const STRIDE: usize = 8;
 
-    /// The sums of `h` (buffers reused).
-    pub fn reset(&mut self, h: &ChannelMatrix) {
-        self.begin(h.symbols, h.subcarriers);
-        for (row, &valid) in h.data.chunks_exact(h.subcarriers.max(1)).zip(&h.valid) {
-            self.push_row(row, valid);
+    /// The whole symbols of `window` from `first_sample` on, `n` samples
+    /// each (buffers reused). Errors: [`Error::TooShort`] without a whole
+    /// symbol, [`Error::NonFinite`] when no symbol is finite.
+    pub fn reset(&mut self, window: &[Complex32], first_sample: usize, n: usize) -> Result<()> {
+        let available = window.len().saturating_sub(first_sample);
+        let symbols = if n == 0 { 0 } else { available / n };
+        if symbols == 0 {
+            return Err(Error::TooShort { what: "demodulation (samples from the first symbol)", needed: n, got: available });
         }
-        self.finish();
-    }
-
-    /// Starts sums over `symbols` rows of `subcarriers` values, to be given
-    /// in order with [`SymbolSums::push_row`] (e.g. by the demodulator as it
-    /// writes each row, while the row is in cache) and closed with
-    /// [`SymbolSums::finish`].
-    pub fn begin(&mut self, symbols: usize, subcarriers: usize) {
         self.symbols = symbols;
-        self.subcarriers = subcarriers;
-        let zero = Complex64::new(0.0, 0.0);
+        self.n = n;
+        self.samples.clear();
+        self.samples.extend_from_slice(&window[first_sample..first_sample + symbols * n]);
+        self.valid.clear();
+        for y in self.samples.chunks_exact_mut(n) {
+            // x·0 is 0 for finite x and NaN for NaN or ±∞: one vectorisable sum.
+            let finite = y.iter().map(|v| v.re * 0.0 + v.im * 0.0).sum::<f32>() == 0.0;
+            if !finite {
+                y.iter_mut().for_each(|v| *v = Complex32::new(0.0, 0.0));
+            }
+            self.valid.push(finite);
+        }
+        let Some(first) = self.valid.iter().position(|&v| v) else {
+            return Err(Error::NonFinite(format!("all {symbols} symbols of the window have non-finite samples")));
+        };
+        let reference32: Vec<Complex32> = self.samples[first * n..(first + 1) * n].to_vec();
         self.reference.clear();
+        self.reference.extend(reference32.iter().map(|&v| widen(v)));
+
         let blocks = symbols / Self::STRIDE + 1;
+        let zero = Complex64::new(0.0, 0.0);
         self.sum.clear();
-        self.sum.reserve(blocks * subcarriers);
-        self.sum_sq.clear();
-        self.sum_sq.reserve(blocks * subcarriers);
+        self.sum.reserve(blocks * n);
+        self.energy.clear();
+        self.energy.reserve(blocks);
         self.count.clear();
         self.count.reserve(symbols + 1);
-        self.count.push(0);
-        self.acc.clear();
-        self.acc.resize(subcarriers, zero);
-        self.acc_sq.clear();
-        self.acc_sq.resize(subcarriers, 0.0);
-    }
-
-    /// Adds the next row (symbol `count.len() − 1`).
-    #[inline]
-    pub fn push_row(&mut self, row: &[Complex32], valid: bool) {
-        let n = self.count.len() - 1;
-        if n % Self::STRIDE == 0 {
-            self.sum.extend_from_slice(&self.acc);
-            self.sum_sq.extend_from_slice(&self.acc_sq);
+        let mut total = vec![zero; n];
+        let mut total_energy = 0.0f64;
+        // Per-sample accumulators within a stride: independent lanes, so the
+        // loop vectorises (one scalar energy sum would chain every add).
+        let mut block = vec![Complex32::new(0.0, 0.0); n];
+        let mut block_energy = vec![0.0f32; n];
+        let mut count = 0u32;
+        for (s, (y, &ok)) in self.samples.chunks_exact(n).zip(&self.valid).enumerate() {
+            if s % Self::STRIDE == 0 {
+                for (t, b) in total.iter_mut().zip(block.iter_mut()) {
+                    *t += widen(*b);
+                    *b = Complex32::new(0.0, 0.0);
+                }
+                total_energy += block_energy.iter().map(|&e| e as f64).sum::<f64>();
+                block_energy.iter_mut().for_each(|e| *e = 0.0);
+                self.sum.extend_from_slice(&total);
+                self.energy.push(total_energy);
+            }
+            self.count.push(count);
+            if ok {
+                for (((b, e), &v), r) in block.iter_mut().zip(block_energy.iter_mut()).zip(y).zip(&reference32) {
+                    let x = v - r;
+                    *b += x;
+                    *e += x.norm_sqr();
+                }
+                count += 1;
+            }
         }
-        let mut count = self.count[n];
-        if valid {
-            if self.reference.is_empty() {
-                // The first valid row is the reference: it adds x = 0.
-                self.reference.extend(row.iter().map(|&v| widen(v)));
+        if symbols % Self::STRIDE == 0 {
+            for (t, b) in total.iter_mut().zip(&block) {
+                *t += widen(*b);
             }
-            for ((a, q), (&v, r)) in self.acc.iter_mut().zip(self.acc_sq.iter_mut()).zip(row.iter().zip(&self.reference)) {
-                let x = widen(v) - r;
-                *a += x;
-                *q += x.norm_sqr();
-            }
-            count += 1;
+            self.sum.extend_from_slice(&total);
+            self.energy.push(total_energy + block_energy.iter().map(|&e| e as f64).sum::<f64>());
         }
         self.count.push(count);
+        Ok(())
     }
 
-    /// Closes the sums after the last row.
-    pub fn finish(&mut self) {
-        if self.symbols % Self::STRIDE == 0 {
-            self.sum.extend_from_slice(&self.acc);
-            self.sum_sq.extend_from_slice(&self.acc_sq);
-        }
-        if self.reference.is_empty() {
-            self.reference.resize(self.subcarriers, Complex64::new(0.0, 0.0));
-        }
+    /// Symbol `s`'s samples.
+    #[inline]
+    pub fn row(&self, s: usize) -> &[Complex32] {
+        &self.samples[s * self.n..(s + 1) * self.n]
     }
 
     /// Keeps the first `symbols` symbols (no-op when already shorter).
@@ -118,8 +135,10 @@ impl SymbolSums {
         if symbols < self.symbols {
             self.symbols = symbols;
             let blocks = symbols / Self::STRIDE + 1;
-            self.sum.truncate(blocks * self.subcarriers);
-            self.sum_sq.truncate(blocks * self.subcarriers);
+            self.samples.truncate(symbols * self.n);
+            self.valid.truncate(symbols);
+            self.sum.truncate(blocks * self.n);
+            self.energy.truncate(blocks);
             self.count.truncate(symbols + 1);
         }
     }
@@ -135,10 +154,9 @@ impl SymbolSums {
         }
     }
 
-    /// Adds `Σ_{n ∈ from..to, valid} x_n(f)` to `sum` and, when given,
-    /// `Σ |x_n(f)|²` to `sum_sq`; returns the number of valid symbols.
-    /// `h` is the matrix the sums were built from.
-    pub fn add_interval(&self, h: &ChannelMatrix, from: usize, to: usize, sum: &mut [Complex64], mut sum_sq: Option<&mut [f64]>) -> usize {
+    /// Adds `Σ_{s ∈ from..to, valid} x_s` (`N` values) to `sum` and, when
+    /// given, `Σ ‖x_s‖²` to `energy`; returns the number of valid symbols.
+    pub fn add_interval(&self, from: usize, to: usize, sum: &mut [Complex64], mut energy: Option<&mut f64>) -> usize {
         let (a, b) = (from.min(self.symbols), to.min(self.symbols));
         if b <= a {
             return 0;
@@ -146,28 +164,27 @@ impl SymbolSums {
         let stride = Self::STRIDE;
         let (first_block, last_block) = (a.div_ceil(stride), b / stride);
         if last_block <= first_block {
-            self.add_rows(h, a, b, sum, sum_sq);
+            self.add_rows(a, b, sum, energy);
         } else {
-            self.add_rows(h, a, first_block * stride, sum, sum_sq.as_deref_mut());
-            let f = self.subcarriers;
-            let (lo, hi) = (first_block * f, last_block * f);
-            sum.iter_mut().zip(self.sum[lo..lo + f].iter().zip(&self.sum[hi..hi + f])).for_each(|(s, (l, h))| *s += h - l);
-            if let Some(sq) = sum_sq.as_deref_mut() {
-                let pairs = self.sum_sq[lo..lo + f].iter().zip(&self.sum_sq[hi..hi + f]);
-                sq.iter_mut().zip(pairs).for_each(|(s, (l, h))| *s += h - l);
+            self.add_rows(a, first_block * stride, sum, energy.as_deref_mut());
+            let n = self.n;
+            let (lo, hi) = (first_block * n, last_block * n);
+            sum.iter_mut().zip(self.sum[lo..lo + n].iter().zip(&self.sum[hi..hi + n])).for_each(|(s, (l, h))| *s += h - l);
+            if let Some(e) = energy.as_deref_mut() {
+                *e += self.energy[last_block] - self.energy[first_block];
             }
-            self.add_rows(h, last_block * stride, b, sum, sum_sq);
+            self.add_rows(last_block * stride, b, sum, energy);
         }
         (self.count[b] - self.count[a]) as usize
     }
 
-    fn add_rows(&self, h: &ChannelMatrix, a: usize, b: usize, sum: &mut [Complex64], mut sum_sq: Option<&mut [f64]>) {
-        for n in (a..b).filter(|&n| h.valid[n]) {
-            for (i, (&v, r)) in h.row(n).iter().zip(&self.reference).enumerate() {
+    fn add_rows(&self, a: usize, b: usize, sum: &mut [Complex64], mut energy: Option<&mut f64>) {
+        for s in (a..b).filter(|&s| self.valid[s]) {
+            for ((out, &v), r) in sum.iter_mut().zip(self.row(s)).zip(&self.reference) {
                 let x = widen(v) - r;
-                sum[i] += x;
-                if let Some(sq) = sum_sq.as_deref_mut() {
-                    sq[i] += x.norm_sqr();
+                *out += x;
+                if let Some(e) = energy.as_deref_mut() {
+                    *e += x.norm_sqr();
                 }
             }
         }
@@ -178,57 +195,49 @@ impl SymbolSums {
 mod tests {
     use super::*;
 
+    fn window(symbols: usize, n: usize) -> Vec<Complex32> {
+        (0..symbols * n + 3)
+            .map(|i| Complex32::new(1e3 + (i % n) as f32 + 0.01 * (i / n) as f32, ((i * 7) % 11) as f32 * 0.1))
+            .collect()
+    }
+
     #[test]
     fn intervals_match_direct_sums_and_skip_invalid_symbols() {
-        let mut h = ChannelMatrix::new(9, 3);
-        for n in 0..9 {
-            for f in 0..3 {
-                h.row_mut(n)[f] = Complex32::new(1e3 + n as f32 * 0.1 + f as f32, (n * f) as f32 * 0.01);
-            }
-        }
-        h.valid[0] = false;
-        h.valid[5] = false;
-        h.row_mut(0).iter_mut().for_each(|v| *v = Complex32::new(f32::NAN, f32::NAN));
+        let n = 4;
+        let mut w = window(45, n);
+        // Symbols 0 and 17 hold a non-finite sample (the window starts at 2).
+        w[3] = Complex32::new(f32::NAN, 0.0);
+        w[2 + 17 * n + 1] = Complex32::new(0.0, f32::INFINITY);
         let mut sums = SymbolSums::default();
-        sums.reset(&h);
-        assert_eq!(sums.reference, h.row(1).iter().map(|&v| widen(v)).collect::<Vec<_>>());
-        let mut s = vec![Complex64::new(0.0, 0.0); 3];
-        let mut q = vec![0.0; 3];
-        let m = sums.add_interval(&h, 0, 7, &mut s, Some(&mut q));
-        assert_eq!(m, 5);
-        for f in 0..3 {
-            let direct: Complex64 = [1, 2, 3, 4, 6].iter().map(|&n| h.at(n, f) - sums.reference[f]).sum();
-            let direct_sq: f64 = [1, 2, 3, 4, 6].iter().map(|&n| (h.at(n, f) - sums.reference[f]).norm_sqr()).sum();
-            assert!((s[f] - direct).norm() < 1e-9 && (q[f] - direct_sq).abs() < 1e-9);
-        }
-        assert_eq!(sums.count_in(4, 100), 4);
-        // Every interval, against direct sums (runs within, across and over blocks).
-        let long = {
-            let mut m = ChannelMatrix::new(45, 2);
-            for n in 0..45 {
-                m.row_mut(n)[0] = Complex32::new(n as f32, 1.0);
-                m.row_mut(n)[1] = Complex32::new(-2.0 * n as f32, 0.5 * n as f32);
-            }
-            m.valid[17] = false;
-            m
-        };
-        let mut sums_long = SymbolSums::default();
-        sums_long.reset(&long);
+        sums.reset(&w, 2, n).unwrap();
+        assert_eq!(sums.symbols, 45);
+        assert!(!sums.valid[0] && !sums.valid[17] && sums.valid[1]);
+        assert_eq!(sums.reference, sums.row(1).iter().map(|&v| widen(v)).collect::<Vec<_>>());
         for a in 0..46 {
             for b in a..46 {
-                let mut s = vec![Complex64::new(0.0, 0.0); 2];
-                let mut q = vec![0.0; 2];
-                let m = sums_long.add_interval(&long, a, b, &mut s, Some(&mut q));
-                let rows: Vec<usize> = (a..b.min(45)).filter(|&n| long.valid[n]).collect();
+                let mut s = vec![Complex64::new(0.0, 0.0); n];
+                let mut e = 0.0;
+                let m = sums.add_interval(a, b, &mut s, Some(&mut e));
+                let rows: Vec<usize> = (a..b.min(45)).filter(|&k| sums.valid[k]).collect();
                 assert_eq!(m, rows.len());
-                for f in 0..2 {
-                    let d: Complex64 = rows.iter().map(|&n| long.at(n, f) - sums_long.reference[f]).sum();
-                    let dq: f64 = rows.iter().map(|&n| (long.at(n, f) - sums_long.reference[f]).norm_sqr()).sum();
-                    assert!((s[f] - d).norm() < 1e-9 && (q[f] - dq).abs() < 1e-9, "{a}..{b}");
+                let mut direct_e = 0.0;
+                for t in 0..n {
+                    let d: Complex64 = rows.iter().map(|&k| widen(w[2 + k * n + t]) - sums.reference[t]).sum();
+                    direct_e += rows.iter().map(|&k| (widen(w[2 + k * n + t]) - sums.reference[t]).norm_sqr()).sum::<f64>();
+                    assert!((s[t] - d).norm() < 1e-6 * (1.0 + d.norm()), "{a}..{b}");
                 }
+                assert!((e - direct_e).abs() < 1e-4 * (1.0 + direct_e), "{a}..{b}: {e} vs {direct_e}");
             }
         }
         sums.truncate(4);
         assert_eq!((sums.symbols, sums.count_in(0, 9)), (4, 3));
+    }
+
+    #[test]
+    fn too_short_and_all_non_finite_windows_are_errors() {
+        let mut sums = SymbolSums::default();
+        assert!(matches!(sums.reset(&window(1, 8)[..7], 0, 8), Err(Error::TooShort { .. })));
+        let nan = vec![Complex32::new(f32::NAN, 0.0); 32];
+        assert!(matches!(sums.reset(&nan, 0, 8), Err(Error::NonFinite(_))));
     }
 }

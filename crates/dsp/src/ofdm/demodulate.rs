@@ -5,7 +5,6 @@ use rustfft::{Fft, FftPlanner};
 
 use super::{ChannelMatrix, KnownSymbol, OfdmConfig};
 use crate::error::{Error, Result};
-use crate::estimate::SymbolSums;
 
 /// Per-symbol OFDM demodulation: `H(f, n) = FFT(y_n)(f) / X(f)` (thesis
 /// ch. 4.2, Fig. 4-1).
@@ -61,19 +60,6 @@ impl Demodulator {
     /// (NaN row). Errors: [`Error::TooShort`] without one whole symbol,
     /// [`Error::NonFinite`] when no symbol is valid.
     pub fn demodulate(&mut self, samples: &[Complex32], first_sample: usize, out: &mut ChannelMatrix) -> Result<()> {
-        self.demodulate_with_sums(samples, first_sample, out, None)
-    }
-
-    /// [`Demodulator::demodulate`] that also builds the matrix's
-    /// [`SymbolSums`] row by row, while each row is still in cache (one
-    /// pass over the matrix fewer than building them afterwards).
-    pub fn demodulate_with_sums(
-        &mut self,
-        samples: &[Complex32],
-        first_sample: usize,
-        out: &mut ChannelMatrix,
-        mut sums: Option<&mut SymbolSums>,
-    ) -> Result<()> {
         let n = self.n;
         let available = samples.len().saturating_sub(first_sample);
         let symbols = available / n;
@@ -98,9 +84,6 @@ impl Demodulator {
             }
         }
         self.fft.process_with_scratch(&mut self.buffer, &mut self.scratch);
-        if let Some(s) = sums.as_deref_mut() {
-            s.begin(symbols, f_count);
-        }
         let nan = Complex32::new(f32::NAN, f32::NAN);
         for ((spectrum, row), &valid) in self.buffer.chunks_exact(n).zip(out.data.chunks_exact_mut(f_count)).zip(&out.valid) {
             if valid {
@@ -110,12 +93,6 @@ impl Demodulator {
             } else {
                 row.iter_mut().for_each(|h| *h = nan);
             }
-            if let Some(s) = sums.as_deref_mut() {
-                s.push_row(row, valid);
-            }
-        }
-        if let Some(s) = sums {
-            s.finish();
         }
         if !out.valid.iter().any(|&v| v) {
             return Err(Error::NonFinite(format!("all {symbols} symbols of the window have non-finite samples")));

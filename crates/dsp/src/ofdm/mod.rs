@@ -11,6 +11,9 @@
 //!   (time-domain correlation with the known symbol).
 //! - [`Demodulator`]: per-symbol FFT ÷ `X(f)` → [`ChannelMatrix`]
 //!   `H(f, n)`, FFT planned once, buffers reused.
+//! - [`ChannelTransform`]: the same map for one (summed) symbol, and the
+//!   time-domain filter of a projection of `H` — what the real-time path
+//!   uses instead of demodulating every symbol.
 //!
 //! Subcarrier order everywhere outside the FFT is ascending frequency over
 //! the `N − 1` active (non-DC) bins; [`OfdmConfig::subcarrier_frequencies`]
@@ -22,9 +25,11 @@ mod config;
 mod demodulate;
 mod symbol;
 mod timing;
+mod transform;
 
 pub use channel::{widen, ChannelMatrix};
 pub use config::OfdmConfig;
 pub use demodulate::Demodulator;
 pub use symbol::KnownSymbol;
 pub use timing::{symbol_timing, SymbolTiming};
+pub use transform::ChannelTransform;
