@@ -429,13 +429,13 @@ def command_stream(args) -> int:
     check_parameters(args.method, scene, params)
     if args.speed is not None and not args.speed > 0:
         raise UsageError(f"--speed must be > 0, got {args.speed}")
-    if args.workers_per_antenna < 1:
-        raise UsageError(f"--workers-per-antenna must be >= 1, got {args.workers_per_antenna}")
+    if args.workers is not None and args.workers < 1:
+        raise UsageError(f"--workers must be >= 1, got {args.workers}")
     calibration = calibration_for(args)
     speed = None if args.fast else (1.0 if args.speed is None else args.speed)
     result = stream_sigmf(
         args.sigmf, scene, calibration, args.method, speed=speed,
-        workers_per_antenna=args.workers_per_antenna, ema_alpha=args.ema_alpha, **params,
+        workers=args.workers, shared=args.shared, ema_alpha=args.ema_alpha, **params,
     )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -637,7 +637,10 @@ def build_parser() -> argparse.ArgumentParser:
     pace = stream.add_mutually_exclusive_group()
     pace.add_argument("--speed", type=float, help="replay at this multiple of the recorded timing (default 1: live)")
     pace.add_argument("--fast", action="store_true", help="as fast as possible (throughput; latency then includes queueing)")
-    stream.add_argument("--workers-per-antenna", type=int, default=1, help="DSP worker threads per receive antenna (default 1)")
+    stream.add_argument("--workers", type=int, help="DSP worker threads per receive antenna (default 1)")
+    stream.add_argument(
+        "--shared", action="store_true", help="one pool of --workers threads for all antennas (default: one per core)"
+    )
     stream.add_argument("--ema-alpha", type=float, help="EMA factor across each tag's channels (default: off)")
     stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
     stream.set_defaults(run=command_stream)

@@ -449,12 +449,14 @@ impl Engine {
     /// transmitter sample mod N, −1 unknown); `dsp` the helper design and
     /// options; `tx` and `rx` (R) antenna indices in this engine's scene;
     /// `timing_reference` (R) per-rx D_r; `correction` (R, F) complex128;
-    /// `speed` None: as fast as possible, else × the recording's timing.
+    /// `speed` None: as fast as possible, else × the recording's timing;
+    /// `workers` threads per antenna (None: 1), or with `shared` that many
+    /// in one pool for all antennas (None: one per core).
     /// Returns the columns of `run` plus `latency_ns`, `receivers` (per
     /// reply), `stage_ns` (K, 5; `stages` names the columns),
     /// `wall_s`, `declined` {reason: count}, `no_channel`.
     #[pyo3(signature = (windows, tag, time_s, tx_phase, dsp, tx, rx, timing_reference=None, correction=None,
-        ema_alpha=None, workers_per_antenna=2, queue_depth=64, speed=None))]
+        ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
     #[allow(clippy::too_many_arguments)]
     fn run_stream<'py>(
         &mut self,
@@ -469,12 +471,13 @@ impl Engine {
         timing_reference: Option<Vec<usize>>,
         correction: Option<PyReadonlyArray2<num_complex::Complex64>>,
         ema_alpha: Option<f64>,
-        workers_per_antenna: usize,
+        workers: Option<usize>,
+        shared: bool,
         queue_depth: usize,
         speed: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         use scattertrack_runtime::dsp::DspSetup;
-        use scattertrack_runtime::{Pacing, Reply, RuntimeConfig};
+        use scattertrack_runtime::{Pacing, Reply, RuntimeConfig, Workers};
         let array = windows.as_array();
         let (k, r, _) = array.dim();
         let (tag, t, phase) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx_phase.as_array().to_vec());
@@ -505,9 +508,16 @@ impl Engine {
             ema_alpha,
         };
         setup.validate(r).map_err(|e| value_error(e.to_string()))?;
-        let mut fusion = setup.fusion().map_err(|e| value_error(e.to_string()))?;
+        let pool = scattertrack_runtime::dsp::BufferPool::default();
+        let mut fusion = setup.fusion(&pool).map_err(|e| value_error(e.to_string()))?;
+        let workers = match (workers, shared) {
+            (None, false) => Workers::PerAntenna(1),
+            (None, true) => Workers::Shared(std::thread::available_parallelism().map_or(2, |n| n.get())),
+            (Some(k), false) => Workers::PerAntenna(k.max(1)),
+            (Some(k), true) => Workers::Shared(k.max(1)),
+        };
         let config = RuntimeConfig {
-            workers_per_antenna,
+            workers,
             queue_depth,
             pacing: speed.map_or(Pacing::AsFastAsPossible, |speed| Pacing::Recorded { speed }),
             tx,
@@ -524,7 +534,7 @@ impl Engine {
             .collect();
         let inner = &mut self.inner;
         let report = py.detach(move || {
-            scattertrack_runtime::run(replies, |slot| setup.worker(slot).expect("validated"), &mut fusion, inner, &config)
+            scattertrack_runtime::run(replies, |_| setup.worker(&pool).expect("validated"), &mut fusion, inner, &config)
         });
         let mut c = Columns::default();
         for o in &report.outputs {

@@ -467,7 +467,7 @@ impl ReplyProcessor {
             return Err(errors.into_iter().flatten().next().unwrap_or(Error::Shape("no antenna".into())));
         }
         let chip_nominal = self.config.chip_symbols();
-        let features: Vec<FeatureSums> = detecting.iter().map(|&a| antennas[a].sums.clone()).collect();
+        let features: Vec<&FeatureSums> = detecting.iter().map(|&a| &antennas[a].sums).collect();
         // Stage 1 of the search was done per antenna (by the fronts) when all
         // windows had the same length; the shares add up.
         let precomputed = detecting.iter().all(|&a| antennas[a].coarse_symbols == symbols && !antennas[a].coarse.is_empty());

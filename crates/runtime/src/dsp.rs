@@ -6,6 +6,7 @@
 //! optional per-tag EMA, on the fusion thread.
 
 use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use num_complex::Complex64;
 use scattertrack_dsp::estimate::Ema;
@@ -59,20 +60,23 @@ impl DspSetup {
         Ok(())
     }
 
-    /// The worker of antenna slot `slot` (`make_worker` of [`crate::run`]).
-    pub fn worker(&self, slot: usize) -> Result<DspWorker> {
+    /// A worker for any antenna slot (`make_worker` of [`crate::run`]),
+    /// drawing its output buffers from `pool` (see [`BufferPool`]).
+    pub fn worker(&self, pool: &BufferPool) -> Result<DspWorker> {
         Ok(DspWorker {
             front: AntennaFront::new(&self.config, &self.symbol, &self.options)?,
-            reference: self.timing_reference.as_ref().map(|r| r[slot]),
+            reference: self.timing_reference.clone(),
             n: self.config.subcarriers,
+            pool: pool.clone(),
         })
     }
 
-    /// The fusion stage.
-    pub fn fusion(&self) -> Result<DspFusion> {
+    /// The fusion stage, returning used buffers to `pool`.
+    pub fn fusion(&self, pool: &BufferPool) -> Result<DspFusion> {
         let mut processor = ReplyProcessor::new(self.config.clone(), self.symbol.clone(), self.options.clone())?;
         processor.set_timing_reference(self.timing_reference.clone())?;
         Ok(DspFusion {
+            pool: pool.clone(),
             processor,
             correction: self.correction.clone(),
             ema_alpha: self.ema_alpha,
@@ -82,11 +86,36 @@ impl DspSetup {
     }
 }
 
+/// Used [`AntennaSymbols`] travelling back from fusion to the workers.
+///
+/// Why: each holds a copy of the antenna's window (240 kB in the thesis
+/// set-up) and its sums; allocating them per reply on a worker and freeing
+/// them on the fusion thread made the allocator hand out fresh pages
+/// (page faults, zeroing) every time, which cost more than the DSP itself.
+#[derive(Clone, Default)]
+pub struct BufferPool(Arc<Mutex<Vec<AntennaSymbols>>>);
+
+impl BufferPool {
+    fn take(&self) -> AntennaSymbols {
+        self.0.lock().ok().and_then(|mut p| p.pop()).unwrap_or_default()
+    }
+
+    fn give(&self, used: Vec<AntennaSymbols>) {
+        if let Ok(mut p) = self.0.lock() {
+            // Bounded: a stalled fusion cannot make the pool grow for ever.
+            let room = 256usize.saturating_sub(p.len());
+            p.extend(used.into_iter().take(room));
+        }
+    }
+}
+
 /// Steps 1–3a of the reply pipeline for one antenna.
 pub struct DspWorker {
     front: AntennaFront,
-    reference: Option<usize>,
+    /// `D_r` of every rx slot.
+    reference: Option<Vec<usize>>,
     n: usize,
+    pool: BufferPool,
 }
 
 impl AntennaWorker for DspWorker {
@@ -95,11 +124,11 @@ impl AntennaWorker for DspWorker {
     fn process(&mut self, slot: usize, reply: &Reply) -> AntennaSymbols {
         // With the transmitter phase and a reference the symbol grid is
         // known: (D_r − tx_phase) mod N, no correlation timing.
-        let first = match (reply.tx_phase, self.reference) {
-            (Some(phase), Some(d)) => Some((d + self.n - phase % self.n) % self.n),
+        let first = match (reply.tx_phase, self.reference.as_ref().and_then(|r| r.get(slot))) {
+            (Some(phase), Some(&d)) => Some((d + self.n - phase % self.n) % self.n),
             _ => None,
         };
-        let mut out = AntennaSymbols::default();
+        let mut out = self.pool.take();
         self.front.process(&reply.windows[slot], first, &mut out);
         out
     }
@@ -107,6 +136,7 @@ impl AntennaWorker for DspWorker {
 
 /// The joint stage: detection, tag channel, calibration, EMA.
 pub struct DspFusion {
+    pool: BufferPool,
     processor: ReplyProcessor,
     correction: Option<Vec<Complex64>>,
     ema_alpha: Option<f64>,
@@ -119,6 +149,7 @@ impl ReplyFusion<AntennaSymbols> for DspFusion {
         // The workers already placed the symbol grid; without a transmitter
         // phase the reference is neither used nor learnt.
         let estimate = self.processor.finish(&mut antennas, reply.tx_phase.filter(|_| self.processor.timing_reference().is_some()));
+        self.pool.give(antennas);
         let estimate = estimate.map_err(|e| e.kind().to_string())?;
         let mut h = estimate.tag_channel;
         if let Some(c) = &self.correction {

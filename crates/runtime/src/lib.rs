@@ -30,5 +30,5 @@ mod pipeline;
 
 pub use pipeline::{
     run, AntennaWorker, ChannelEstimator, Output, Pacing, PassThroughFusion, PerAntenna, Reply, ReplyFusion, ReplyHeader,
-    RunReport, RuntimeConfig, STAGES,
+    RunReport, RuntimeConfig, Workers, STAGES,
 };

@@ -9,7 +9,7 @@ use num_complex::{Complex32, Complex64};
 use scattertrack_core::engine::Engine;
 use scattertrack_core::scene::{Antenna, Region, Role, Scene, SPEED_OF_LIGHT};
 use scattertrack_core::track::Params;
-use scattertrack_runtime::{run, ChannelEstimator, Pacing, PassThroughFusion, PerAntenna, Reply, RuntimeConfig};
+use scattertrack_runtime::{run, ChannelEstimator, Pacing, PassThroughFusion, PerAntenna, Reply, RuntimeConfig, Workers};
 
 fn scene() -> Scene {
     let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
@@ -94,9 +94,25 @@ fn every_reply_comes_out_in_order_with_its_latency() {
 fn recorded_pacing_takes_the_recording_time() {
     let (input, _) = replies(60); // 0.2 s of replies
     let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
-    let cfg = RuntimeConfig { pacing: Pacing::Recorded { speed: 1.0 }, workers_per_antenna: 1, ..config() };
+    let cfg = RuntimeConfig { pacing: Pacing::Recorded { speed: 1.0 }, workers: Workers::PerAntenna(1), ..config() };
     let report = run(input, |_| PerAntenna(PassThrough { delay: Duration::ZERO }), &mut PassThroughFusion, &mut engine, &cfg);
     assert_eq!(report.outputs.len(), 60);
     // 59 intervals of 1/300 s: the run cannot be faster than the recording.
     assert!(report.wall_s >= 59.0 / 300.0 * 0.95, "{}", report.wall_s);
+}
+
+
+#[test]
+fn shared_and_per_antenna_pools_give_the_same_track() {
+    let (input, _) = replies(120);
+    let mut outputs = Vec::new();
+    for workers in [Workers::Shared(1), Workers::Shared(3), Workers::PerAntenna(1), Workers::PerAntenna(2)] {
+        let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
+        let cfg = RuntimeConfig { workers, ..config() };
+        let report =
+            run(input.clone(), |_| PerAntenna(PassThrough { delay: Duration::ZERO }), &mut PassThroughFusion, &mut engine, &cfg);
+        assert_eq!(report.outputs.len(), 120);
+        outputs.push(report.outputs.iter().map(|o| o.estimate.as_ref().map(|e| e.position)).collect::<Vec<_>>());
+    }
+    assert!(outputs.windows(2).all(|w| w[0] == w[1]));
 }

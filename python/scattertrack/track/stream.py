@@ -78,7 +78,8 @@ def stream_sigmf(
     method: str = "turbotrack",
     *,
     speed: float | None = None,
-    workers_per_antenna: int = 1,
+    workers: int | None = None,
+    shared: bool = False,
     queue_depth: int = 64,
     ema_alpha: float | None = None,
     dsp_options: dict | None = None,
@@ -91,8 +92,11 @@ def stream_sigmf(
     (None: uncalibrated channels, which no tracker can use: a warning is
     not enough, so it raises ValueError). ``speed``: None as fast as
     possible, else a multiple of the recording's own timing (1 = live).
-    ``params``: the tracker's parameters. Windows are cut to the shortest
-    window's length (the helper records equal windows).
+    ``workers``: DSP worker threads per receive antenna (None: 1, the
+    thesis's layout), or with ``shared`` that many in one pool for all
+    antennas (None: one per core; see ``crates/runtime``). ``params``: the tracker's parameters.
+    Windows are cut to the shortest window's length (the helper records
+    equal windows).
     """
     if method not in wideband.WIDEBAND_METHODS:
         raise ValueError(f"method '{method}' does not track helper recordings (one of {', '.join(wideband.WIDEBAND_METHODS)})")
@@ -134,7 +138,8 @@ def stream_sigmf(
         timing_reference=calibration.timing_reference,
         correction=np.ascontiguousarray(calibration.correction, dtype=np.complex128),
         ema_alpha=ema_alpha,
-        workers_per_antenna=int(workers_per_antenna),
+        workers=None if workers is None else int(workers),
+        shared=bool(shared),
         queue_depth=int(queue_depth),
         speed=speed,
     )

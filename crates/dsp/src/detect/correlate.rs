@@ -12,6 +12,12 @@ pub struct FeatureSums {
     sum_sq: Vec<f64>,
 }
 
+impl AsRef<FeatureSums> for FeatureSums {
+    fn as_ref(&self) -> &FeatureSums {
+        self
+    }
+}
+
 impl FeatureSums {
     /// Running sums of `feature` (one value per symbol). Fails with
     /// [`Error::NonFinite`] when no value is finite.

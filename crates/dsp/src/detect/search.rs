@@ -40,8 +40,8 @@ pub struct Detection {
     pub scale_uncertainty: f64,
 }
 
-fn score(features: &[FeatureSums], template: &Template, start: f64, chip: f64) -> f64 {
-    let sum: f64 = features.iter().map(|f| normalised_correlation(f, template, start, chip).powi(2)).sum();
+fn score<F: AsRef<FeatureSums>>(features: &[F], template: &Template, start: f64, chip: f64) -> f64 {
+    let sum: f64 = features.iter().map(|f| normalised_correlation(f.as_ref(), template, start, chip).powi(2)).sum();
     (sum / features.len() as f64).sqrt()
 }
 
@@ -66,8 +66,8 @@ fn score(features: &[FeatureSums], template: &Template, start: f64, chip: f64) -
 /// lies inside the window count. Errors: [`Error::BadConfig`] for bad
 /// options, [`Error::TooShort`] when the preamble cannot fit,
 /// [`Error::NoPreamble`] below the threshold.
-pub fn detect_preamble(
-    features: &[FeatureSums],
+pub fn detect_preamble<F: AsRef<FeatureSums>>(
+    features: &[F],
     template: &Template,
     nominal_chip_symbols: f64,
     options: &DetectionOptions,
@@ -84,11 +84,11 @@ pub fn detect_preamble(
     if features.is_empty() {
         return Err(Error::Shape("no detection feature given".into()));
     }
-    let symbols = features.iter().map(|f| f.len()).min().unwrap_or(0);
+    let symbols = features.iter().map(|f| f.as_ref().len()).min().unwrap_or(0);
     let grid = CoarseGrid::new(symbols, template.len(), nominal_chip_symbols, options.blf_tolerance);
     let mut summed = vec![0.0; grid.len()];
     for feature in features {
-        grid.add_scores(feature, template, &mut summed);
+        grid.add_scores(feature.as_ref(), template, &mut summed);
     }
     detect_on_grid(features, template, nominal_chip_symbols, options, &grid, &summed)
 }
@@ -165,8 +165,8 @@ impl CoarseGrid {
 /// Stages 2 and 3 of [`detect_preamble`] given the antennas' summed
 /// stage-1 scores on `grid` ([`CoarseGrid::add_scores`] over every feature
 /// in `features`): the best alignment, refined, then the threshold.
-pub fn detect_on_grid(
-    features: &[FeatureSums],
+pub fn detect_on_grid<F: AsRef<FeatureSums>>(
+    features: &[F],
     template: &Template,
     nominal_chip_symbols: f64,
     options: &DetectionOptions,
@@ -195,8 +195,8 @@ pub fn detect_on_grid(
 
 /// The combined score with the template centred at `centre` (symbols) at
 /// BLF scale `scale`; −∞ where the template leaves the window.
-fn centred_score(
-    features: &[FeatureSums],
+fn centred_score<F: AsRef<FeatureSums>>(
+    features: &[F],
     template: &Template,
     nominal: f64,
     centre: f64,
@@ -222,15 +222,15 @@ fn centred_score(
 /// Used as the second stage of [`detect_preamble`] and, with the preamble
 /// extended by the decided payload chips (more transitions over a longer
 /// span), to pin the BLF down for the payload.
-pub fn refine_detection(
-    features: &[FeatureSums],
+pub fn refine_detection<F: AsRef<FeatureSums>>(
+    features: &[F],
     template: &Template,
     nominal_chip_symbols: f64,
     start: f64,
     scale: f64,
     scale_step: f64,
 ) -> Detection {
-    let symbols = features.iter().map(|f| f.len()).min().unwrap_or(0) as f64;
+    let symbols = features.iter().map(|f| f.as_ref().len()).min().unwrap_or(0) as f64;
     let k = template.len() as f64;
     let eval =
         |centre: f64, scale: f64| centred_score(features, template, nominal_chip_symbols, centre, scale, symbols);
@@ -270,7 +270,7 @@ pub fn refine_detection(
         chip_symbols: chip,
         blf_scale: scale,
         score: top.max(0.0),
-        correlations: features.iter().map(|f| normalised_correlation(f, template, start, chip)).collect(),
+        correlations: features.iter().map(|f| normalised_correlation(f.as_ref(), template, start, chip)).collect(),
         scale_uncertainty: scale_step / 2.0,
     }
 }
