@@ -45,12 +45,10 @@ Usage: ``.venv/bin/python bench/turbotrack.py [--seeds N] [--skip BLOCKS] [--out
 from __future__ import annotations
 
 import argparse
-import datetime
 import importlib.util
 import json
 import math
 import os
-import platform
 import shlex
 import subprocess
 import sys
@@ -576,24 +574,8 @@ def git_commit() -> dict:
 
 
 def environment() -> dict:
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
-    return {
-        "scattertrack": scattertrack.__version__,
-        "git": git_commit(),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "platform": platform.platform(),
-        "cpu": cpu,
-        "cpus": os.cpu_count(),
-        "date": datetime.datetime.now().isoformat(timespec="seconds"),
-    }
+    """bench/run.py's record of the machine and versions, plus the git commit."""
+    return {**_run.environment(), "git": git_commit()}
 
 
 def command_line(argv) -> str:
