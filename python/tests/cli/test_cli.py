@@ -441,3 +441,17 @@ def test_stream_a_cots_method_and_iq_of_a_glac_scenario_are_usage_errors(capsys,
     assert code == 2 and "glac" in err
     code, _, err = run(capsys, "simulate", "--scenario", "glac-2d-10cms", "--iq", "--out", tmp_path / "x")
     assert code == 2 and "glac pipeline" in err
+
+
+def test_stream_a_corrupt_recording_names_the_file(capsys, iq_session, tmp_path):
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    for name in ("recording.sigmf-meta", "recording.sigmf-data", "calibration.sigmf-meta", "calibration.sigmf-data"):
+        shutil.copy(iq_session / name, bad / name)
+    data = bad / "recording.sigmf-data"
+    data.write_bytes(data.read_bytes()[:-6])  # cut mid-sample
+    code, _, err = run(
+        capsys, "stream", "--scene", iq_session / "scene.toml", "--sigmf", bad / "recording.sigmf-meta",
+        "--fast", "--out", tmp_path / "track.csv",
+    )
+    assert code == 2 and "recording.sigmf-data" in err and "Traceback" not in err
