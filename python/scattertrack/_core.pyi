@@ -54,6 +54,28 @@ class Engine:
         """Wideband frames: per frame tag, time, tx index and row offsets; per row
         rx index, subcarrier Hz and channel (sorted by rx, then frequency).
         Same columns as ``run``; ``row`` is the frame index."""
+    def run_stream(
+        self,
+        windows: npt.NDArray[np.complex64],
+        tag: npt.NDArray[np.int64],
+        time_s: npt.NDArray[np.float64],
+        tx_phase: npt.NDArray[np.int64],
+        dsp: OfdmDsp,
+        tx: int,
+        rx: list[int],
+        timing_reference: list[int] | None = None,
+        correction: npt.NDArray[np.complex128] | None = None,
+        ema_alpha: float | None = None,
+        workers: int | None = None,
+        shared: bool = False,
+        queue_depth: int = 64,
+        speed: float | None = None,
+    ) -> dict[str, Any]:
+        """Helper IQ through the real-time runtime: windows (K, R, S) per reply
+        and rx slot; tx_phase -1 where unknown; correction (R, F); speed None
+        = as fast as possible. Returns the columns of ``run`` plus latency_ns
+        (K,), receivers (K,), stage_ns (K, 5), stages, wall_s, no_channel and
+        declined {reason: count}."""
     def trajectory(self, tag: int) -> list[tuple[float, list[float]]]:
         """Backtracked MAP trajectory (TurboTrack): (time_s, position m) pairs."""
     def stats(self, tag: int) -> dict[str, int]: ...
