@@ -76,6 +76,32 @@ class Engine:
         = as fast as possible. Returns the columns of ``run`` plus latency_ns
         (K,), receivers (K,), stage_ns (K, 5), stages, wall_s, no_channel and
         declined {reason: count}."""
+    def run_stream_file(
+        self,
+        path: str,
+        datatype: str,
+        channels: int,
+        scale: float,
+        window_len: int,
+        start_sample: npt.NDArray[np.int64],
+        tag: npt.NDArray[np.int64],
+        time_s: npt.NDArray[np.float64],
+        tx_phase: npt.NDArray[np.int64],
+        dsp: OfdmDsp,
+        tx: int,
+        rx: list[int],
+        timing_reference: list[int] | None = None,
+        correction: npt.NDArray[np.complex128] | None = None,
+        ema_alpha: float | None = None,
+        workers: int | None = None,
+        shared: bool = False,
+        queue_depth: int = 64,
+        speed: float | None = None,
+    ) -> dict[str, Any]:
+        """``run_stream`` with capture reading each reply's windows from an
+        interleaved IQ file (SigMF data: ci16_le or cf32_le, ``channels``
+        interleaved, stored = scale x baseband), ``window_len`` samples from
+        each ``start_sample``; adds ``unreadable`` (windows it could not read)."""
     def trajectory(self, tag: int) -> list[tuple[float, list[float]]]:
         """Backtracked MAP trajectory (TurboTrack): (time_s, position m) pairs."""
     def stats(self, tag: int) -> dict[str, int]: ...

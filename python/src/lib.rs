@@ -454,7 +454,7 @@ impl Engine {
     /// in one pool for all antennas (None: one per core).
     /// Returns the columns of `run` plus `latency_ns`, `receivers` (per
     /// reply), `stage_ns` (K, 5; `stages` names the columns),
-    /// `wall_s`, `declined` {reason: count}, `no_channel`.
+    /// `wall_s`, `declined` {reason: count}, `no_channel`, `unreadable`.
     #[pyo3(signature = (windows, tag, time_s, tx_phase, dsp, tx, rx, timing_reference=None, correction=None,
         ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
     #[allow(clippy::too_many_arguments)]
@@ -469,95 +469,83 @@ impl Engine {
         tx: usize,
         rx: Vec<usize>,
         timing_reference: Option<Vec<usize>>,
-        correction: Option<PyReadonlyArray2<num_complex::Complex64>>,
+        correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
         ema_alpha: Option<f64>,
         workers: Option<usize>,
         shared: bool,
         queue_depth: usize,
         speed: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        use scattertrack_runtime::dsp::DspSetup;
-        use scattertrack_runtime::{Pacing, Reply, RuntimeConfig, Workers};
+        use scattertrack_runtime::Reply;
         let array = windows.as_array();
         let (k, r, _) = array.dim();
-        let (tag, t, phase) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx_phase.as_array().to_vec());
-        if tag.len() != k || t.len() != k || phase.len() != k {
-            return Err(value_error("tag, time_s and tx_phase need one entry per reply (windows' first axis)"));
-        }
-        if rx.len() != r {
-            return Err(value_error(format!("{} rx antennas for windows of {r} rx", rx.len())));
-        }
-        if tag.iter().any(|&x| x < 0) {
-            return Err(value_error("tag indices must be non-negative"));
-        }
-        if let Some(bad) = rx.iter().chain(std::iter::once(&tx)).find(|&&x| x >= self.antennas) {
-            return Err(value_error(format!("antenna index {bad} out of range")));
-        }
-        if let Some(s) = speed {
-            if !(s > 0.0 && s.is_finite()) {
-                return Err(value_error(format!("speed must be > 0, got {s}")));
-            }
-        }
-        let processor = &dsp.inner;
-        let setup = DspSetup {
-            config: processor.config().clone(),
-            symbol: processor.symbol().clone(),
-            options: processor.options().clone(),
-            timing_reference,
-            correction: correction.map(|c| c.as_array().iter().copied().collect()),
-            ema_alpha,
-        };
-        setup.validate(r).map_err(|e| value_error(e.to_string()))?;
-        let pool = scattertrack_runtime::dsp::BufferPool::default();
-        let mut fusion = setup.fusion(&pool).map_err(|e| value_error(e.to_string()))?;
-        let workers = match (workers, shared) {
-            (None, false) => Workers::PerAntenna(1),
-            (None, true) => Workers::Shared(std::thread::available_parallelism().map_or(2, |n| n.get())),
-            (Some(k), false) => Workers::PerAntenna(k.max(1)),
-            (Some(k), true) => Workers::Shared(k.max(1)),
-        };
-        let config = RuntimeConfig {
-            workers,
-            queue_depth,
-            pacing: speed.map_or(Pacing::AsFastAsPossible, |speed| Pacing::Recorded { speed }),
-            tx,
-            rx,
-            frequencies_hz: setup.config.subcarrier_frequencies(),
-        };
-        let replies: Vec<Reply> = (0..k)
-            .map(|i| Reply {
-                tag: tag[i] as usize,
-                time_s: t[i],
-                tx_phase: (phase[i] >= 0).then_some(phase[i] as usize),
+        let headers = stream_headers(&tag, &time_s, &tx_phase, k)?;
+        let replies: Vec<Reply> = headers
+            .iter()
+            .enumerate()
+            .map(|(i, h)| Reply {
+                tag: h.tag,
+                time_s: h.time_s,
+                tx_phase: h.tx_phase,
                 windows: (0..r).map(|a| array.slice(numpy::ndarray::s![i, a, ..]).to_vec()).collect(),
             })
             .collect();
-        let inner = &mut self.inner;
-        let report = py.detach(move || {
-            scattertrack_runtime::run(replies, |_| setup.worker(&pool).expect("validated"), &mut fusion, inner, &config)
-        });
-        let mut c = Columns::default();
-        for o in &report.outputs {
-            if let Some(e) = &o.estimate {
-                c.push(o.index as usize, e);
-            }
+        let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, shared, queue_depth, speed };
+        self.stream(py, scattertrack_runtime::InMemory::new(replies), r, &dsp.inner, options, None)
+    }
+
+    /// [`Engine::run_stream`] reading the windows from an interleaved IQ
+    /// file as capture goes (memory stays bounded whatever the length):
+    /// `path` the samples (SigMF `.sigmf-data`), `datatype` "ci16_le" or
+    /// "cf32_le", `channels` interleaved, stored = `scale` × baseband,
+    /// every window `window_len` samples from `start_sample` (K,).
+    #[pyo3(signature = (path, datatype, channels, scale, window_len, start_sample, tag, time_s, tx_phase, dsp, tx, rx,
+        timing_reference=None, correction=None, ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
+    #[allow(clippy::too_many_arguments)]
+    fn run_stream_file<'py>(
+        &mut self,
+        py: Python<'py>,
+        path: std::path::PathBuf,
+        datatype: &str,
+        channels: usize,
+        scale: f32,
+        window_len: usize,
+        start_sample: PyReadonlyArray1<i64>,
+        tag: PyReadonlyArray1<i64>,
+        time_s: PyReadonlyArray1<f64>,
+        tx_phase: PyReadonlyArray1<i64>,
+        dsp: PyRef<'py, dsp::OfdmDsp>,
+        tx: usize,
+        rx: Vec<usize>,
+        timing_reference: Option<Vec<usize>>,
+        correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
+        ema_alpha: Option<f64>,
+        workers: Option<usize>,
+        shared: bool,
+        queue_depth: usize,
+        speed: Option<f64>,
+    ) -> PyResult<Bound<'py, PyDict>> {
+        use scattertrack_runtime::source::{IqFileReplies, SampleFormat, WindowSpec};
+        let format = match datatype {
+            "ci16_le" => SampleFormat::ComplexI16,
+            "cf32_le" => SampleFormat::ComplexF32,
+            other => return Err(value_error(format!("unsupported datatype {other:?} (ci16_le or cf32_le)"))),
+        };
+        let starts = start_sample.as_array().to_vec();
+        let headers = stream_headers(&tag, &time_s, &tx_phase, starts.len())?;
+        if starts.iter().any(|&x| x < 0) {
+            return Err(value_error("start_sample must be non-negative"));
         }
-        let d = c.into_dict(py)?;
-        let latency: Vec<u64> = report.outputs.iter().map(|o| o.latency_ns).collect();
-        let receivers: Vec<i64> = report.outputs.iter().map(|o| o.receivers as i64).collect();
-        let stages: Vec<u64> = report.stage_ns.iter().flat_map(|s| s.iter().copied()).collect();
-        d.set_item("latency_ns", latency.into_pyarray(py))?;
-        d.set_item("receivers", receivers.into_pyarray(py))?;
-        d.set_item("stage_ns", stages.into_pyarray(py).reshape([report.stage_ns.len(), 5]).map_err(value_error)?)?;
-        d.set_item("stages", scattertrack_runtime::STAGES.to_vec())?;
-        d.set_item("wall_s", report.wall_s)?;
-        d.set_item("no_channel", report.no_channel)?;
-        let declined = PyDict::new(py);
-        for (reason, count) in &report.declined {
-            declined.set_item(reason, count)?;
-        }
-        d.set_item("declined", declined)?;
-        Ok(d)
+        let specs = headers
+            .iter()
+            .zip(&starts)
+            .map(|(h, &start)| WindowSpec { start_sample: start as u64, tag: h.tag, time_s: h.time_s, tx_phase: h.tx_phase })
+            .collect();
+        let replies = IqFileReplies::open(&path, format, channels, scale, window_len, specs)
+            .map_err(|e| PyErr::new::<pyo3::exceptions::PyOSError, _>(format!("{}: {e}", path.display())))?;
+        let unreadable = replies.unreadable.clone();
+        let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, shared, queue_depth, speed };
+        self.stream(py, replies, channels, &dsp.inner, options, Some(unreadable))
     }
 
     /// Smoothed (backtracked MAP) trajectory of tag `tag`: (time_s, position) pairs.
@@ -664,6 +652,127 @@ fn default_params<'py>(py: Python<'py>, method: &str) -> PyResult<Bound<'py, PyD
     d.set_item("init_max_speed_m_s", p.initial.max_speed_m_s)?;
     d.set_item("init_max_pair_gap_s", p.initial.max_pair_gap_s)?;
     Ok(d)
+}
+
+/// A reply's header as given from Python (validated).
+struct StreamHeader {
+    tag: usize,
+    time_s: f64,
+    tx_phase: Option<usize>,
+}
+
+fn stream_headers(
+    tag: &PyReadonlyArray1<i64>,
+    time_s: &PyReadonlyArray1<f64>,
+    tx_phase: &PyReadonlyArray1<i64>,
+    k: usize,
+) -> PyResult<Vec<StreamHeader>> {
+    let (tag, t, phase) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx_phase.as_array().to_vec());
+    if tag.len() != k || t.len() != k || phase.len() != k {
+        return Err(value_error("tag, time_s and tx_phase need one entry per reply"));
+    }
+    if tag.iter().any(|&x| x < 0) {
+        return Err(value_error("tag indices must be non-negative"));
+    }
+    Ok((0..k)
+        .map(|i| StreamHeader { tag: tag[i] as usize, time_s: t[i], tx_phase: (phase[i] >= 0).then_some(phase[i] as usize) })
+        .collect())
+}
+
+/// The runtime's settings shared by `run_stream` and `run_stream_file`.
+struct StreamOptions<'py> {
+    tx: usize,
+    rx: Vec<usize>,
+    timing_reference: Option<Vec<usize>>,
+    correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
+    ema_alpha: Option<f64>,
+    workers: Option<usize>,
+    shared: bool,
+    queue_depth: usize,
+    speed: Option<f64>,
+}
+
+impl Engine {
+    /// Runs the runtime over `replies` (`r` rx windows each) and returns the
+    /// dictionary of `run_stream`.
+    fn stream<'py, S>(
+        &mut self,
+        py: Python<'py>,
+        replies: S,
+        r: usize,
+        processor: &scattertrack_dsp::reply::ReplyProcessor,
+        o: StreamOptions<'py>,
+        unreadable: Option<std::sync::Arc<std::sync::atomic::AtomicU64>>,
+    ) -> PyResult<Bound<'py, PyDict>>
+    where
+        S: scattertrack_runtime::ReplySource,
+    {
+        use scattertrack_runtime::dsp::DspSetup;
+        use scattertrack_runtime::{Pacing, RuntimeConfig, Workers};
+        if o.rx.len() != r {
+            return Err(value_error(format!("{} rx antennas for windows of {r} rx", o.rx.len())));
+        }
+        if let Some(bad) = o.rx.iter().chain(std::iter::once(&o.tx)).find(|&&x| x >= self.antennas) {
+            return Err(value_error(format!("antenna index {bad} out of range")));
+        }
+        if let Some(s) = o.speed {
+            if !(s > 0.0 && s.is_finite()) {
+                return Err(value_error(format!("speed must be > 0, got {s}")));
+            }
+        }
+        let setup = DspSetup {
+            config: processor.config().clone(),
+            symbol: processor.symbol().clone(),
+            options: processor.options().clone(),
+            timing_reference: o.timing_reference,
+            correction: o.correction.map(|c| c.as_array().iter().copied().collect()),
+            ema_alpha: o.ema_alpha,
+        };
+        setup.validate(r).map_err(|e| value_error(e.to_string()))?;
+        let pool = scattertrack_runtime::dsp::BufferPool::default();
+        let mut fusion = setup.fusion(&pool).map_err(|e| value_error(e.to_string()))?;
+        let workers = match (o.workers, o.shared) {
+            (None, false) => Workers::PerAntenna(1),
+            (None, true) => Workers::Shared(std::thread::available_parallelism().map_or(2, |n| n.get())),
+            (Some(k), false) => Workers::PerAntenna(k.max(1)),
+            (Some(k), true) => Workers::Shared(k.max(1)),
+        };
+        let config = RuntimeConfig {
+            workers,
+            queue_depth: o.queue_depth,
+            pacing: o.speed.map_or(Pacing::AsFastAsPossible, |speed| Pacing::Recorded { speed }),
+            tx: o.tx,
+            rx: o.rx,
+            frequencies_hz: setup.config.subcarrier_frequencies(),
+        };
+        let inner = &mut self.inner;
+        let report = py.detach(move || {
+            scattertrack_runtime::run_source(replies, |_| setup.worker(&pool).expect("validated"), &mut fusion, inner, &config)
+        });
+        let mut c = Columns::default();
+        for out in &report.outputs {
+            if let Some(e) = &out.estimate {
+                c.push(out.index as usize, e);
+            }
+        }
+        let d = c.into_dict(py)?;
+        let latency: Vec<u64> = report.outputs.iter().map(|o| o.latency_ns).collect();
+        let receivers: Vec<i64> = report.outputs.iter().map(|o| o.receivers as i64).collect();
+        let stages: Vec<u64> = report.stage_ns.iter().flat_map(|s| s.iter().copied()).collect();
+        d.set_item("latency_ns", latency.into_pyarray(py))?;
+        d.set_item("receivers", receivers.into_pyarray(py))?;
+        d.set_item("stage_ns", stages.into_pyarray(py).reshape([report.stage_ns.len(), 5]).map_err(value_error)?)?;
+        d.set_item("stages", scattertrack_runtime::STAGES.to_vec())?;
+        d.set_item("wall_s", report.wall_s)?;
+        d.set_item("no_channel", report.no_channel)?;
+        d.set_item("unreadable", unreadable.map_or(0, |u| u.load(std::sync::atomic::Ordering::Relaxed)))?;
+        let declined = PyDict::new(py);
+        for (reason, count) in &report.declined {
+            declined.set_item(reason, count)?;
+        }
+        d.set_item("declined", declined)?;
+        Ok(d)
+    }
 }
 
 #[pymodule]

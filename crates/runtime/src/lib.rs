@@ -27,8 +27,9 @@
 
 pub mod dsp;
 mod pipeline;
+pub mod source;
 
 pub use pipeline::{
-    run, AntennaWorker, ChannelEstimator, Output, Pacing, PassThroughFusion, PerAntenna, Reply, ReplyFusion, ReplyHeader,
+    run, run_source, AntennaWorker, InMemory, ReplySource, ChannelEstimator, Output, Pacing, PassThroughFusion, PerAntenna, Reply, ReplyFusion, ReplyHeader,
     RunReport, RuntimeConfig, Workers, STAGES,
 };

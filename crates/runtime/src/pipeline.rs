@@ -77,6 +77,37 @@ impl ReplyFusion<Option<Vec<Complex64>>> for PassThroughFusion {
     }
 }
 
+/// Where capture takes replies from. Split in two so that a replay source
+/// can wait for a reply's due time *before* loading its samples: loading
+/// (reading and converting half a megabyte) right after the previous
+/// dispatch would compete for the cores with that reply's workers.
+pub trait ReplySource: Send {
+    /// Recording time of the next reply, s (None when done), without
+    /// loading it.
+    fn next_time(&mut self) -> Option<f64>;
+    /// The next reply, loaded.
+    fn next_reply(&mut self) -> Option<Reply>;
+}
+
+/// A [`ReplySource`] over replies already in memory.
+pub struct InMemory<I: Iterator<Item = Reply>>(std::iter::Peekable<I>);
+
+impl<I: Iterator<Item = Reply>> InMemory<I> {
+    pub fn new(replies: impl IntoIterator<IntoIter = I>) -> Self {
+        Self(replies.into_iter().peekable())
+    }
+}
+
+impl<I: Iterator<Item = Reply> + Send> ReplySource for InMemory<I> {
+    fn next_time(&mut self) -> Option<f64> {
+        self.0.peek().map(|r| r.time_s)
+    }
+
+    fn next_reply(&mut self) -> Option<Reply> {
+        self.0.next()
+    }
+}
+
 /// How fast capture hands replies to the pipeline.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Pacing {
@@ -249,6 +280,17 @@ where
     F: Fn(usize) -> W,
     U: ReplyFusion<W::Output>,
 {
+    run_source(InMemory::new(replies), make_worker, fusion, engine, config)
+}
+
+/// [`run`] over any [`ReplySource`] (e.g. [`crate::source::IqFileReplies`]).
+pub fn run_source<S, W, F, U>(replies: S, make_worker: F, fusion: &mut U, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
+where
+    S: ReplySource,
+    W: AntennaWorker,
+    F: Fn(usize) -> W,
+    U: ReplyFusion<W::Output>,
+{
     let antennas = config.rx.len();
     let (queue_count, per_queue) = match config.workers {
         Workers::PerAntenna(k) => (antennas.max(1), k.max(1)),
@@ -266,7 +308,6 @@ where
     }
     let pools: Vec<Vec<W>> =
         (0..queue_count).map(|q| (0..per_queue).map(|i| make_worker(q * per_queue + i)).collect()).collect();
-    let replies = replies.into_iter();
     let pacing = config.pacing;
     std::thread::scope(|scope| {
         // Workers: each pulls jobs from its queue.
@@ -298,8 +339,8 @@ where
     })
 }
 
-fn capture<I: Iterator<Item = Reply>, T>(
-    replies: I,
+fn capture<S: ReplySource, T>(
+    mut replies: S,
     antennas: usize,
     queues: Vec<std::sync::mpsc::SyncSender<Job>>,
     events: Sender<Event<T>>,
@@ -307,16 +348,17 @@ fn capture<I: Iterator<Item = Reply>, T>(
 ) {
     let start = Instant::now();
     let mut first_time: Option<f64> = None;
-    for (index, reply) in replies.enumerate() {
-        let index = index as u64;
+    let mut index = 0u64;
+    while let Some(time_s) = replies.next_time() {
         if let Pacing::Recorded { speed } = pacing {
-            let t0 = *first_time.get_or_insert(reply.time_s);
-            let due = Duration::from_secs_f64(((reply.time_s - t0) / speed.max(1e-9)).max(0.0));
+            let t0 = *first_time.get_or_insert(time_s);
+            let due = Duration::from_secs_f64(((time_s - t0) / speed.max(1e-9)).max(0.0));
             let elapsed = start.elapsed();
             if due > elapsed {
                 std::thread::sleep(due - elapsed);
             }
         }
+        let Some(reply) = replies.next_reply() else { break };
         let reply = Arc::new(reply);
         let arrival = Instant::now();
         let header = ReplyHeader { index, tag: reply.tag, time_s: reply.time_s, tx_phase: reply.tx_phase };
@@ -329,6 +371,7 @@ fn capture<I: Iterator<Item = Reply>, T>(
                 return;
             }
         }
+        index += 1;
     }
 }
 

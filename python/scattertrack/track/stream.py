@@ -33,6 +33,7 @@ from scattertrack.track import wideband
 from scattertrack.track.glac import track_from_columns
 
 SKIP_DSP = "reply without a usable tag channel (DSP: {})"
+SKIP_UNREADABLE = "reply window that could not be read from the data file"
 
 
 @dataclass
@@ -92,6 +93,9 @@ def stream_sigmf(
     (None: uncalibrated channels, which no tracker can use: a warning is
     not enough, so it raises ValueError). ``speed``: None as fast as
     possible, else a multiple of the recording's own timing (1 = live).
+    A recording read from disk is streamed from its data file (one reply's
+    windows read at a time, so any length fits in memory); one in memory
+    from its array.
     ``workers``: DSP worker threads per receive antenna (None: 1, the
     thesis's layout), or with ``shared`` that many in one pool for all
     antennas (None: one per core; see ``crates/runtime``). ``params``: the tracker's parameters.
@@ -117,9 +121,6 @@ def stream_sigmf(
     count = len(recording.windows)
     length = min((w.sample_count for w in recording.windows), default=0)
     n = recording.subcarriers
-    windows = np.empty((count, len(recording.channels), length), dtype=np.complex64)
-    for k in range(count):
-        windows[k] = recording.window_samples(k)[:, :length]
     epcs = np.array([w.epc or "" for w in recording.windows], dtype=str)
     names, tag = np.unique(epcs, return_inverse=True)
     time_s = np.array([w.time_s for w in recording.windows], dtype=np.float64)
@@ -127,14 +128,7 @@ def stream_sigmf(
 
     index = {a.id: i for i, a in enumerate(scene.antennas)}
     core = wideband.engine(method, scene, params)
-    out = core.run_stream(
-        windows,
-        tag.astype(np.int64),
-        time_s,
-        tx_phase,
-        dsp,
-        index[recording.tx_id],
-        [index[r] for r in recording.channels],
+    settings = dict(
         timing_reference=calibration.timing_reference,
         correction=np.ascontiguousarray(calibration.correction, dtype=np.complex128),
         ema_alpha=ema_alpha,
@@ -143,9 +137,24 @@ def stream_sigmf(
         queue_depth=int(queue_depth),
         speed=speed,
     )
+    headers = (tag.astype(np.int64), time_s, tx_phase, dsp, index[recording.tx_id], [index[r] for r in recording.channels])
+    if recording.data_path is not None and isinstance(recording.data, np.memmap):
+        # Capture reads each reply's windows from the file as it goes.
+        starts = np.array([w.sample_start for w in recording.windows], dtype=np.int64)
+        out = core.run_stream_file(
+            str(recording.data_path), recording.datatype, len(recording.channels), float(recording.scale), int(length),
+            starts, *headers, **settings,
+        )
+    else:
+        windows = np.empty((count, len(recording.channels), length), dtype=np.complex64)
+        for k in range(count):
+            windows[k] = recording.window_samples(k)[:, :length]
+        out = core.run_stream(windows, *headers, **settings)
     skipped = SkipReport()
     for reason, number in dict(out["declined"]).items():
         skipped.add(SKIP_DSP.format(reason), n=int(number))
+    if out["unreadable"]:
+        skipped.add(SKIP_UNREADABLE, n=int(out["unreadable"]))
     columns = {k: [out[k]] for k in ("row", "time_s", "position", "velocity", "covariance")}
     stats = {str(name): dict(core.stats(i)) for i, name in enumerate(names)}
     track = track_from_columns(columns, epcs, skipped, stats, wideband._DECLINED)

@@ -88,3 +88,38 @@ def test_an_all_nan_window_is_counted(session, tmp_path):
     result = stream_sigmf(recording, scene, out / "calibration.sigmf-meta")
     assert result.replies == len(recording.windows)
     assert sum(result.declined.values()) >= 1
+
+
+def test_file_capture_and_in_memory_capture_agree(session):
+    """A recording read from disk is streamed from its data file; the same
+    samples from memory give the same track."""
+    _, out = session
+    scene = io.read_scene(out / "scene.toml")
+    calibration = calibrate_sigmf(out / "calibration.sigmf-meta", scene)
+    recording = read_sigmf(out / "recording.sigmf-meta")
+    from_file = stream_sigmf(recording, scene, calibration)
+    recording.data = np.array(recording.data)  # no longer a memory map: the array path
+    from_memory = stream_sigmf(recording, scene, calibration)
+    np.testing.assert_array_equal(from_file.track.position, from_memory.track.position)
+    assert from_file.declined == from_memory.declined
+
+
+def test_a_window_that_cannot_be_read_is_counted(session, tmp_path):
+    """A data file cut after it was validated (e.g. a recording being rotated):
+    the windows past its end are counted, not a crash."""
+    import shutil
+
+    _, out = session
+    scene = io.read_scene(out / "scene.toml")
+    calibration = calibrate_sigmf(out / "calibration.sigmf-meta", scene)
+    for suffix in ("sigmf-meta", "sigmf-data"):
+        shutil.copy(out / f"recording.{suffix}", tmp_path / f"recording.{suffix}")
+    recording = read_sigmf(tmp_path / "recording.sigmf-meta")
+    data = tmp_path / "recording.sigmf-data"
+    last = recording.windows[-1]
+    per_sample = data.stat().st_size // recording.n_samples
+    with open(data, "r+b") as handle:
+        handle.truncate(last.sample_start * per_sample)
+    result = stream_sigmf(recording, scene, calibration)
+    assert result.replies == len(recording.windows)
+    assert result.track.skipped.counts.get("reply window that could not be read from the data file") == 1
