@@ -56,13 +56,14 @@ class Engine:
         Same columns as ``run``; ``row`` is the frame index."""
     def run_stream(
         self,
-        windows: npt.NDArray[np.complex64],
         tag: npt.NDArray[np.int64],
         time_s: npt.NDArray[np.float64],
         tx_phase: npt.NDArray[np.int64],
         dsp: OfdmDsp,
         tx: int,
         rx: list[int],
+        windows: npt.NDArray[np.complex64] | None = None,
+        file: tuple[str, str, int, float, int, npt.NDArray[np.int64]] | None = None,
         timing_reference: list[int] | None = None,
         correction: npt.NDArray[np.complex128] | None = None,
         ema_alpha: float | None = None,
@@ -71,37 +72,13 @@ class Engine:
         queue_depth: int = 64,
         speed: float | None = None,
     ) -> dict[str, Any]:
-        """Helper IQ through the real-time runtime: windows (K, R, S) per reply
-        and rx slot; tx_phase -1 where unknown; correction (R, F); speed None
-        = as fast as possible. Returns the columns of ``run`` plus latency_ns
-        (K,), receivers (K,), stage_ns (K, 5), stages, wall_s, no_channel and
-        declined {reason: count}."""
-    def run_stream_file(
-        self,
-        path: str,
-        datatype: str,
-        channels: int,
-        scale: float,
-        window_len: int,
-        start_sample: npt.NDArray[np.int64],
-        tag: npt.NDArray[np.int64],
-        time_s: npt.NDArray[np.float64],
-        tx_phase: npt.NDArray[np.int64],
-        dsp: OfdmDsp,
-        tx: int,
-        rx: list[int],
-        timing_reference: list[int] | None = None,
-        correction: npt.NDArray[np.complex128] | None = None,
-        ema_alpha: float | None = None,
-        workers: int | None = None,
-        shared: bool = False,
-        queue_depth: int = 64,
-        speed: float | None = None,
-    ) -> dict[str, Any]:
-        """``run_stream`` with capture reading each reply's windows from an
-        interleaved IQ file (SigMF data: ci16_le or cf32_le, ``channels``
-        interleaved, stored = scale x baseband), ``window_len`` samples from
-        each ``start_sample``; adds ``unreadable`` (windows it could not read)."""
+        """Helper IQ through the real-time runtime, from exactly one of
+        ``windows`` (K, R, S) in memory or ``file`` = (path, "ci16_le" |
+        "cf32_le", channels, scale, window_len, start_sample (K,)), read
+        one reply at a time; tx_phase -1 where unknown; correction (R, F);
+        speed None = as fast as possible. Returns the columns of ``run``
+        plus latency_ns (K,), receivers (K,), stage_ns (K, 5), stages,
+        wall_s, no_channel, unreadable and declined {reason: count}."""
     def trajectory(self, tag: int) -> list[tuple[float, list[float]]]:
         """Backtracked MAP trajectory (TurboTrack): (time_s, position m) pairs."""
     def stats(self, tag: int) -> dict[str, int]: ...

@@ -444,79 +444,35 @@ impl Engine {
     /// channel, calibration, EMA) → this engine, with every reply's
     /// latency from arrival to output.
     ///
-    /// `windows` (K, R, S) complex64: reply k's window on rx slot r;
-    /// `tag` (K,), `time_s` (K,) (s), `tx_phase` (K,) (the window's first
-    /// transmitter sample mod N, −1 unknown); `dsp` the helper design and
-    /// options; `tx` and `rx` (R) antenna indices in this engine's scene;
-    /// `timing_reference` (R) per-rx D_r; `correction` (R, F) complex128;
-    /// `speed` None: as fast as possible, else × the recording's timing;
-    /// `workers` threads per antenna (None: 1), or with `shared` that many
-    /// in one pool for all antennas (None: one per core).
-    /// Returns the columns of `run` plus `latency_ns`, `receivers` (per
-    /// reply), `stage_ns` (K, 5; `stages` names the columns),
-    /// `wall_s`, `declined` {reason: count}, `no_channel`, `unreadable`.
-    #[pyo3(signature = (windows, tag, time_s, tx_phase, dsp, tx, rx, timing_reference=None, correction=None,
-        ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
+    /// Per reply k: `tag`, `time_s` (s), `tx_phase` (the window's first
+    /// transmitter sample mod N, −1 unknown). The samples come from exactly
+    /// one of `windows` (K, R, S) complex64 in memory, or `file` = (path,
+    /// datatype "ci16_le" | "cf32_le", channels, scale, window_len,
+    /// start_sample (K,)): an interleaved IQ file (SigMF data, stored =
+    /// scale × baseband) that capture reads one reply at a time, when it is
+    /// due. `dsp` the helper design and options; `tx` and `rx` (R) antenna
+    /// indices in this engine's scene; `timing_reference` (R) per-rx D_r;
+    /// `correction` (R, F) complex128; `speed` None: as fast as possible,
+    /// else × the recording's timing; `workers` threads per antenna (None:
+    /// 1), or with `shared` that many in one pool for all antennas (None:
+    /// one per core). Returns the columns of `run` plus `latency_ns`,
+    /// `receivers` (per reply), `stage_ns` (K, 5; `stages` names the
+    /// columns), `wall_s`, `declined` {reason: count}, `no_channel` and
+    /// `unreadable` (file windows that could not be read).
+    #[pyo3(signature = (tag, time_s, tx_phase, dsp, tx, rx, windows=None, file=None, timing_reference=None,
+        correction=None, ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
     #[allow(clippy::too_many_arguments)]
     fn run_stream<'py>(
         &mut self,
         py: Python<'py>,
-        windows: PyReadonlyArray3<num_complex::Complex32>,
         tag: PyReadonlyArray1<i64>,
         time_s: PyReadonlyArray1<f64>,
         tx_phase: PyReadonlyArray1<i64>,
         dsp: PyRef<'py, dsp::OfdmDsp>,
         tx: usize,
         rx: Vec<usize>,
-        timing_reference: Option<Vec<usize>>,
-        correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
-        ema_alpha: Option<f64>,
-        workers: Option<usize>,
-        shared: bool,
-        queue_depth: usize,
-        speed: Option<f64>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        use scattertrack_runtime::Reply;
-        let array = windows.as_array();
-        let (k, r, _) = array.dim();
-        let headers = stream_headers(&tag, &time_s, &tx_phase, k)?;
-        let replies: Vec<Reply> = headers
-            .iter()
-            .enumerate()
-            .map(|(i, h)| Reply {
-                tag: h.tag,
-                time_s: h.time_s,
-                tx_phase: h.tx_phase,
-                windows: (0..r).map(|a| array.slice(numpy::ndarray::s![i, a, ..]).to_vec()).collect(),
-            })
-            .collect();
-        let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, shared, queue_depth, speed };
-        self.stream(py, scattertrack_runtime::InMemory::new(replies), r, &dsp.inner, options, None)
-    }
-
-    /// [`Engine::run_stream`] reading the windows from an interleaved IQ
-    /// file as capture goes (memory stays bounded whatever the length):
-    /// `path` the samples (SigMF `.sigmf-data`), `datatype` "ci16_le" or
-    /// "cf32_le", `channels` interleaved, stored = `scale` × baseband,
-    /// every window `window_len` samples from `start_sample` (K,).
-    #[pyo3(signature = (path, datatype, channels, scale, window_len, start_sample, tag, time_s, tx_phase, dsp, tx, rx,
-        timing_reference=None, correction=None, ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn run_stream_file<'py>(
-        &mut self,
-        py: Python<'py>,
-        path: std::path::PathBuf,
-        datatype: &str,
-        channels: usize,
-        scale: f32,
-        window_len: usize,
-        start_sample: PyReadonlyArray1<i64>,
-        tag: PyReadonlyArray1<i64>,
-        time_s: PyReadonlyArray1<f64>,
-        tx_phase: PyReadonlyArray1<i64>,
-        dsp: PyRef<'py, dsp::OfdmDsp>,
-        tx: usize,
-        rx: Vec<usize>,
+        windows: Option<PyReadonlyArray3<num_complex::Complex32>>,
+        file: Option<(std::path::PathBuf, String, usize, f32, usize, PyReadonlyArray1<i64>)>,
         timing_reference: Option<Vec<usize>>,
         correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
         ema_alpha: Option<f64>,
@@ -526,26 +482,48 @@ impl Engine {
         speed: Option<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
         use scattertrack_runtime::source::{IqFileReplies, SampleFormat, WindowSpec};
-        let format = match datatype {
-            "ci16_le" => SampleFormat::ComplexI16,
-            "cf32_le" => SampleFormat::ComplexF32,
-            other => return Err(value_error(format!("unsupported datatype {other:?} (ci16_le or cf32_le)"))),
-        };
-        let starts = start_sample.as_array().to_vec();
-        let headers = stream_headers(&tag, &time_s, &tx_phase, starts.len())?;
-        if starts.iter().any(|&x| x < 0) {
-            return Err(value_error("start_sample must be non-negative"));
-        }
-        let specs = headers
-            .iter()
-            .zip(&starts)
-            .map(|(h, &start)| WindowSpec { start_sample: start as u64, tag: h.tag, time_s: h.time_s, tx_phase: h.tx_phase })
-            .collect();
-        let replies = IqFileReplies::open(&path, format, channels, scale, window_len, specs)
-            .map_err(|e| PyErr::new::<pyo3::exceptions::PyOSError, _>(format!("{}: {e}", path.display())))?;
-        let unreadable = replies.unreadable.clone();
+        use scattertrack_runtime::{InMemory, Reply};
         let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, shared, queue_depth, speed };
-        self.stream(py, replies, channels, &dsp.inner, options, Some(unreadable))
+        match (windows, file) {
+            (Some(windows), None) => {
+                let array = windows.as_array();
+                let (k, r, _) = array.dim();
+                let headers = stream_headers(&tag, &time_s, &tx_phase, k)?;
+                let replies: Vec<Reply> = headers
+                    .iter()
+                    .enumerate()
+                    .map(|(i, h)| Reply {
+                        tag: h.tag,
+                        time_s: h.time_s,
+                        tx_phase: h.tx_phase,
+                        windows: (0..r).map(|a| array.slice(numpy::ndarray::s![i, a, ..]).to_vec()).collect(),
+                    })
+                    .collect();
+                self.stream(py, InMemory::new(replies), r, &dsp.inner, options, None)
+            }
+            (None, Some((path, datatype, channels, scale, window_len, start_sample))) => {
+                let format = match datatype.as_str() {
+                    "ci16_le" => SampleFormat::ComplexI16,
+                    "cf32_le" => SampleFormat::ComplexF32,
+                    other => return Err(value_error(format!("unsupported datatype {other:?} (ci16_le or cf32_le)"))),
+                };
+                let starts = start_sample.as_array().to_vec();
+                if starts.iter().any(|&x| x < 0) {
+                    return Err(value_error("start_sample must be non-negative"));
+                }
+                let headers = stream_headers(&tag, &time_s, &tx_phase, starts.len())?;
+                let specs = headers
+                    .iter()
+                    .zip(&starts)
+                    .map(|(h, &start)| WindowSpec { start_sample: start as u64, tag: h.tag, time_s: h.time_s, tx_phase: h.tx_phase })
+                    .collect();
+                let replies = IqFileReplies::open(&path, format, channels, scale, window_len, specs)
+                    .map_err(|e| PyErr::new::<pyo3::exceptions::PyOSError, _>(format!("{}: {e}", path.display())))?;
+                let unreadable = replies.unreadable.clone();
+                self.stream(py, replies, channels, &dsp.inner, options, Some(unreadable))
+            }
+            _ => Err(value_error("give exactly one of windows and file")),
+        }
     }
 
     /// Smoothed (backtracked MAP) trajectory of tag `tag`: (time_s, position) pairs.

@@ -139,17 +139,16 @@ def stream_sigmf(
     )
     headers = (tag.astype(np.int64), time_s, tx_phase, dsp, index[recording.tx_id], [index[r] for r in recording.channels])
     if recording.data_path is not None and isinstance(recording.data, np.memmap):
-        # Capture reads each reply's windows from the file as it goes.
+        # Capture reads each reply's windows from the file when it is due.
         starts = np.array([w.sample_start for w in recording.windows], dtype=np.int64)
-        out = core.run_stream_file(
-            str(recording.data_path), recording.datatype, len(recording.channels), float(recording.scale), int(length),
-            starts, *headers, **settings,
-        )
+        source = {"file": (str(recording.data_path), recording.datatype, len(recording.channels),
+                           float(recording.scale), int(length), starts)}
     else:
         windows = np.empty((count, len(recording.channels), length), dtype=np.complex64)
         for k in range(count):
             windows[k] = recording.window_samples(k)[:, :length]
-        out = core.run_stream(windows, *headers, **settings)
+        source = {"windows": windows}
+    out = core.run_stream(*headers, **source, **settings)
     skipped = SkipReport()
     for reason, number in dict(out["declined"]).items():
         skipped.add(SKIP_DSP.format(reason), n=int(number))
