@@ -657,7 +657,7 @@ fn stream_headers(
         .collect())
 }
 
-/// The runtime's settings shared by `run_stream` and `run_stream_file`.
+/// `run_stream`'s settings, handed to [`Engine::stream`] whichever the source.
 struct StreamOptions<'py> {
     tx: usize,
     rx: Vec<usize>,

@@ -1,3 +1,5 @@
+use num_complex::Complex64;
+
 use crate::error::{Error, Result};
 
 /// The helper's OFDM parameters and the tag's backscatter link frequency.
@@ -113,6 +115,22 @@ impl OfdmConfig {
     pub fn active_bins(&self) -> Vec<usize> {
         let n = self.subcarriers as i64;
         self.signed_bins().into_iter().map(|k| k.rem_euclid(n) as usize).collect()
+    }
+
+    /// What demodulation divides by: the active bins (ascending frequency)
+    /// and `1 / (√N X[k])` for each — the unitary FFT's scaling and the
+    /// known symbol in one factor. Errors when `symbol` does not have `N`
+    /// bins or the configuration is invalid.
+    pub fn demodulation_factors(&self, symbol: &super::KnownSymbol) -> Result<(Vec<usize>, Vec<Complex64>)> {
+        self.validate()?;
+        let n = self.subcarriers;
+        if symbol.len() != n {
+            return Err(Error::Shape(format!("symbol has {} bins, configuration has N = {n}", symbol.len())));
+        }
+        let bins = self.active_bins();
+        let scale = 1.0 / (n as f64).sqrt();
+        let inverse = bins.iter().map(|&k| scale / symbol.frequency[k]).collect();
+        Ok((bins, inverse))
     }
 
     /// RF frequency of each active subcarrier, `centre + k' B / N`, Hz,

@@ -1,6 +1,6 @@
 use std::sync::Arc;
 
-use num_complex::{Complex32, Complex64};
+use num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
 
 use super::{ChannelMatrix, KnownSymbol, OfdmConfig};
@@ -32,20 +32,11 @@ impl Demodulator {
     /// A demodulator for `config` and its known symbol (`symbol.len()` must
     /// equal `config.subcarriers`).
     pub fn new(config: &OfdmConfig, symbol: &KnownSymbol) -> Result<Self> {
-        config.validate()?;
+        let (bins, inverse) = config.demodulation_factors(symbol)?;
         let n = config.subcarriers;
-        if symbol.len() != n {
-            return Err(Error::Shape(format!("symbol has {} bins, configuration has N = {n}", symbol.len())));
-        }
         let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
         let scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
-        let bins = config.active_bins();
-        let scale = 1.0 / (n as f64).sqrt();
-        let inverse = bins
-            .iter()
-            .map(|&k| scale / symbol.frequency[k])
-            .map(|v: Complex64| Complex32::new(v.re as f32, v.im as f32))
-            .collect();
+        let inverse = inverse.iter().map(|v| Complex32::new(v.re as f32, v.im as f32)).collect();
         Ok(Self { n, fft, buffer: Vec::new(), scratch, bins, inverse })
     }
 
@@ -104,6 +95,7 @@ impl Demodulator {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use num_complex::Complex64;
 
     fn periodic(symbol: &KnownSymbol, channel: &[Complex64], len: usize, shift: usize) -> Vec<Complex32> {
         // y = IFFT(X · H) repeated: the steady state of back-to-back symbols.

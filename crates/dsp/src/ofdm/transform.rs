@@ -4,7 +4,7 @@ use num_complex::{Complex32, Complex64};
 use rustfft::{Fft, FftPlanner};
 
 use super::{KnownSymbol, OfdmConfig};
-use crate::error::{Error, Result};
+use crate::error::Result;
 
 /// The demodulation of one symbol as a linear map from its `N` time
 /// samples to the channel on the active subcarriers,
@@ -30,16 +30,10 @@ pub struct ChannelTransform {
 
 impl ChannelTransform {
     pub fn new(config: &OfdmConfig, symbol: &KnownSymbol) -> Result<Self> {
-        config.validate()?;
+        let (bins, inverse) = config.demodulation_factors(symbol)?;
         let n = config.subcarriers;
-        if symbol.len() != n {
-            return Err(Error::Shape(format!("symbol has {} bins, configuration has N = {n}", symbol.len())));
-        }
         let fft = FftPlanner::<f64>::new().plan_fft_forward(n);
         let scratch = vec![Complex64::new(0.0, 0.0); fft.get_inplace_scratch_len()];
-        let bins = config.active_bins();
-        let scale = 1.0 / (n as f64).sqrt();
-        let inverse = bins.iter().map(|&k| scale / symbol.frequency[k]).collect();
         Ok(Self { n, fft, scratch, buffer: vec![Complex64::new(0.0, 0.0); n], bins, inverse })
     }
 
