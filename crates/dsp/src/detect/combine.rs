@@ -191,12 +191,19 @@ fn dominant_direction(blocks: &[Complex64], f_count: usize) -> Option<Vec<Comple
     let mut v: Vec<Complex64> =
         blocks.chunks_exact(f_count).max_by(|a, b| norm(a).total_cmp(&norm(b))).map(|b| b.to_vec())?;
     let mut next = vec![zero; f_count];
+    let mut previous: Option<Vec<Complex64>> = None;
     for _ in 0..6 {
         let length = norm(&v);
         if !(length > 0.0 && length.is_finite()) {
             break;
         }
         v.iter_mut().for_each(|x| *x /= length);
+        // Converged (the direction no longer turns): a reply's modulation
+        // dominates the noise by far, so this usually stops after 2–3 steps.
+        if previous.as_ref().is_some_and(|p| dot_conj(p, &v).norm() > 1.0 - 1e-8) {
+            return Some(v);
+        }
+        previous = Some(v.clone());
         next.iter_mut().for_each(|x| *x = zero);
         for b in blocks.chunks_exact(f_count) {
             let coefficient = dot_conj(b, &v);

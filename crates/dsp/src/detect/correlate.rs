@@ -96,6 +96,12 @@ pub struct Template {
     mean: f64,
     /// `Σ_i (c_i − c̄)²` over chips.
     spread: f64,
+    /// The numerator `Σ_i (c_i − c̄)(S(b_{i+1}) − S(b_i))` regrouped by
+    /// boundary: `Σ_j w_j S(b_j)` with `w_j = d_{j−1} − d_j`, `d_i = c_i − c̄`
+    /// (zero outside the template). Only the ends and the boundaries where
+    /// the level changes have `w_j ≠ 0`: (boundary index, weight) of those,
+    /// 8 lookups instead of 13 for the FM0 preamble.
+    steps: Vec<(usize, f64)>,
 }
 
 impl Template {
@@ -107,7 +113,12 @@ impl Template {
         if k == 0 || spread <= 0.0 {
             return Err(Error::BadConfig("a preamble template needs both chip levels".into()));
         }
-        Ok(Self { levels, mean, spread })
+        let centred = |i: Option<usize>| i.and_then(|i| levels.get(i)).map_or(0.0, |&c| c as f64 - mean);
+        let steps = (0..=k)
+            .map(|j| (j, centred(j.checked_sub(1)) - centred(Some(j))))
+            .filter(|&(_, w)| w != 0.0)
+            .collect();
+        Ok(Self { levels, mean, spread, steps })
     }
 
     /// Number of chips.
@@ -143,14 +154,19 @@ pub fn normalised_correlation(sums: &FeatureSums, template: &Template, start: f6
         return 0.0;
     }
     let (first, first_sq) = sums.at(start);
-    let mut previous = first;
-    let mut numerator = 0.0;
-    for (i, &level) in template.levels.iter().enumerate() {
-        let next = sums.sum_at(start + (i + 1) as f64 * chip_symbols);
-        numerator += (level as f64 - template.mean) * (next - previous);
-        previous = next;
-    }
     let (last, last_sq) = sums.at(end);
+    let numerator: f64 = template
+        .steps
+        .iter()
+        .map(|&(j, w)| {
+            let value = match j {
+                0 => first,
+                j if j == k => last,
+                j => sums.sum_at(start + j as f64 * chip_symbols),
+            };
+            w * value
+        })
+        .sum();
     let span = end - start;
     let total = last - first;
     let variance = (last_sq - first_sq) - total * total / span;
@@ -211,5 +227,33 @@ mod tests {
         assert!((s + 1.0).abs() < 1e-12 && (q - 2.0).abs() < 1e-12);
         let (s, _) = sums.at(3.0);
         assert!(s.abs() < 1e-12);
+    }
+
+    #[test]
+    fn boundary_weights_give_the_chip_by_chip_numerator() {
+        // The regrouped numerator against Σ_i (c_i − c̄)(S(b_{i+1}) − S(b_i)).
+        let feature: Vec<f64> = (0..300).map(|n| ((n * 37 % 101) as f64).sin() * 3.0 + n as f64 * 0.01).collect();
+        let sums = FeatureSums::new(&feature).unwrap();
+        for levels in [vec![1u8, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1], vec![0, 1], vec![1, 0, 1, 1, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0]] {
+            let template = Template::new(levels.clone()).unwrap();
+            let mean = levels.iter().map(|&c| c as f64).sum::<f64>() / levels.len() as f64;
+            for (start, chip) in [(3.0, 7.25), (10.4, 11.0), (0.0, 20.5)] {
+                let direct: f64 = levels
+                    .iter()
+                    .enumerate()
+                    .map(|(i, &c)| {
+                        (c as f64 - mean)
+                            * (sums.sum_at(start + (i + 1) as f64 * chip) - sums.sum_at(start + i as f64 * chip))
+                    })
+                    .sum();
+                let k = levels.len() as f64;
+                let (first, first_sq) = sums.at(start);
+                let (last, last_sq) = sums.at(start + k * chip);
+                let variance = (last_sq - first_sq) - (last - first).powi(2) / (k * chip);
+                let expected = (direct / (chip * template.spread * variance).sqrt()).clamp(-1.0, 1.0);
+                let got = normalised_correlation(&sums, &template, start, chip);
+                assert!((got - expected).abs() < 1e-12, "{levels:?} {start} {chip}: {got} vs {expected}");
+            }
+        }
     }
 }
