@@ -8,20 +8,25 @@
 //!
 //! 1. [`ofdm::symbol_timing`]: time-domain correlation with the known symbol
 //!    finds the first sample of the first whole symbol (ch. 4.3, bullet 3).
-//! 2. [`ofdm::Demodulator`]: one FFT per symbol, divided by the known symbol
-//!    `X(f)` → channel `H(f, n)` on the `N − 1` non-DC subcarriers (ch. 4.2).
+//! 2. Demodulation, `H(f, n) = FFT(y_n)/(√N X(f))` on the `N − 1` non-DC
+//!    subcarriers (ch. 4.2): [`ofdm::Demodulator`] for every symbol, or —
+//!    since it is linear — [`ofdm::ChannelTransform`] on sums of runs of
+//!    symbols kept in the time domain ([`estimate::SymbolSums`]), which is
+//!    what the reply pipeline does.
 //! 3. [`detect`]: a per-symbol detection feature (the paper's
 //!    `H_combined(n) = Σ_f |H(f, n)|`, or a coherent projection) correlated
 //!    with the Gen2 preamble → reply start and tag BLF (ch. 4.3 (a)).
 //! 4. [`estimate::symbol_states`]: edge-flip elimination — symbols within a
 //!    guard of a tag state transition are discarded (ch. 4.3 (b)).
-//! 5. [`estimate::tag_channel`]: mean(reflective) − mean(non-reflective) per
+//! 5. [`estimate::tag_channel_from_sums`] (or [`estimate::tag_channel`] on
+//!    a demodulated matrix): mean(reflective) − mean(non-reflective) per
 //!    subcarrier (ch. 4.3 (c)).
 //! 6. [`estimate::Ema`] across replies and [`estimate::Calibration`] from a
 //!    tag at a known position (ch. 4.3, last bullets).
 //!
 //! [`reply::ReplyProcessor`] runs 1–5 for all rx antennas of one reply with
-//! buffers and FFT plans allocated once.
+//! buffers and FFT plans allocated once; [`reply::AntennaFront`] is its
+//! per-antenna half, for a worker thread per antenna.
 //!
 //! Map of the crate:
 //! - [`ofdm`]: configuration and design rule, known symbol, timing, FFT.

@@ -149,8 +149,9 @@ pub struct ReplyEstimate {
 }
 
 /// One antenna's share of a reply (steps 1–3a of
-/// [`ReplyProcessor::process`]): symbol timing, per-symbol FFT and the
-/// smoothed detection feature — the expensive, independent part, so that a
+/// [`ReplyProcessor::process`]): symbol timing, the symbols' time-domain
+/// prefix sums, the smoothed detection feature and its share of the coarse
+/// preamble search — the expensive, independent part, so that a
 /// real-time runtime can run one worker per rx antenna (thesis §6) and
 /// leave only the joint preamble search and the tag channel to
 /// [`ReplyProcessor::finish`].
@@ -363,12 +364,16 @@ impl ReplyProcessor {
     ///    identical in every window even if noise or a hardware delay near
     ///    half a sample would make the peak hop by one sample between
     ///    windows (a 3 m jump of the apparent path at 100 MHz).
-    /// 2. One FFT per symbol → `H(f, n)` ([`Demodulator`]).
+    /// 2. The whole symbols with their prefix sums ([`SymbolSums`]): the
+    ///    demodulation `H = FFT(y)/(√N X)` is linear, so later steps
+    ///    demodulate sums of runs of symbols ([`ChannelTransform`]) rather
+    ///    than every symbol ([`Demodulator`] is used only for the
+    ///    magnitude feature).
     /// 3. Detection feature per antenna, smoothed over an eighth of a chip
     ///    ([`moving_average`]), and the joint preamble search
     ///    ([`detect_preamble`]).
     /// 4. Edge-flip elimination on the preamble chips, tag channel per
-    ///    antenna ([`symbol_states`], [`tag_channel`]).
+    ///    antenna ([`symbol_states`], [`tag_channel_from_sums`]).
     /// 5. With `use_payload`: payload chips are read one by one — the
     ///    chip's clean symbols projected on the preamble's tag channel around
     ///    its midpoint, summed over antennas, normalised so that the two

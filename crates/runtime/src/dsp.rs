@@ -1,6 +1,6 @@
 //! The helper's DSP (`scattertrack-dsp`, thesis ch. 4) as the pipeline's two
-//! stages: [`DspWorker`] runs one antenna's symbol timing, per-symbol FFTs
-//! and detection feature ([`AntennaFront`]) on a worker thread;
+//! stages: [`DspWorker`] runs one antenna's symbol timing, symbol prefix
+//! sums and detection feature ([`AntennaFront`]) on a worker thread;
 //! [`DspFusion`] runs the joint preamble search, edge-flip elimination and
 //! tag channel ([`ReplyProcessor::finish`]), then the calibration and the
 //! optional per-tag EMA, on the fusion thread.

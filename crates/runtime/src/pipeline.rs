@@ -25,8 +25,8 @@ pub struct Reply {
 
 /// The per-antenna stage (thesis §6: a worker pool per receive antenna):
 /// whatever one antenna's window alone allows — for the helper's DSP the
-/// symbol timing, the per-symbol FFTs and the detection feature, most of
-/// the cost. One instance per worker thread (it may keep FFT plans and
+/// symbol timing, the symbols' prefix sums and the detection feature, most
+/// of the cost. One instance per worker thread (it may keep FFT plans and
 /// buffers).
 pub trait AntennaWorker: Send {
     /// What one antenna's window becomes (sent to the fusion stage).
