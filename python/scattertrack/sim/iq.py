@@ -307,7 +307,6 @@ def simulate_iq(
     streams = dict(zip(STREAMS, np.random.default_rng(seed).spawn(len(STREAMS))))
     tx_id, tx, rx_ids, rx = wideband.helper_geometry(scene)
     n = int(model["n_subcarriers"])
-    bandwidth = float(model["bandwidth_hz"])
     frequencies = fft_bin_frequencies(model)
 
     # The known symbol: unit-magnitude random phases, DC empty.

@@ -484,7 +484,7 @@ def _frames(scene, epcs, positions, start_s, duration_s, model, rngs, covered=No
     model = resolved_model(scene, model)
     tx_id, tx, rx_ids, rx = helper_geometry(scene)
     frequencies = model_frequencies(model)
-    n_rx, n_subcarriers = len(rx_ids), len(frequencies)
+    n_rx = len(rx_ids)
     time, tag, attempts = reply_schedule(duration_s, len(epcs), model, rngs)
     time = np.round((time + start_s) * 1e6) / 1e6
     if covered is not None:  # a truth may not cover every tag over the whole span

@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scattertrack import _core
 from scattertrack.io.sigmf import SigmfCalibration, calibrate_sigmf, read_sigmf, Recording, _dsp, _positions
 from scattertrack.io.types import Scene, SkipReport, Track
 from scattertrack.track import wideband
