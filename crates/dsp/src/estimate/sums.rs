@@ -53,7 +53,7 @@ impl SymbolSums {
     /// symbol, [`Error::NonFinite`] when no symbol is finite.
     pub fn reset(&mut self, window: &[Complex32], first_sample: usize, n: usize) -> Result<()> {
         let available = window.len().saturating_sub(first_sample);
-        let symbols = if n == 0 { 0 } else { available / n };
+        let symbols = available.checked_div(n).unwrap_or(0);
         if symbols == 0 {
             return Err(Error::TooShort { what: "demodulation (samples from the first symbol)", needed: n, got: available });
         }
