@@ -271,13 +271,19 @@ impl AntennaFront {
         out.coarse_symbols = 0;
         if out.feature_error.is_none() {
             let symbols = out.sums.len();
-            if self.grid.as_ref().is_none_or(|g| g.symbols != symbols) {
-                self.grid = Some(CoarseGrid::new(symbols, self.template.len(), self.nominal_chip_symbols, self.blf_tolerance));
-            }
+            self.ensure_grid(symbols);
             let grid = self.grid.as_ref().expect("just built");
             out.coarse.resize(grid.len(), 0.0);
             grid.add_scores(&out.sums, &self.template, &mut out.coarse);
             out.coarse_symbols = symbols;
+        }
+    }
+
+    /// The stage-1 search grid for features of `symbols` values, built once
+    /// per window length (the fronts and the joint stage share it).
+    fn ensure_grid(&mut self, symbols: usize) {
+        if self.grid.as_ref().is_none_or(|g| g.symbols != symbols) {
+            self.grid = Some(CoarseGrid::new(symbols, self.template.len(), self.nominal_chip_symbols, self.blf_tolerance));
         }
     }
 }
@@ -477,7 +483,9 @@ impl ReplyProcessor {
         // windows had the same length; the shares add up.
         let precomputed = detecting.iter().all(|&a| antennas[a].coarse_symbols == symbols && !antennas[a].coarse.is_empty());
         let mut detection = if precomputed {
-            let grid = CoarseGrid::new(symbols, self.template.len(), chip_nominal, self.options.detection.blf_tolerance);
+            // The front was built from the same options: its grid is this one.
+            self.front.ensure_grid(symbols);
+            let grid = self.front.grid.as_ref().expect("just built");
             let mut summed = vec![0.0; grid.len()];
             for &a in &detecting {
                 summed.iter_mut().zip(&antennas[a].coarse).for_each(|(s, c)| *s += c);
