@@ -2,7 +2,7 @@
 
 Subcommands::
 
-    scattertrack simulate --scenario NAME|FILE --out DIR [--seed N] [--duration S] [--pipeline glac|turbotrack] [--iq]
+    scattertrack simulate --scenario NAME|FILE --out DIR [--seed N] [--duration S] [--pipeline glac|turbotrack|marvel] [--iq]
     scattertrack scenarios
     scattertrack methods
     scattertrack track --scene S --reads R|--frames F|--sigmf R [--calibration C] [--method glac] --out T [--param name=value ...]
@@ -242,6 +242,8 @@ def command_simulate(args) -> int:
     simulation, out = simulate_and_write(args)
     if simulation.frames is not None:
         return report_frames(simulation, out, args)
+    if simulation.features is not None:
+        return report_marvel(simulation, out, args)
     reads = simulation.reads
     duration = float(simulation.scenario["duration_s"])
     tags = reads.epcs()
@@ -288,6 +290,22 @@ def report_frames(simulation, out: Path, args) -> int:
         f"{read_rates(frames.n_frames, len(tags), duration).replace('reads', 'frames')}; "
         f"{plural(receivers, 'receive antenna')}, {helper.get('n_subcarriers', '?')} subcarriers over "
         f"{helper.get('bandwidth_hz', math.nan) / 1e6:g} MHz"
+    )
+    return 0
+
+
+def report_marvel(simulation, out: Path, args) -> int:
+    """What ``simulate`` says about a marvel scenario's IMU and features."""
+    duration = float(simulation.scenario["duration_s"])
+    counts = simulation.details["counts"]
+    say(f"wrote {out}: scene.toml, imu.csv, features.csv, truth.csv, simulation.json")
+    name = simulation.scenario.get("name", args.scenario)
+    say(f"  scenario {name} (marvel), seed {simulation.seed}, {duration:g} s, "
+        f"{plural(simulation.details['walls'], 'wall')}")
+    say(
+        f"  {plural(len(simulation.imu), 'IMU sample')}; {plural(counts['rows'], 'feature row')} of "
+        f"{counts['epochs']} epochs ({counts['rows_below_snr']} lost below the decoding SNR, "
+        f"{counts['rows_without_yaw']} without yaw)"
     )
     return 0
 
@@ -566,9 +584,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     simulate = commands.add_parser(
         "simulate",
-        help="simulate a reader session: scene.toml, reads.csv or frames.csv, truth.csv",
+        help="simulate a reader session: scene.toml, reads.csv, frames.csv or imu.csv + features.csv, truth.csv",
         description="Run a simulation scenario and write scene.toml, reads.csv (a COTS reader, glac "
-        "scenarios) or frames.csv (a reader + SDR helper, turbotrack scenarios), truth.csv and simulation.json.",
+        "scenarios), frames.csv (a reader + SDR helper, turbotrack scenarios) or imu.csv and features.csv "
+        "(a drone with LoRa-backscatter tags, marvel scenarios), truth.csv and simulation.json.",
     )
     simulate.add_argument("--scenario", required=True, help="a named scenario (see 'scattertrack scenarios') or a TOML file")
     simulate.add_argument("--out", required=True, help="output folder")
@@ -576,7 +595,7 @@ def build_parser() -> argparse.ArgumentParser:
     simulate.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, seconds")
     simulate.add_argument(
         "--pipeline",
-        choices=("glac", "turbotrack"),
+        choices=("glac", "turbotrack", "marvel"),
         default=None,
         help="check that the scenario is for this pipeline (default: the scenario's own)",
     )

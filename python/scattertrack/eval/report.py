@@ -27,6 +27,13 @@ _COLUMNS = [
     ("first", "s", 7, lambda m: m.first_estimate_s, 1, 2),
 ]
 
+# Shown only when some row has both an estimated and a true orientation (Marvel).
+_ORIENTATION_COLUMNS = [
+    ("rot mean", "deg", 9, lambda m: m.mean_orientation_deg, 1, 2),
+    ("yaw mean", "deg", 9, lambda m: m.mean_yaw_deg, 1, 2),
+    ("3D mean", "mm", 9, lambda m: m.mean_3d_m, 1e3, 1),
+]
+
 
 def _cell(value, scale: float, decimals: int, width: int) -> str:
     """A right-aligned number, or '-' for nan (no rows, never converged)."""
@@ -42,19 +49,22 @@ def format_report(report: Report, *, title: str | None = None) -> str:
     Columns: rows evaluated, rows excluded (outside the truth span), median
     and 90th percentile 3D error (mm), median absolute error per axis (mm),
     median velocity error (cm/s), convergence time (s, '-' if never) and
-    first-estimate delay (s). Below the table: how many tags converged,
+    first-estimate delay (s); when the track and the truth carry orientations,
+    also the mean orientation and heading errors (degrees) and the mean 3D
+    error (mm; the Marvel paper reports means). Below the table: how many tags converged,
     rows excluded by reason, reads the tracker skipped, tags never tracked.
     """
     names = list(report.per_tag) + ["overall"]
+    columns = _COLUMNS + (_ORIENTATION_COLUMNS if report.overall.n_orientation else [])
     tag_width = max(len("tag"), *(len(name) for name in names))
-    header = "tag".ljust(tag_width) + "".join(name.rjust(width) for name, _, width, *_ in _COLUMNS)
-    units = " " * tag_width + "".join(unit.rjust(width) for _, unit, width, *_ in _COLUMNS)
+    header = "tag".ljust(tag_width) + "".join(name.rjust(width) for name, _, width, *_ in columns)
+    units = " " * tag_width + "".join(unit.rjust(width) for _, unit, width, *_ in columns)
     lines = [title, "=" * len(header)] if title else []
     lines += [header, units]
 
     def row(name: str, metrics: TagMetrics) -> str:
         return name.ljust(tag_width) + "".join(
-            _cell(get(metrics), scale, decimals, width) for _, _, width, get, scale, decimals in _COLUMNS
+            _cell(get(metrics), scale, decimals, width) for _, _, width, get, scale, decimals in columns
         )
 
     for name, metrics in report.per_tag.items():
@@ -110,6 +120,10 @@ def _metrics_to_dict(metrics: TagMetrics) -> dict:
         "converged_fraction": _number(metrics.converged_fraction),
         "motion_start_s": _number(metrics.motion_start_s),
         "converged_at_s": _number(metrics.converged_at_s),
+        "n_orientation": int(metrics.n_orientation),
+        "mean_orientation_deg": _number(metrics.mean_orientation_deg),
+        "median_orientation_deg": _number(metrics.median_orientation_deg),
+        "mean_yaw_deg": _number(metrics.mean_yaw_deg),
     }
 
 

@@ -1,4 +1,4 @@
-"""Readers and writers of the public formats (FORMATS.md sections 1-4).
+"""Readers and writers of the public formats (FORMATS.md sections 1-7).
 
 Contract: every reader validates and raises :class:`FormatError` naming the
 file, the 1-based line and the column for a malformed file; rows it declines
@@ -11,7 +11,9 @@ accept.
 from scattertrack.io.types import (
     Antenna,
     ChannelOffset,
+    Features,
     FormatError,
+    Imu,
     Reader,
     Reads,
     Region,
@@ -34,12 +36,16 @@ from scattertrack.io.sigmf import (
     write_sigmf,
 )
 from scattertrack.io.track import read_track, write_track
+from scattertrack.io.imu import read_imu, write_imu
+from scattertrack.io.features import read_features, write_features
 from scattertrack.io.truth import read_truth, write_truth
 
 __all__ = [
     "Antenna",
     "ChannelOffset",
+    "Features",
     "FormatError",
+    "Imu",
     "Frames",
     "Reader",
     "Reads",
@@ -54,14 +60,18 @@ __all__ = [
     "calibrate_sigmf",
     "estimate_sigmf",
     "make_frames",
+    "read_features",
     "read_frames",
+    "read_imu",
     "read_reads",
     "read_scene",
     "read_sigmf",
     "read_sigmf_frames",
     "read_track",
     "read_truth",
+    "write_features",
     "write_frames",
+    "write_imu",
     "write_reads",
     "write_scene",
     "write_sigmf",

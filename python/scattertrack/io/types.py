@@ -198,6 +198,7 @@ class Truth:
     epc: np.ndarray
     position: np.ndarray  # (n, 3) metres
     velocity: np.ndarray  # (n, 3) m/s, nan where absent
+    orientation: np.ndarray | None = None  # (n, 4) qw, qx, qy, qz (world_T_body), when given
 
     def __len__(self) -> int:
         return len(self.time_s)
@@ -226,6 +227,51 @@ class Track:
     smoothed: dict = field(default_factory=dict)
     """Methods that revise the past (TurboTrack's backtracked MAP trajectory):
     ``epc -> (times s (n,), positions m (n, 3))``; empty otherwise."""
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+
+@dataclass
+class Imu:
+    """Inertial samples (``imu.csv``, FORMATS.md section 6), sorted by time.
+
+    Body frame x forward, y left, z up; at rest ``accel`` reads about
+    (0, 0, +9.81) m/s^2 (specific force).
+    """
+
+    time_s: np.ndarray  # (n,) seconds, strictly increasing after reading
+    accel: np.ndarray  # (n, 3) specific force, body frame, m/s^2
+    gyro: np.ndarray  # (n, 3) angular rate, body frame, rad/s
+    baro_z: np.ndarray  # (n,) barometric height, metres; nan where absent
+    skipped: SkipReport = field(default_factory=SkipReport)
+    """Samples declined on reading (duplicate or non-monotonic timestamps), by reason."""
+    gaps: int = 0
+    """Gaps longer than 3 nominal sample periods (counted and reported, not filled)."""
+
+    def __len__(self) -> int:
+        return len(self.time_s)
+
+
+@dataclass
+class Features:
+    """Backscatter pose features (``features.csv``, FORMATS.md section 7), sorted by time.
+
+    ``azimuth_rad``/``elevation_rad``: direction from the controller's array
+    to the drone, world frame; ``yaw_rad``: heading of body x about +z, nan
+    where the row has none. Sigmas are nan where the file gives none.
+    """
+
+    time_s: np.ndarray  # (n,) seconds, same clock as the IMU
+    range_m: np.ndarray  # (n,) controller-to-drone distance, metres
+    azimuth_rad: np.ndarray  # (n,)
+    elevation_rad: np.ndarray  # (n,)
+    yaw_rad: np.ndarray  # (n,) nan where absent
+    range_sigma_m: np.ndarray  # (n,) nan where absent
+    angle_sigma_rad: np.ndarray  # (n,) nan where absent
+    yaw_sigma_rad: np.ndarray  # (n,) nan where absent
+    skipped: SkipReport = field(default_factory=SkipReport)
+    reordered: int = 0
 
     def __len__(self) -> int:
         return len(self.time_s)

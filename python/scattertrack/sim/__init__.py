@@ -22,7 +22,7 @@ Contract
     ``simulation.json`` (seed, resolved scenario, package version, details).
 ``list_scenarios(pipeline="glac") -> list[str]``
     The named scenarios shipped in ``<repo>/scenarios`` for one pipeline
-    (``"glac"``, ``"turbotrack"``, or ``"all"``).
+    (``"glac"``, ``"turbotrack"``, ``"marvel"``, or ``"all"``).
 
 Scenarios with ``pipeline = "turbotrack"`` simulate a reader plus SDR
 localization helper instead (:mod:`scattertrack.sim.wideband`): their
@@ -33,6 +33,17 @@ and ``write_simulation`` writes ``frames.csv`` instead of ``reads.csv``.
 ``subcarrier_frequencies``) and the frame-level simulator
 (``simulate_frames(scene, tags, model, seed) -> (Frames, Truth)``) are
 exported here too.
+
+Scenarios with ``pipeline = "marvel"`` simulate a drone with four
+LoRa-backscatter tags and an IMU at the feature level
+(:mod:`scattertrack.sim.marvel`, docs/marvel.md section 9): their
+``Simulation`` has ``imu`` and ``features`` (FORMATS.md sections 6-7),
+``truth`` with orientation and ``reads = None``; ``write_simulation`` writes
+``imu.csv`` and ``features.csv``. The drone's flights
+(``flight(params, t) -> FlightTruth``, ``tag_positions``, ``DEFAULT_TAGS``),
+the IMU (``simulate_imu``, ``IMU_MODEL_DEFAULTS``) and the feature model
+(``simulate_marvel``, ``FEATURE_MODEL_DEFAULTS``) are exported here;
+quaternion helpers are in :mod:`scattertrack.sim.rotation`.
 
 The reads follow FORMATS.md's monostatic phase model
 ``phase = (phase_sign 4 pi f d / c + antenna offset + channel offset(f)
@@ -55,6 +66,9 @@ from scattertrack.sim.scenario import (
 from scattertrack.sim.trajectory import positions_velocities
 from scattertrack.sim.scenario import PIPELINES, resolve_helper_model, scenario_pipeline
 from scattertrack.sim.iq import IQ_MODEL_DEFAULTS, IqSimulation, simulate_iq, simulate_iq_scenario, write_iq_simulation
+from scattertrack.sim.drone import DEFAULT_TAGS, FlightError, FlightTruth, TagLayout, flight, tag_positions
+from scattertrack.sim.imu import IMU_MODEL_DEFAULTS, simulate_imu
+from scattertrack.sim.marvel import FEATURE_MODEL_DEFAULTS, simulate_marvel
 from scattertrack.sim.wideband import (
     HELPER_MODEL_DEFAULTS,
     bistatic_path_lengths,
@@ -66,6 +80,16 @@ from scattertrack.sim.wideband import (
 )
 
 __all__ = [
+    "DEFAULT_TAGS",
+    "FEATURE_MODEL_DEFAULTS",
+    "FlightError",
+    "FlightTruth",
+    "IMU_MODEL_DEFAULTS",
+    "TagLayout",
+    "flight",
+    "simulate_imu",
+    "simulate_marvel",
+    "tag_positions",
     "HELPER_MODEL_DEFAULTS",
     "IQ_MODEL_DEFAULTS",
     "IqSimulation",

@@ -4,10 +4,13 @@ A scenario holds the scene (antennas, reader conventions, region), the reader
 model (schedule and impairments, :data:`scattertrack.sim.cots.READER_MODEL_DEFAULTS`)
 and the tags with their trajectories (:mod:`scattertrack.sim.trajectory`).
 Its ``pipeline`` says which hardware it simulates: ``"glac"`` (the default: a
-COTS reader, ``[reader_model]``, output ``reads.csv``) or ``"turbotrack"``
+COTS reader, ``[reader_model]``, output ``reads.csv``), ``"turbotrack"``
 (a reader plus SDR localization helper, ``[helper_model]`` with the keys of
 :data:`scattertrack.sim.wideband.HELPER_MODEL_DEFAULTS`, antennas with
-``role = "tx"``/``"rx"``, output ``frames.csv``).
+``role = "tx"``/``"rx"``, output ``frames.csv``) or ``"marvel"`` (a drone
+with LoRa-backscatter tags and an IMU, :mod:`scattertrack.sim.marvel`:
+``[controller]``, ``[flight]``, ``[imu_model]``, ``[feature_model]``,
+output ``imu.csv`` and ``features.csv``; docs/marvel.md section 9).
 The schema, with every key, unit and default, is in ``docs/simulator.md``;
 named scenarios live in ``<repo>/scenarios/NAME.toml``.
 
@@ -31,14 +34,27 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack.io.frames import Frames
-from scattertrack.io.types import Antenna, ChannelOffset, FormatError, Reader, Reads, Region, Scene, Truth
-from scattertrack.sim import cots, trajectory, wideband
+from scattertrack.io.types import (
+    Antenna,
+    ChannelOffset,
+    Features,
+    FormatError,
+    Imu,
+    Reader,
+    Reads,
+    Region,
+    Scene,
+    Truth,
+)
+from scattertrack.sim import cots, drone, marvel, trajectory, wideband
+from scattertrack.sim import imu as imu_sim
 
 SCENARIOS_DIR = Path(__file__).resolve().parents[3] / "scenarios"
 """The repository's named scenarios: python/scattertrack/sim/ -> ../../../scenarios."""
 
-PIPELINES = ("glac", "turbotrack")
-"""What a scenario simulates: a COTS reader (reads.csv) or a reader + SDR helper (frames.csv)."""
+PIPELINES = ("glac", "turbotrack", "marvel")
+"""What a scenario simulates: a COTS reader (reads.csv), a reader + SDR helper (frames.csv)
+or a drone with LoRa-backscatter tags and an IMU (imu.csv, features.csv)."""
 
 MODEL_TABLE = {"glac": "reader_model", "turbotrack": "helper_model"}
 """The table of impairments each pipeline's scenarios use."""
@@ -68,10 +84,14 @@ class Simulation:
     """Hidden truth (true offsets, hop table) and counts (attempts, misses, outliers)."""
     frames: Frames | None = None
     """Wideband channel frames of a turbotrack scenario (None for glac)."""
+    imu: Imu | None = None
+    """IMU samples of a marvel scenario (None otherwise)."""
+    features: Features | None = None
+    """Backscatter pose features of a marvel scenario (None otherwise)."""
 
     @property
     def pipeline(self) -> str:
-        """``"glac"`` or ``"turbotrack"``: which scenario kind produced this."""
+        """``"glac"``, ``"turbotrack"`` or ``"marvel"``: which scenario kind produced this."""
         return self.scenario.get("pipeline", "glac")
 
 
@@ -84,7 +104,7 @@ def list_scenarios(pipeline: str = "glac") -> list[str]:
 
     ``pipeline`` is ``"glac"`` (the default: the COTS reader scenarios, what
     callers written before the turbotrack pipeline expect), ``"turbotrack"``,
-    or ``"all"``.
+    ``"marvel"``, or ``"all"``.
     """
     names = sorted(path.stem for path in SCENARIOS_DIR.glob("*.toml"))
     if pipeline == "all":
@@ -220,6 +240,8 @@ def resolve_scenario(scenario: dict) -> dict:
     check = _Checker(source)
     data = copy.deepcopy(scenario)
     pipeline = check.choice(data.setdefault("pipeline", "glac"), "pipeline", PIPELINES)
+    if pipeline == "marvel":
+        return _resolve_marvel(check, data)
     helper = pipeline == "turbotrack"
     for other, table in MODEL_TABLE.items():
         if other != pipeline and table in data:
@@ -332,6 +354,101 @@ def resolve_scenario(scenario: dict) -> dict:
         if "phase_offset_rad" in tag:
             tag["phase_offset_rad"] = check.number(tag["phase_offset_rad"], f"{where}.phase_offset_rad")
         _check_trajectory(check, check.table(tag["trajectory"], f"{where}.trajectory"), f"{where}.trajectory", data)
+    return data
+
+
+_MARVEL_TOP_LEVEL = (
+    "name",
+    "source",
+    "pipeline",
+    "scene",
+    "controller",
+    "flight",
+    "imu_model",
+    "feature_model",
+    *TOP_LEVEL_DEFAULTS,
+)
+_MARVEL_SCENE_KEYS = ("name", "region")
+_CONTROLLER_KEYS = ("position", "array", "walls")
+"""The keys of ``[controller]``, as :func:`scattertrack.sim.lora.resolve_controller` takes them."""
+MARVEL_TRUTH_RATE_HZ = 100.0
+"""Default truth rate of a marvel scenario, Hz: the IMU's rate, so truth and IMU share their times."""
+
+
+def _resolve_marvel(check: _Checker, data: dict) -> dict:
+    """Validate and complete a ``pipeline = "marvel"`` scenario (docs/marvel.md section 9)."""
+    for other, table in MODEL_TABLE.items():
+        if table in data:
+            check.fail(table, f"is for {other} scenarios; this one has pipeline = 'marvel'")
+    if "tags" in data:
+        check.fail("tags", "a marvel scenario has one drone with four tags (docs/marvel.md section 2): use [flight]")
+    check.keys(data, _MARVEL_TOP_LEVEL, "")
+    if "name" not in data:
+        check.fail("name", "missing")
+    data.setdefault("truth_rate_hz", MARVEL_TRUTH_RATE_HZ)
+    for key, default in TOP_LEVEL_DEFAULTS.items():
+        data.setdefault(key, default)
+    check.string(data["name"], "name")
+    check.string(data["description"], "description")
+    data["duration_s"] = check.number(data["duration_s"], "duration_s", 0.0, strict=True)
+    data["seed"] = check.integer(data["seed"], "seed", 0)
+    data["truth_rate_hz"] = check.number(data["truth_rate_hz"], "truth_rate_hz", 100.0)
+
+    scene = check.table(data.setdefault("scene", {}), "scene")
+    check.keys(scene, _MARVEL_SCENE_KEYS, "scene")
+    scene.setdefault("name", data["name"])
+    check.string(scene["name"], "scene.name")
+    if "region" in scene:
+        region = check.table(scene["region"], "scene.region")
+        check.keys(region, ("min", "max"), "scene.region")
+        for key in ("min", "max"):
+            if key not in region:
+                check.fail(f"scene.region.{key}", "missing")
+            region[key] = check.point(region[key], f"scene.region.{key}")
+        if any(lo >= hi for lo, hi in zip(region["min"], region["max"])):
+            check.fail("scene.region", "min must be below max on every axis")
+
+    if "controller" not in data:
+        check.fail("controller", "missing (the controller's [controller] position, hidden from the estimator)")
+    controller = check.table(data["controller"], "controller")
+    check.keys(controller, _CONTROLLER_KEYS, "controller")
+    if "position" not in controller:
+        check.fail("controller.position", "missing")
+    controller["position"] = check.point(controller["position"], "controller.position")
+    check.choice(controller.setdefault("array", "triangle"), "controller.array", marvel.ARRAYS)
+    controller["walls"] = check.integer(controller.setdefault("walls", 0), "controller.walls", 0)
+
+    if "flight" not in data:
+        check.fail("flight", "missing (the drone's [flight] table)")
+    try:
+        data["flight"] = drone.check_flight(check.table(data["flight"], "flight"), data["duration_s"])
+    except drone.ParameterError as error:
+        check.fail("flight" if error.key is None else f"flight.{error.key}", error.message)
+    for table, resolve in (("imu_model", imu_sim.resolve_imu_model), ("feature_model", marvel.resolve_feature_model)):
+        try:
+            data[table] = resolve(check.table(data.get(table, {}), table))
+        except drone.ParameterError as error:
+            check.fail(table if error.key is None else f"{table}.{error.key}", error.message)
+
+    # Geometry over the session: the drone never reaches the controller, and
+    # stays in front of a planar array (docs/marvel.md section 4), and inside the region.
+    times = np.linspace(0.0, data["duration_s"], int(data["duration_s"] * 10) + 2)
+    position = drone.flight(data["flight"], times).position
+    delta = position - np.asarray(controller["position"])
+    distance = np.linalg.norm(delta, axis=1)
+    if distance.min() < 0.5:
+        check.fail("controller.position", f"the drone passes within {distance.min():.2f} m of the controller")
+    if controller["array"] == "triangle" and np.min(delta[:, 1]) <= 0.0:
+        worst = float(times[np.argmin(delta[:, 1])])
+        check.fail(
+            "controller.position",
+            f"the drone goes behind the controller's planar array (u_y <= 0 at t = {worst:.1f} s); "
+            "the array faces +y (docs/marvel.md section 4)",
+        )
+    if "region" in scene:
+        low, high = np.array(scene["region"]["min"]), np.array(scene["region"]["max"])
+        if np.any(position < low) or np.any(position > high):
+            check.fail("scene.region", "the flight leaves the region")
     return data
 
 
@@ -508,6 +625,8 @@ def simulate(scenario: dict, seed: int | None = None) -> Simulation:
     seed = data["seed"]
     if data["pipeline"] == "turbotrack":
         return _simulate_helper(data)
+    if data["pipeline"] == "marvel":
+        return marvel.simulate_marvel(data)
     root = np.random.default_rng(seed)
     names = (*cots.STREAMS, "trajectories")
     rngs = dict(zip(names, root.spawn(len(names))))
@@ -657,20 +776,24 @@ def _truth(epcs: list[str], trajectories: list[dict], duration_s: float, rate_hz
 
 def write_simulation(sim: Simulation, out_dir) -> Path:
     """Write ``scene.toml``, ``reads.csv`` (``frames.csv`` for a turbotrack
-    scenario), ``truth.csv`` and ``simulation.json`` into ``out_dir``.
+    scenario; ``imu.csv`` and ``features.csv`` for a marvel one),
+    ``truth.csv`` and ``simulation.json`` into ``out_dir``.
 
     ``simulation.json`` records the seed, the resolved scenario, the package
     version and the hidden truth (true offsets, hop table, counts), so a run
     can be reproduced and audited. Returns the folder.
     """
     from scattertrack import __version__
-    from scattertrack.io import write_frames, write_reads, write_scene, write_truth
+    from scattertrack.io import write_features, write_frames, write_imu, write_reads, write_scene, write_truth
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_scene(out / "scene.toml", sim.scene)
     if sim.frames is not None:
         write_frames(out / "frames.csv", sim.frames)
+    elif sim.features is not None:
+        write_imu(out / "imu.csv", sim.imu)
+        write_features(out / "features.csv", sim.features)
     else:
         write_reads(out / "reads.csv", sim.reads)
     write_truth(out / "truth.csv", sim.truth)

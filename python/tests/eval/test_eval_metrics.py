@@ -268,3 +268,59 @@ def test_nees_needs_sigma():
     truth = make_truth()
     with pytest.raises(ValueError, match="sigma"):
         nees(truth, track_from(truth))
+
+
+def _yaw_quaternions(yaw: np.ndarray) -> np.ndarray:
+    """Unit quaternions (qw, qx, qy, qz) of rotations by ``yaw`` (rad) about +z."""
+    return np.column_stack([np.cos(yaw / 2), np.zeros_like(yaw), np.zeros_like(yaw), np.sin(yaw / 2)])
+
+
+def _spinning(n=201, rate=0.8):
+    time = np.linspace(0.0, 2.0, n)
+    position = np.column_stack([time, np.zeros(n), np.ones(n)])
+    truth = Truth(time, np.full(n, "drone"), position, np.tile([1.0, 0.0, 0.0], (n, 1)), _yaw_quaternions(rate * time))
+    return truth, time, position
+
+
+def test_orientation_error_is_the_relative_rotation_angle():
+    truth, time, position = _spinning()
+    query = time[::7] + 0.003  # between truth rows: exercises the interpolation
+    offset = np.radians(10.0)
+    estimated = _yaw_quaternions(0.8 * query + offset)
+    estimated[::2] *= -1.0  # q and -q are one rotation
+    track = Track(query, np.full(len(query), "drone"), np.column_stack([query, np.zeros(len(query)), np.ones(len(query))]),
+                  np.tile([1.0, 0.0, 0.0], (len(query), 1)), orientation=estimated)
+    report = compare(truth, track)
+    assert report.overall.n_orientation == len(query)
+    assert report.overall.mean_orientation_deg == pytest.approx(10.0, abs=1e-3)
+    assert report.overall.mean_yaw_deg == pytest.approx(10.0, abs=1e-3)
+    assert np.all(np.abs(report.overall.yaw_errors_rad - offset) < 1e-5)
+
+
+def test_tilt_shows_in_orientation_but_not_in_yaw():
+    truth, time, position = _spinning()
+    tilt = np.radians(5.0)
+    # A tilt about body x after the true yaw: q_est = q_true * q_x(tilt).
+    q = truth.orientation
+    qx = np.array([np.cos(tilt / 2), np.sin(tilt / 2), 0.0, 0.0])
+    w1, x1, y1, z1 = q.T
+    w2, x2, y2, z2 = qx
+    estimated = np.column_stack([
+        w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+        w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+        w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+    ])
+    track = Track(time, truth.epc, position, truth.velocity, orientation=estimated)
+    report = compare(truth, track)
+    assert report.overall.mean_orientation_deg == pytest.approx(5.0, abs=1e-3)
+    assert report.overall.mean_yaw_deg < 0.5
+
+
+def test_no_orientation_gives_nan_orientation_statistics():
+    truth, time, position = _spinning()
+    track = Track(time, truth.epc, position, truth.velocity)
+    report = compare(truth, track)
+    assert report.overall.n_orientation == 0
+    assert np.isnan(report.overall.mean_orientation_deg)
+    assert np.isnan(report.overall.mean_yaw_deg)

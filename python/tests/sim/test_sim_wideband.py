@@ -277,7 +277,7 @@ def test_turbotrack_scenarios_are_listed_by_pipeline():
     assert sorted(TURBOTRACK) == list_scenarios("turbotrack")
     assert not set(TURBOTRACK) & set(list_scenarios("glac"))
     assert list_scenarios() == list_scenarios("glac")  # the default, as before the helper existed
-    assert set(list_scenarios("all")) == set(list_scenarios("glac")) | set(TURBOTRACK)
+    assert set(list_scenarios("all")) == set(list_scenarios("glac")) | set(TURBOTRACK) | set(list_scenarios("marvel"))
     with pytest.raises(ValueError, match="unknown pipeline"):
         list_scenarios("tagoram")
 

@@ -1,0 +1,53 @@
+"""Backscatter-inertial fusion of the Marvel pipeline (paper sec. IV, docs/marvel.md section 8).
+
+Contract
+--------
+In: the drone's IMU samples (:class:`scattertrack.io.types.Imu`, FORMATS.md
+section 6: specific force m/s^2 and angular rate rad/s in the body frame x
+forward, y left, z up; optional barometric height m) and the backscatter
+pose features (:class:`scattertrack.io.types.Features`, FORMATS.md section 7:
+range m, azimuth and elevation rad of the drone seen from the controller,
+optional yaw rad, optional 1-sigmas), on one clock in seconds.
+
+Out: one estimate per accepted feature row (sensing epoch, ~10 Hz), in the
+world frame (origin at take-off, z up, x along the controller's array):
+body position m, velocity m/s, orientation world_T_body quaternion
+``(qw, qx, qy, qz)``, 1-sigma position m (from the smoother's marginal
+covariance), the controller's position ``rho`` m (unknown, estimated with
+the trajectory) and the wall time spent on the row s. In batch form
+(:func:`run_marvel`) a :class:`scattertrack.io.types.Track` with ``epc =
+"drone"`` and the declined rows counted by reason in ``skipped``.
+
+Causality: the estimate of a row uses only IMU samples and rows at or before
+its time; it is the smoother's estimate of the newest state just after that
+row, never a later smoothed value, so appending data cannot change it.
+
+Assumptions: the drone starts at rest at the world origin; gravity is
+9.80665 m/s^2 along -z; the IMU sits at the body origin.
+
+Modules: :mod:`.factors` (pure measurement models with Jacobians, and their
+GTSAM factors), :mod:`.estimator` (the causal fixed-lag smoother),
+:mod:`.run` (the batch loop).
+"""
+
+from scattertrack.fusion.estimator import (
+    DECLINE_REASONS,
+    IMU_DECLINE_REASONS,
+    Estimate,
+    MarvelEstimator,
+    MarvelParams,
+    chi_square_gate,
+    tilt_from_specific_force,
+)
+from scattertrack.fusion.run import run_marvel
+
+__all__ = [
+    "DECLINE_REASONS",
+    "IMU_DECLINE_REASONS",
+    "Estimate",
+    "MarvelEstimator",
+    "MarvelParams",
+    "chi_square_gate",
+    "run_marvel",
+    "tilt_from_specific_force",
+]

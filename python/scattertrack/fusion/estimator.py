@@ -1,0 +1,634 @@
+"""Causal backscatter-inertial estimator on a GTSAM fixed-lag smoother (paper sec. IV).
+
+One state per sensing epoch k: ``X(k)`` pose (world_T_body), ``V(k)``
+velocity (m/s, world), ``B(k)`` IMU biases, ``O(k)`` the barometer's offset
+(m, when a barometer is used), and one ``L(0)``: the controller's position
+``rho`` (m, world). Between epochs the IMU samples are preintegrated into one
+``CombinedImuFactor`` (eq. 13, with the bias random walk inside); each
+feature row adds range, direction and yaw factors (eq. 12, see
+:mod:`scattertrack.fusion.factors`). An ``IncrementalFixedLagSmoother``
+(iSAM2 that marginalises states older than the lag) solves eq. 10; the
+controller's time stamp is renewed every epoch so it is never marginalised.
+
+Causality: :meth:`MarvelEstimator.add_features` returns the smoother's
+estimate of the newest state right after the update with that row, using
+only IMU samples and rows given before (at or before its time).
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+import time
+from collections import deque
+from dataclasses import dataclass, field, fields
+
+import gtsam
+import numpy as np
+from gtsam.symbol_shorthand import B, L, O, V, X
+
+from scattertrack.fusion import factors
+
+GRAVITY_M_S2 = 9.80665
+"""Standard gravity, m/s^2; the world's gravity is ``(0, 0, -g)`` (docs/marvel.md section 1)."""
+
+CONTROLLER = L(0)
+"""Key of the controller's position in the graph."""
+
+# Reasons a feature row (or one of its measurements) is declined; the keys
+# are the counters in ``MarvelEstimator.declined``, the values the text of
+# ``Track.skipped``.
+DECLINE_REASONS = {
+    "non_finite": "feature row with a non-finite time, range or angle (declined)",
+    "before_imu": "feature row before the first IMU sample (declined)",
+    "not_after_previous": "feature row not after the previous epoch (declined)",
+    "too_close": "feature row within min_epoch_interval_s of the previous epoch (declined)",
+    "before_latest_imu": "feature row older than an IMU sample already integrated (declined)",
+    "range_gate": "range outside the innovation gate (declined)",
+    "direction_gate": "direction outside the innovation gate (declined)",
+    "yaw_gate": "yaw outside the innovation gate (declined)",
+}
+
+# IMU samples the estimator ignores, counted in ``MarvelEstimator.imu_declined``.
+IMU_DECLINE_REASONS = {
+    "non_finite": "IMU sample with a non-finite time, force or rate (ignored)",
+    "not_after_previous": "IMU sample not after the previous one (ignored)",
+}
+
+
+@dataclass
+class MarvelParams:
+    """Tuning of :class:`MarvelEstimator`; SI units. IMU defaults: docs/marvel.md section 3."""
+
+    smoother_lag_s: float = 3.0
+    """States older than this behind the newest epoch are marginalised, s."""
+    gravity_m_s2: float = GRAVITY_M_S2
+    accel_noise_density: float = 1.0e-3
+    """Accelerometer white noise, m/s^2/sqrt(Hz)."""
+    gyro_noise_density: float = 8.7e-5
+    """Gyroscope white noise, rad/s/sqrt(Hz)."""
+    accel_bias_random_walk: float = 1.0e-4
+    """Accelerometer bias random walk, m/s^3/sqrt(Hz)."""
+    gyro_bias_random_walk: float = 2.0e-5
+    """Gyroscope bias random walk, rad/s^2/sqrt(Hz)."""
+    accel_bias_sigma: float = 0.02
+    """1-sigma of the accelerometer bias at take-off, m/s^2."""
+    gyro_bias_sigma: float = 0.002
+    """1-sigma of the gyroscope bias at take-off, rad/s."""
+    integration_sigma: float = 1.0e-4
+    """Position integration noise of the preintegration, m/sqrt(Hz): covers
+    the sample-and-hold error of integrating discrete samples."""
+    imu_noise_scale: float = 1.0
+    """Multiplies the two white-noise densities (a margin for unmodelled vibration)."""
+
+    range_sigma_m: float = 0.5
+    """1-sigma of a range when the features give none, m."""
+    angle_sigma_rad: float = 0.05
+    """1-sigma of azimuth and elevation when the features give none, rad."""
+    yaw_sigma_rad: float = 0.15
+    """1-sigma of a yaw when the features give none, rad."""
+    use_yaw: bool = True
+
+    prior_position_sigma_m: float = 0.05
+    """Take-off prior: at rest at the origin, 1-sigma per axis, m."""
+    prior_velocity_sigma_m_s: float = 0.1
+    prior_tilt_sigma_rad: float = 0.05
+    """1-sigma of roll and pitch from the averaged accelerometer, rad."""
+    prior_yaw_sigma_rad: float = 1.0
+    """Loose take-off yaw prior, rad: the yaw's value comes from the first
+    yaw feature when there is one (0 otherwise), its information from the
+    yaw factors."""
+    tilt_window_s: float = 0.5
+    """Accelerometer samples averaged for roll and pitch at take-off, s."""
+
+    use_baro: bool = True
+    """Barometer factors when ``baro_z`` is given."""
+    baro_sigma_m: float = 0.1
+    """White noise of one barometer sample, m."""
+    baro_random_walk: float = 0.02
+    """Random walk of the barometer's offset, m/sqrt(s)."""
+    baro_window_s: float = 0.05
+    """Barometer samples in (t_k - window, t_k] are averaged for epoch k, s;
+    short, because their mean lags the epoch by about window / 2."""
+    baro_offset_prior_sigma_m: float = 100.0
+    """Loose prior on the offset (the barometer reads an arbitrary datum), m."""
+
+    gate_probability: float = 0.999
+    """Chi-square gate on each measurement's normalised innovation (0: no gate)."""
+    min_epoch_interval_s: float = 1.0e-3
+    """Rows closer than this to the previous epoch are declined: a
+    preintegration over a vanishing interval has a near-singular covariance."""
+    max_declined_epochs: int = 5
+    """After this many consecutive epochs with every measurement gated, the
+    next row is taken ungated (recovery from a wrong state instead of lock-out)."""
+    robust: str | None = None
+    """None, or "huber": a Huber kernel on the feature factors."""
+    huber_k: float = 1.345
+
+    compute_sigma: bool = True
+    """1-sigma position and controller in the output, from iSAM2's marginal
+    covariances of the newest pose, velocity and controller (about 0.4 ms of
+    the ~8 ms per epoch). The gate needs them too, so they are computed
+    whenever the gate is on; off with the gate off, the output sigmas are nan."""
+    relinearize_threshold: float = 0.01
+    """iSAM2 relinearises a variable whose update exceeds this (tangent units)."""
+    factorization: str = "QR"
+    """iSAM2 factorization, "QR" or "CHOLESKY" (see the note in the constructor)."""
+    extra_iterations: int = 0
+    """Additional iSAM2 updates per epoch (more Gauss-Newton steps)."""
+
+    @classmethod
+    def from_kwargs(cls, **kwargs) -> MarvelParams:
+        """Params with the given fields changed (ValueError for unknown names)."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(kwargs) - names)
+        if unknown:
+            raise ValueError(f"unknown Marvel parameter(s): {', '.join(unknown)}")
+        return cls(**kwargs)
+
+    def __post_init__(self):
+        if self.robust not in (None, "huber"):
+            raise ValueError(f"robust: None or 'huber', not {self.robust!r}")
+        if self.factorization not in ("QR", "CHOLESKY"):
+            raise ValueError(f"factorization: 'QR' or 'CHOLESKY', not {self.factorization!r}")
+        if not self.smoother_lag_s > 0.0:
+            raise ValueError("smoother_lag_s must be positive (seconds)")
+
+
+@dataclass
+class Estimate:
+    """The estimate of one sensing epoch (world frame, SI units)."""
+
+    time_s: float
+    position: np.ndarray
+    """Body origin, (3,) m."""
+    velocity: np.ndarray
+    """(3,) m/s."""
+    orientation: np.ndarray
+    """world_T_body quaternion ``(qw, qx, qy, qz)``, ``qw >= 0``."""
+    sigma: np.ndarray
+    """1-sigma position along the world axes, (3,) m; nan when not computed."""
+    controller: np.ndarray
+    """Controller position ``rho``, (3,) m."""
+    controller_sigma: np.ndarray
+    """1-sigma of ``rho`` along the world axes, (3,) m; nan when not computed."""
+    accel_bias: np.ndarray
+    """(3,) m/s^2."""
+    gyro_bias: np.ndarray
+    """(3,) rad/s."""
+    used: dict = field(default_factory=dict)
+    """Which measurements of the row entered the graph: ``range``, ``direction``, ``yaw``, ``baro``."""
+    wall_time_s: float = float("nan")
+    """Wall time spent in :meth:`MarvelEstimator.add_features` for this row, s."""
+
+
+def chi_square_gate(probability: float, dof: int) -> float:
+    """Chi-square quantile for 1 or 2 degrees of freedom (closed forms, no scipy).
+
+    1 dof: the square of the two-sided normal quantile; 2 dof: the
+    exponential distribution, ``-2 ln(1 - P)``.
+    """
+    if dof == 1:
+        return statistics.NormalDist().inv_cdf(0.5 + 0.5 * probability) ** 2
+    if dof == 2:
+        return -2.0 * math.log1p(-probability)
+    raise ValueError("chi_square_gate: only 1 or 2 degrees of freedom")
+
+
+def tilt_from_specific_force(specific_force) -> tuple[float, float]:
+    """Roll and pitch (rad) of a body at rest from its accelerometer (m/s^2).
+
+    At rest ``f = R^T (0, 0, g)``; with ``R = Rz(yaw) Ry(pitch) Rx(roll)``
+    that is ``g (-sin pitch, cos pitch sin roll, cos pitch cos roll)``.
+    """
+    f = np.asarray(specific_force, dtype=float)
+    return math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2]))
+
+
+def _finite_or(value: float, default: float) -> float:
+    return float(value) if value is not None and math.isfinite(value) and value > 0.0 else default
+
+
+class MarvelEstimator:
+    """Causal backscatter-inertial fusion: feed IMU samples and feature rows in time order.
+
+    ``add_imu`` for every IMU sample, ``add_features`` for every feature row
+    (after the IMU samples at or before its time); the latter returns the
+    :class:`Estimate` of that epoch, or ``None`` when the row is declined
+    (counted in :attr:`declined`).
+    """
+
+    def __init__(self, params: MarvelParams | None = None, **kwargs):
+        if params is None:
+            params = MarvelParams.from_kwargs(**kwargs)
+        elif kwargs:
+            raise ValueError("pass either a MarvelParams or keyword parameters, not both")
+        self.params = params
+        self.declined: dict[str, int] = {key: 0 for key in DECLINE_REASONS}
+        self.epochs = 0
+        self.wall_times_s: list[float] = []
+        self.imu_samples = 0
+        self.imu_wall_time_s = 0.0
+        """Wall time spent in :meth:`add_imu`, all samples together, s."""
+        self.imu_declined: dict[str, int] = {key: 0 for key in IMU_DECLINE_REASONS}
+
+        p = params
+        # Preintegration: continuous-time densities squared (GTSAM divides by
+        # dt when it discretises); gravity along -z (MakeSharedU).
+        self._imu_params = gtsam.PreintegrationCombinedParams.MakeSharedU(p.gravity_m_s2)
+        eye = np.eye(3)
+        self._imu_params.setAccelerometerCovariance(eye * (p.accel_noise_density * p.imu_noise_scale) ** 2)
+        self._imu_params.setGyroscopeCovariance(eye * (p.gyro_noise_density * p.imu_noise_scale) ** 2)
+        self._imu_params.setBiasAccCovariance(eye * p.accel_bias_random_walk**2)
+        self._imu_params.setBiasOmegaCovariance(eye * p.gyro_bias_random_walk**2)
+        self._imu_params.setIntegrationCovariance(eye * p.integration_sigma**2)
+        self._preintegrated = gtsam.PreintegratedCombinedMeasurements(self._imu_params)
+
+        isam_params = gtsam.ISAM2Params()
+        isam_params.setRelinearizeThreshold(p.relinearize_threshold)
+        isam_params.relinearizeSkip = 1
+        # QR on the Jacobian instead of Cholesky on J^T J: the bias random
+        # walk between 0.1 s epochs (1/sigma ~ 2e5 for the gyroscope) next to
+        # metre-level feature noise gives cond(J) ~ 1e6, cond(J^T J) ~ 1e12,
+        # where iSAM2's Cholesky reports an indeterminate system.
+        isam_params.setFactorization(p.factorization)
+        self._smoother = gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
+
+        self._gate = (
+            {1: chi_square_gate(p.gate_probability, 1), 2: chi_square_gate(p.gate_probability, 2)}
+            if p.gate_probability and p.gate_probability > 0.0
+            else None
+        )
+
+        # IMU stream: the newest sample (time s, specific force m/s^2, rate
+        # rad/s) and the time the preintegration has reached.
+        self._first_imu_time: float | None = None
+        self._last_sample: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._integrated_to: float | None = None
+        self._tilt_sum = np.zeros(3)
+        self._tilt_count = 0
+        self._baro: deque[tuple[float, float]] = deque()
+
+        # Graph state.
+        self._key = -1  # index of the newest state, -1 before take-off
+        self._last_epoch_time: float | None = None
+        self._nav: gtsam.NavState | None = None  # newest state's estimate
+        self._bias = gtsam.imuBias.ConstantBias()
+        self._controller: np.ndarray | None = None
+        self._baro_chain = False  # O(k) exists for the newest state
+        self._baro_key = -1  # index k of the newest O(k)
+        self._baro_time = float("nan")
+        self._baro_offset = 0.0
+        self._cov_position = np.full((3, 3), np.nan)  # world, m^2
+        self._cov_velocity = np.full((3, 3), np.nan)
+        self._cov_yaw = float("nan")
+        self._cov_controller = np.full((3, 3), np.nan)
+        self._declined_run = 0
+
+    # --- IMU ---------------------------------------------------------------
+
+    def add_imu(self, time_s: float, accel, gyro, baro_z: float = float("nan")) -> None:
+        """One IMU sample: specific force (m/s^2) and angular rate (rad/s) in
+        the body frame, optional barometric height (m). Samples must come in
+        increasing time; a sample not after the previous one, or with a
+        non-finite value, is ignored and counted in :attr:`imu_declined`."""
+        started = time.perf_counter()
+        try:
+            self._add_imu(float(time_s), np.asarray(accel, dtype=float), np.asarray(gyro, dtype=float), baro_z)
+        finally:
+            self.imu_wall_time_s += time.perf_counter() - started
+
+    def _add_imu(self, time_s: float, accel: np.ndarray, gyro: np.ndarray, baro_z) -> None:
+        if not (math.isfinite(time_s) and np.all(np.isfinite(accel)) and np.all(np.isfinite(gyro))):
+            self.imu_declined["non_finite"] += 1
+            return
+        if self._last_sample is not None and time_s <= self._last_sample[0]:
+            self.imu_declined["not_after_previous"] += 1
+            return
+        self.imu_samples += 1
+        if self._first_imu_time is None:
+            self._first_imu_time = time_s
+            self._integrated_to = time_s
+        elif time_s > self._integrated_to:
+            # Trapezoid over (integrated_to, t] on the line between the
+            # previous sample and this one: second order in dt, where holding
+            # the old sample would lag the signal by half a period.
+            t_prev, a_prev, w_prev = self._last_sample
+            span = time_s - t_prev
+            fraction = (self._integrated_to - t_prev) / span
+            a_start = a_prev + fraction * (accel - a_prev)
+            w_start = w_prev + fraction * (gyro - w_prev)
+            self._preintegrated.integrateMeasurement(
+                0.5 * (a_start + accel), 0.5 * (w_start + gyro), time_s - self._integrated_to
+            )
+            self._integrated_to = time_s
+        self._last_sample = (time_s, accel, gyro)
+        if self._key < 0 and time_s <= self._first_imu_time + self.params.tilt_window_s:
+            self._tilt_sum += accel
+            self._tilt_count += 1
+        if baro_z is not None and math.isfinite(baro_z):
+            self._baro.append((time_s, float(baro_z)))
+            while self._baro and self._baro[0][0] <= time_s - self.params.baro_window_s:
+                self._baro.popleft()
+
+    def _integrate_to(self, time_s: float) -> None:
+        """Extends the preintegration to ``time_s`` holding the newest sample
+        (the next one is not known yet: causal)."""
+        if time_s > self._integrated_to:
+            _, accel, gyro = self._last_sample
+            self._preintegrated.integrateMeasurement(accel, gyro, time_s - self._integrated_to)
+            self._integrated_to = time_s
+
+    # --- features ----------------------------------------------------------
+
+    def add_features(
+        self,
+        time_s: float,
+        range_m: float,
+        azimuth_rad: float,
+        elevation_rad: float,
+        yaw_rad: float = float("nan"),
+        range_sigma_m: float = float("nan"),
+        angle_sigma_rad: float = float("nan"),
+        yaw_sigma_rad: float = float("nan"),
+    ) -> Estimate | None:
+        """One feature row (FORMATS.md section 7): adds the epoch's state and
+        factors, updates the smoother and returns the newest state's estimate;
+        ``None`` when the row is declined."""
+        started = time.perf_counter()
+        values = (time_s, range_m, azimuth_rad, elevation_rad)
+        if not all(v is not None and math.isfinite(v) for v in values) or range_m <= 0.0:
+            return self._decline("non_finite")
+        time_s = float(time_s)
+        if self._first_imu_time is None or time_s < self._first_imu_time:
+            return self._decline("before_imu")
+        if self._last_epoch_time is not None and time_s <= self._last_epoch_time:
+            return self._decline("not_after_previous")
+        if self._last_epoch_time is not None and time_s - self._last_epoch_time < self.params.min_epoch_interval_s:
+            return self._decline("too_close")
+        if time_s < self._last_sample[0]:
+            return self._decline("before_latest_imu")
+        p = self.params
+        range_sigma = _finite_or(range_sigma_m, p.range_sigma_m)
+        angle_sigma = _finite_or(angle_sigma_rad, p.angle_sigma_rad)
+        yaw_sigma = _finite_or(yaw_sigma_rad, p.yaw_sigma_rad)
+        has_yaw = p.use_yaw and yaw_rad is not None and math.isfinite(yaw_rad)
+
+        self._integrate_to(time_s)
+        graph = gtsam.NonlinearFactorGraph()
+        initial = gtsam.Values()
+        stamps: dict[int, float] = {}
+
+        if self._key < 0:
+            self._take_off(graph, initial, stamps, float(yaw_rad) if has_yaw else 0.0)
+            # A row at the take-off instant itself measures X(0).
+            if self._preintegrated.deltaTij() > 0.0:
+                self._key = 1
+                self._add_imu_factor(graph, initial, 0)
+            else:
+                self._key = 0
+        else:
+            # A new state joins the previous one through the preintegrated IMU.
+            self._key += 1
+            self._add_imu_factor(graph, initial, self._key - 1)
+        k = self._key
+        for key in (X(k), V(k), B(k)):
+            stamps[key] = time_s
+        predicted = self._nav
+
+        # Controller: initialised from the first row, rho = p - d u.
+        gated = self._controller is not None and self._gate is not None and self._declined_run < p.max_declined_epochs
+        if self._controller is None:
+            self._controller = predicted.position() - range_m * factors.direction(azimuth_rad, elevation_rad)
+            initial.insert(CONTROLLER, self._controller)
+        stamps[CONTROLLER] = time_s
+
+        used = {"range": True, "direction": True, "yaw": has_yaw, "baro": False}
+        direction_sigma = factors.direction_sigmas(elevation_rad, angle_sigma)
+        if gated:
+            used["range"], used["direction"], yaw_ok = self._innovation_tests(
+                predicted, range_m, azimuth_rad, elevation_rad, yaw_rad if has_yaw else None,
+                range_sigma, direction_sigma, yaw_sigma,
+            )
+            used["yaw"] = has_yaw and yaw_ok
+            for name in ("range", "direction", "yaw"):
+                if (name != "yaw" or has_yaw) and not used[name]:
+                    self.declined[f"{name}_gate"] += 1
+            self._declined_run = 0 if (used["range"] or used["direction"] or used["yaw"]) else self._declined_run + 1
+        else:
+            self._declined_run = 0
+
+        if used["range"]:
+            graph.add(factors.range_factor(X(k), CONTROLLER, range_m, self._noise(np.array([range_sigma]))))
+        if used["direction"]:
+            graph.add(
+                factors.direction_factor(X(k), CONTROLLER, azimuth_rad, elevation_rad, self._noise(direction_sigma))
+            )
+        if used["yaw"]:
+            graph.add(factors.yaw_factor(X(k), float(yaw_rad), self._noise(np.array([yaw_sigma]))))
+        used["baro"] = self._add_baro(graph, initial, stamps, time_s, predicted)
+
+        self._smoother.update(graph, initial, stamps)
+        for _ in range(p.extra_iterations):
+            self._smoother.update()
+        self._last_epoch_time = time_s
+        estimate = self._read_estimate(time_s, used)
+        # The next interval integrates against the newest bias estimate.
+        self._preintegrated.resetIntegrationAndSetBias(self._bias)
+        self.epochs += 1
+        estimate.wall_time_s = time.perf_counter() - started
+        self.wall_times_s.append(estimate.wall_time_s)
+        return estimate
+
+    def step(self, measurement) -> Estimate | None:
+        """Either an IMU sample ``("imu", time_s, accel, gyro[, baro_z])`` or a
+        feature row ``("features", time_s, range_m, azimuth_rad, elevation_rad, ...)``."""
+        kind, *rest = measurement
+        if kind == "imu":
+            self.add_imu(*rest)
+            return None
+        if kind == "features":
+            return self.add_features(*rest)
+        raise ValueError(f"unknown measurement kind {kind!r}")
+
+    # --- graph building ----------------------------------------------------
+
+    def _take_off(self, graph, initial, stamps, yaw_rad: float) -> None:
+        """State X(0) at the first IMU sample: at rest at the origin, roll and
+        pitch from the averaged accelerometer, yaw from the first yaw feature."""
+        p = self.params
+        mean_force = self._tilt_sum / self._tilt_count if self._tilt_count else np.array([0.0, 0.0, 1.0])
+        roll, pitch = tilt_from_specific_force(mean_force)
+        pose = gtsam.Pose3(gtsam.Rot3.Ypr(yaw_rad, pitch, roll), np.zeros(3))
+        # Pose3 tangent: rotation about body x, y, z then translation.
+        pose_sigmas = np.array(
+            [p.prior_tilt_sigma_rad, p.prior_tilt_sigma_rad, p.prior_yaw_sigma_rad] + [p.prior_position_sigma_m] * 3
+        )
+        velocity_noise = gtsam.noiseModel.Isotropic.Sigma(3, p.prior_velocity_sigma_m_s)
+        bias_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3))
+        graph.add(gtsam.PriorFactorPose3(X(0), pose, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
+        graph.add(gtsam.PriorFactorVector(V(0), np.zeros(3), velocity_noise))
+        graph.add(gtsam.PriorFactorConstantBias(B(0), gtsam.imuBias.ConstantBias(), bias_noise))
+        initial.insert(X(0), pose)
+        initial.insert(V(0), np.zeros(3))
+        initial.insert(B(0), gtsam.imuBias.ConstantBias())
+        for key in (X(0), V(0), B(0)):
+            stamps[key] = self._first_imu_time
+        self._nav = gtsam.NavState(pose, np.zeros(3))
+        self._bias = gtsam.imuBias.ConstantBias()
+
+    def _add_imu_factor(self, graph, initial, previous: int) -> None:
+        k = self._key
+        graph.add(gtsam.CombinedImuFactor(X(previous), V(previous), X(k), V(k), B(previous), B(k), self._preintegrated))
+        predicted = self._preintegrated.predict(self._nav, self._bias)
+        # Prior-free prediction of the new state for the gate and as the
+        # initial value: previous estimate pushed through the preintegration.
+        dt = self._preintegrated.deltaTij()
+        if np.all(np.isfinite(self._cov_position)):
+            rotation = self._nav.attitude().matrix()
+            preintegrated_cov = np.asarray(self._preintegrated.preintMeasCov())
+            # preintMeasCov order: rotation, position, velocity, biases;
+            # position in the previous body frame.
+            self._cov_position = (
+                self._cov_position
+                + dt * dt * self._cov_velocity
+                + rotation @ preintegrated_cov[3:6, 3:6] @ rotation.T
+            )
+            self._cov_yaw = self._cov_yaw + preintegrated_cov[2, 2]
+        initial.insert(X(k), predicted.pose())
+        initial.insert(V(k), predicted.velocity())
+        initial.insert(B(k), self._bias)
+        self._nav = predicted
+
+    def _add_baro(self, graph, initial, stamps, time_s: float, predicted: gtsam.NavState) -> bool:
+        """Barometer: height + offset O(k) = mean of the samples in the window;
+        O(k) follows a random walk between epochs. Returns whether a height
+        factor was added."""
+        p = self.params
+        if not p.use_baro:
+            return False
+        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
+        if not samples and not self._baro_chain:
+            return False
+        k = self._key
+        if self._baro_chain:
+            dt = max(time_s - self._baro_time, 1e-6)
+            walk = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_random_walk * math.sqrt(dt))
+            graph.add(gtsam.BetweenFactorDouble(O(self._baro_key), O(k), 0.0, walk))
+            initial.insert(O(k), self._baro_offset)
+        else:
+            self._baro_offset = float(np.mean(samples)) - predicted.position()[2]
+            loose = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_offset_prior_sigma_m)
+            graph.add(gtsam.PriorFactorDouble(O(k), self._baro_offset, loose))
+            initial.insert(O(k), self._baro_offset)
+            self._baro_chain = True
+        self._baro_key, self._baro_time = k, time_s
+        stamps[O(k)] = time_s
+        if not samples:
+            return False
+        # White noise averages down over the window's samples.
+        noise = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_sigma_m / math.sqrt(len(samples)))
+        graph.add(factors.height_factor(X(k), O(k), float(np.mean(samples)), noise))
+        return True
+
+    def _noise(self, sigmas: np.ndarray):
+        model = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
+        if self.params.robust == "huber":
+            # Huber: quadratic within huber_k sigma, linear beyond, so a
+            # moderate outlier that passed the gate pulls less.
+            return gtsam.noiseModel.Robust.Create(gtsam.noiseModel.mEstimator.Huber.Create(self.params.huber_k), model)
+        return model
+
+    def _innovation_tests(
+        self, predicted, range_m, azimuth_rad, elevation_rad, yaw_rad, range_sigma, direction_sigma, yaw_sigma
+    ) -> tuple[bool, bool, bool]:
+        """Normalised innovation squared of each measurement against the
+        IMU-predicted state, ``nu^T S^-1 nu`` with ``S = H P H^T + R``, below
+        the chi-square gate. ``P`` is the predicted position covariance plus
+        the controller's (their cross-covariance is left out: it is positive
+        for a drone measured from the controller, so leaving it out widens
+        ``S`` and the gate errs on accepting)."""
+        position = predicted.position()
+        covariance = np.zeros((3, 3))
+        if np.all(np.isfinite(self._cov_position)):
+            covariance = covariance + self._cov_position
+        if np.all(np.isfinite(self._cov_controller)):
+            covariance = covariance + self._cov_controller
+        residual, (h_position, _) = factors.range_residual(position, self._controller, range_m, jacobians=True)
+        s = float((h_position @ covariance @ h_position.T)[0, 0]) + range_sigma**2
+        range_ok = residual[0] ** 2 / s <= self._gate[1]
+        residual, (h_position, _) = factors.direction_residual(
+            position, self._controller, azimuth_rad, elevation_rad, jacobians=True
+        )
+        s = h_position @ covariance @ h_position.T + np.diag(direction_sigma**2)
+        direction_ok = float(residual @ np.linalg.solve(s, residual)) <= self._gate[2]
+        yaw_ok = True
+        if yaw_rad is not None:
+            residual = factors.yaw_residual(predicted.attitude().matrix(), yaw_rad)
+            s = (self._cov_yaw if math.isfinite(self._cov_yaw) else 0.0) + yaw_sigma**2
+            yaw_ok = residual[0] ** 2 / s <= self._gate[1]
+        return bool(range_ok), bool(direction_ok), bool(yaw_ok)
+
+    def _read_estimate(self, time_s: float, used: dict) -> Estimate:
+        k = self._key
+        smoother = self._smoother
+        pose = smoother.calculateEstimatePose3(X(k))
+        velocity = np.asarray(smoother.calculateEstimateVector(V(k)), dtype=float)
+        self._bias = smoother.calculateEstimateConstantBias(B(k))
+        self._controller = np.asarray(smoother.calculateEstimatePoint3(CONTROLLER), dtype=float)
+        if self._baro_chain:
+            self._baro_offset = smoother.calculateEstimateDouble(O(self._baro_key))
+        self._nav = gtsam.NavState(pose, velocity)
+        rotation = pose.rotation().matrix()
+        if self.params.compute_sigma or self._gate is not None:
+            pose_cov = np.asarray(smoother.marginalCovariance(X(k)))
+            # Pose3 covariance: tangent [rotation, translation] in the body frame.
+            self._cov_position = rotation @ pose_cov[3:, 3:] @ rotation.T
+            self._cov_yaw = float(pose_cov[2, 2])
+            self._cov_velocity = np.asarray(smoother.marginalCovariance(V(k)))
+            self._cov_controller = np.asarray(smoother.marginalCovariance(CONTROLLER))
+        if self.params.compute_sigma:
+            sigma = np.sqrt(np.clip(np.diag(self._cov_position), 0.0, None))
+            controller_sigma = np.sqrt(np.clip(np.diag(self._cov_controller), 0.0, None))
+        else:
+            sigma = np.full(3, np.nan)
+            controller_sigma = np.full(3, np.nan)
+        quaternion = pose.rotation().toQuaternion()
+        q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
+        if q[0] < 0.0:
+            q = -q
+        return Estimate(
+            time_s=time_s,
+            position=np.asarray(pose.translation(), dtype=float),
+            velocity=velocity,
+            orientation=q,
+            sigma=sigma,
+            controller=self._controller.copy(),
+            controller_sigma=controller_sigma,
+            accel_bias=np.asarray(self._bias.accelerometer(), dtype=float),
+            gyro_bias=np.asarray(self._bias.gyroscope(), dtype=float),
+            used=used,
+        )
+
+    def _decline(self, reason: str) -> None:
+        """Counts a declined row; returns None, the value add_features gives for it."""
+        self.declined[reason] += 1
+
+    # --- reporting ---------------------------------------------------------
+
+    def latency_ns(self) -> dict[str, float]:
+        """Quantiles of the wall time per accepted feature row, ns (``p50``, ``p99``, ``mean``, ``max``)."""
+        if not self.wall_times_s:
+            return {}
+        ns = np.asarray(self.wall_times_s) * 1e9
+        return {
+            "p50": float(np.percentile(ns, 50)),
+            "p99": float(np.percentile(ns, 99)),
+            "mean": float(np.mean(ns)),
+            "max": float(np.max(ns)),
+        }
+
+    @property
+    def controller(self) -> np.ndarray | None:
+        """Current estimate of the controller position, (3,) m, or None before the first row."""
+        return None if self._controller is None else self._controller.copy()

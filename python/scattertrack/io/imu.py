@@ -1,0 +1,124 @@
+"""Inertial samples, ``imu.csv`` (FORMATS.md section 6).
+
+Columns: ``time_s`` (seconds, the features' clock), ``ax``, ``ay``, ``az``
+(specific force in the body frame, m/s^2; at rest about ``(0, 0, +9.81)``),
+``gx``, ``gy``, ``gz`` (angular rate in the body frame, rad/s) and
+optionally ``baro_z`` (barometric height, metres; an empty cell is no
+reading).
+
+An IMU stream must move forward in time: a sample whose time equals an
+earlier one (``"duplicate time"``) or is before it (``"non-monotonic
+time"``) is declined and counted in ``Imu.skipped`` with its line, never
+silently dropped and never re-sorted (an integrator would otherwise
+integrate across it). Gaps longer than 3 nominal periods (the median
+spacing) are counted in ``Imu.gaps``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, write_columns
+from scattertrack.io.types import Imu, SkipReport
+
+ACCEL = ["ax", "ay", "az"]
+GYRO = ["gx", "gy", "gz"]
+REQUIRED = ["time_s", *ACCEL, *GYRO]
+OPTIONAL = ["baro_z"]
+
+DUPLICATE = "duplicate time"
+"""SkipReport reason: a sample at the same time as an earlier one."""
+BACKWARDS = "non-monotonic time"
+"""SkipReport reason: a sample earlier than one before it in the file."""
+GAP_PERIODS = 3.0
+"""A spacing longer than this many nominal sample periods is a gap."""
+
+
+def read_imu(path) -> Imu:
+    """Read and validate an ``imu.csv``; returns samples in strictly increasing time.
+
+    Raises :class:`FormatError` (file, line, column) for a missing column, a
+    non-numeric or non-finite cell (``nan`` included; an empty ``baro_z`` is
+    allowed and reads as nan) or a file without data rows.
+    """
+    times, accels, gyros, baros, lines = [], [], [], [], []
+    with CsvReader(path, REQUIRED, OPTIONAL) as reader:
+        for chunk in reader.chunks():
+            times.append(chunk.floats("time_s"))
+            accels.append(np.column_stack([chunk.floats(name) for name in ACCEL]))
+            gyros.append(np.column_stack([chunk.floats(name) for name in GYRO]))
+            if chunk.has("baro_z"):
+                baros.append(chunk.floats("baro_z", allow_empty=True))
+            else:
+                baros.append(np.full(len(chunk), math.nan))
+            chunk.raise_first_problem()
+            lines.append(chunk.line_numbers())
+    time = np.concatenate(times)
+    line = np.concatenate(lines)
+    keep, skipped = _forward_in_time(time, line)
+    time = time[keep]
+    return Imu(
+        time_s=time,
+        accel=np.concatenate(accels)[keep],
+        gyro=np.concatenate(gyros)[keep],
+        baro_z=np.concatenate(baros)[keep],
+        skipped=skipped,
+        gaps=count_gaps(time),
+    )
+
+
+def _forward_in_time(time: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, SkipReport]:
+    """Mask of samples later than every earlier sample, and the report of the others.
+
+    A declined sample is never later than the running maximum, so the
+    running maximum over all rows equals the one over the kept rows.
+    """
+    latest_before = np.concatenate([[-np.inf], np.maximum.accumulate(time)[:-1]])
+    duplicate = time == latest_before
+    backwards = time < latest_before
+    skipped = SkipReport()
+    for reason, mask in ((DUPLICATE, duplicate), (BACKWARDS, backwards)):
+        rows = np.flatnonzero(mask)
+        if len(rows):
+            for row in rows[:5].tolist():
+                skipped.add(reason, int(line[row]))
+            if len(rows) > 5:
+                skipped.add(reason, None, n=len(rows) - 5)
+    return ~(duplicate | backwards), skipped
+
+
+def count_gaps(time_s: np.ndarray) -> int:
+    """Spacings longer than :data:`GAP_PERIODS` nominal periods (the median spacing), seconds."""
+    if len(time_s) < 3:
+        return 0
+    spacing = np.diff(time_s)
+    nominal = float(np.median(spacing))
+    # The 1e-6 margin keeps a spacing of exactly 3 periods, written in decimal, from counting.
+    return int(np.count_nonzero(spacing > GAP_PERIODS * nominal * (1.0 + 1e-6)))
+
+
+def write_imu(path, imu: Imu) -> None:
+    """Write ``imu`` as ``imu.csv``: time (s) and accelerations (m/s^2) with 6 decimals,
+    rates (rad/s) with 8, barometric height (m) with 4; ``baro_z`` only when some is finite
+    (a nan one is an empty cell).
+    """
+    time = np.asarray(imu.time_s, dtype=np.float64)
+    accel = np.asarray(imu.accel, dtype=np.float64).reshape(-1, 3)
+    gyro = np.asarray(imu.gyro, dtype=np.float64).reshape(-1, 3)
+    require_finite(path, "time_s", time)
+    require_finite(path, "accel", accel)
+    require_finite(path, "gyro", gyro)
+    if len(time) and np.any(np.diff(time) <= 0.0):
+        raise ValueError(f"{path}: IMU times must increase strictly")
+    header = list(REQUIRED)
+    columns = [format_fixed(time, 6)]
+    columns += [format_fixed(accel[:, k], 6) for k in range(3)]
+    columns += [format_fixed(gyro[:, k], 8) for k in range(3)]
+    baro = np.asarray(imu.baro_z, dtype=np.float64).reshape(-1) if imu.baro_z is not None else None
+    if baro is not None and np.isfinite(baro).any():
+        require_finite(path, "baro_z", baro[~np.isnan(baro)])
+        header.append("baro_z")
+        columns.append(format_fixed(baro, 4, empty_nan=True))
+    write_columns(path, header, columns)

@@ -1,0 +1,251 @@
+"""The causal backscatter-inertial estimator on synthetic flights (conftest.py).
+
+Accuracy against the features alone, orientation, the controller's
+convergence, consistency of the 1-sigma output, declined rows by reason,
+causality, and the streaming interface.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from scattertrack.fusion import (
+    DECLINE_REASONS,
+    MarvelEstimator,
+    MarvelParams,
+    chi_square_gate,
+    run_marvel,
+    tilt_from_specific_force,
+)
+from scattertrack.io.types import Features
+
+
+@pytest.fixture(scope="module")
+def circle_track(circle_flight):
+    return run_marvel(circle_flight.imu, circle_flight.features)
+
+
+def _position_errors(track, data) -> np.ndarray:
+    assert np.allclose(track.time_s, data.truth_time[: len(track)])
+    return np.linalg.norm(track.position - data.truth_position[: len(track)], axis=1)
+
+
+# --- accuracy --------------------------------------------------------------------
+
+
+def test_fused_position_beats_the_features_alone(circle_flight, circle_track):
+    errors = _position_errors(circle_track, circle_flight)
+    # The features alone, even placed with the TRUE controller position.
+    raw = np.linalg.norm(circle_flight.raw_position - circle_flight.truth_position, axis=1)
+    assert len(circle_track) == len(circle_flight.features)
+    assert errors.mean() < 0.45 * raw.mean()
+    assert errors.mean() < 0.5
+    assert np.median(errors) < 0.45
+
+
+def test_orientation_error_is_a_few_degrees(circle_flight, circle_track, rotation_errors):
+    errors = rotation_errors(circle_track.orientation, circle_flight.truth_rotation)
+    assert errors.mean() < 3.0
+    assert errors.max() < 8.0
+    assert np.allclose(np.linalg.norm(circle_track.orientation, axis=1), 1.0)
+    assert np.all(circle_track.orientation[:, 0] >= 0.0)
+
+
+def test_controller_estimate_converges(circle_flight, circle_track):
+    stats = circle_track.stats["drone"]
+    error = stats["controller"] - circle_flight.controller
+    assert np.linalg.norm(error) < 0.5
+    # And its own 1-sigma accounts for the error.
+    assert np.all(np.abs(error) < 3.0 * stats["controller_sigma"])
+    # The first row's controller (range sigma 0.5 m, 15 m * 0.05 rad across) is far worse.
+    first = MarvelEstimator()
+    data = circle_flight
+    for i in range(6):
+        first.add_imu(data.imu.time_s[i], data.imu.accel[i], data.imu.gyro[i], data.imu.baro_z[i])
+    f = data.features
+    first.add_features(f.time_s[0], f.range_m[0], f.azimuth_rad[0], f.elevation_rad[0], f.yaw_rad[0])
+    assert np.linalg.norm(first.controller - data.controller) > np.linalg.norm(error)
+
+
+def test_position_sigma_is_consistent(circle_flight, circle_track):
+    """NEES-style check: normalised errors per axis within 3 sigma, mean NEES near 3."""
+    assert circle_track.sigma is not None and np.all(np.isfinite(circle_track.sigma))
+    normalised = (circle_track.position - circle_flight.truth_position) / circle_track.sigma
+    within = np.mean(np.all(np.abs(normalised) < 3.0, axis=1))
+    nees = np.mean(np.sum(normalised**2, axis=1))
+    assert within > 0.95
+    # 3 axes: mean 3 when consistent; a factor ~3 either way flags over- or under-confidence.
+    assert 1.0 < nees < 9.0
+
+
+def test_yaw_is_observable_without_yaw_features(flight_factory, rotation_errors):
+    """IMU + range/direction alone find the heading once the drone accelerates sideways."""
+    data = flight_factory(duration_s=15.0, seed=3)
+    track = run_marvel(data.imu, data.features, use_yaw=False)
+    errors = rotation_errors(track.orientation, data.truth_rotation)
+    late = track.time_s > 10.0
+    assert errors[late].mean() < 8.0
+
+
+# --- declined rows ------------------------------------------------------------------
+
+
+def test_outliers_and_bad_rows_are_declined_and_counted(flight_factory):
+    data = flight_factory(duration_s=15.0, seed=5)
+    f = data.features
+    columns = {
+        name: getattr(f, name).copy()
+        for name in (
+            "time_s", "range_m", "azimuth_rad", "elevation_rad", "yaw_rad",
+            "range_sigma_m", "angle_sigma_rad", "yaw_sigma_rad",
+        )
+    }
+    range_rows, direction_rows, yaw_rows = [40, 60, 80, 100, 120], [50, 70, 90, 110], [55, 75, 95]
+    nan_rows = [45, 65, 85]
+    columns["range_m"][range_rows] += 12.0  # 24 sigma
+    columns["azimuth_rad"][direction_rows] += 0.6  # 12 sigma
+    columns["yaw_rad"][yaw_rows] += 2.0  # 20 sigma
+    columns["range_m"][nan_rows[0]] = np.nan
+    columns["azimuth_rad"][nan_rows[1]] = np.nan
+    columns["time_s"][nan_rows[2]] = np.nan
+    # A row before the first IMU sample and a repeated epoch time.
+    for name, column in columns.items():
+        columns[name] = np.insert(column, [0, 31], [column[0], column[30]])
+    columns["time_s"][0] = -0.5
+    features = Features(**columns)
+
+    track = run_marvel(data.imu, features)
+    declined = track.stats["drone"]["declined"]
+    assert declined["non_finite"] == 3
+    assert declined["before_imu"] == 1
+    assert declined["not_after_previous"] == 1
+    # Every injected outlier is caught; at 99.9 % a clean one is rarely gated too.
+    assert len(range_rows) <= declined["range_gate"] <= len(range_rows) + 1
+    assert len(direction_rows) <= declined["direction_gate"] <= len(direction_rows) + 1
+    assert len(yaw_rows) <= declined["yaw_gate"] <= len(yaw_rows) + 1
+    for key, reason in DECLINE_REASONS.items():
+        if declined[key]:
+            assert track.skipped.counts[reason] == declined[key]
+    # Rows with a gated measurement still give an estimate; invalid rows do not.
+    assert len(track) == len(f) - 3
+    truth_rows = np.searchsorted(data.truth_time, track.time_s)
+    assert np.array_equal(data.truth_time[truth_rows], track.time_s)
+    errors = np.linalg.norm(track.position - data.truth_position[truth_rows], axis=1)
+    assert errors.mean() < 0.5
+
+
+def test_gate_does_not_lock_out_after_consecutive_declines(flight_factory):
+    """After max_declined_epochs rows with every measurement gated, one row is taken ungated."""
+    data = flight_factory(duration_s=8.0, seed=11)
+    f = data.features
+    estimator = MarvelEstimator(max_declined_epochs=3, robust="huber")
+    used, imu = [], 0
+    for j in range(len(f)):
+        while imu < len(data.imu) and data.imu.time_s[imu] <= f.time_s[j]:
+            estimator.add_imu(data.imu.time_s[imu], data.imu.accel[imu], data.imu.gyro[imu], data.imu.baro_z[imu])
+            imu += 1
+        # From row 50 on every measurement is far off (a jump the gate must refuse).
+        jump = j >= 50
+        estimate = estimator.add_features(
+            f.time_s[j], f.range_m[j] + 20.0 * jump, f.azimuth_rad[j] + 1.0 * jump, f.elevation_rad[j],
+            f.yaw_rad[j] + 2.5 * jump,
+        )
+        used.append(estimate.used["range"])
+    assert all(used[:50])
+    assert used[50:54] == [False, False, False, True]  # three declined epochs, then re-acquisition
+    assert estimator.declined["range_gate"] >= 3
+
+
+# --- causality -------------------------------------------------------------------------
+
+
+def test_estimates_do_not_change_when_later_data_is_appended(flight_factory, truncate_flight):
+    data = flight_factory(duration_s=10.0, seed=7)
+    full = run_marvel(data.imu, data.features)
+    imu, features = truncate_flight(data, 6.0)
+    part = run_marvel(imu, features)
+    n = len(part)
+    assert 50 < n < len(full)
+    assert np.array_equal(part.time_s, full.time_s[:n])
+    assert np.array_equal(part.position, full.position[:n])
+    assert np.array_equal(part.velocity, full.velocity[:n])
+    assert np.array_equal(part.orientation, full.orientation[:n])
+    assert np.array_equal(part.sigma, full.sigma[:n])
+
+
+# --- interface ----------------------------------------------------------------------------
+
+
+def test_streaming_interface_and_take_off_row(circle_flight):
+    data = circle_flight
+    estimator = MarvelEstimator(smoother_lag_s=2.0)
+    # A row before any IMU sample is declined.
+    assert estimator.add_features(0.0, 15.0, 1.4, 0.0) is None
+    assert estimator.declined["before_imu"] == 1
+    estimator.step(("imu", data.imu.time_s[0], data.imu.accel[0], data.imu.gyro[0], data.imu.baro_z[0]))
+    # A row at the first IMU sample's own time measures the take-off state X(0).
+    delta = data.truth_position[0] - data.controller
+    first = estimator.add_features(data.imu.time_s[0], np.linalg.norm(delta), math.atan2(delta[1], delta[0]), 0.0)
+    assert first is not None and np.allclose(first.position, 0.0, atol=0.2)
+    assert first.wall_time_s > 0.0
+    f = data.features
+    estimates = []
+    imu_time = data.imu.time_s
+    for i in range(1, 400):
+        estimator.step(("imu", imu_time[i], data.imu.accel[i], data.imu.gyro[i], data.imu.baro_z[i]))
+        # The rows from this sample's time up to the next sample's.
+        for j in np.flatnonzero((f.time_s >= imu_time[i]) & (f.time_s < imu_time[i + 1])):
+            row = ("features", f.time_s[j], f.range_m[j], f.azimuth_rad[j], f.elevation_rad[j], f.yaw_rad[j])
+            estimates.append(estimator.step(row))
+    assert len(estimates) == 40 and all(e is not None for e in estimates)
+    last = estimates[-1]
+    assert last.position.shape == (3,) and last.velocity.shape == (3,) and last.orientation.shape == (4,)
+    assert np.all(np.isfinite(last.sigma)) and np.all(np.isfinite(last.controller_sigma))
+    assert last.used == {"range": True, "direction": True, "yaw": True, "baro": True}
+    assert np.linalg.norm(last.position - data.truth_position[39]) < 1.0
+    assert set(estimator.latency_ns()) >= {"p50", "p99"}
+    # IMU samples out of order or non-finite are ignored and counted.
+    estimator.add_imu(imu_time[10], data.imu.accel[10], data.imu.gyro[10])
+    estimator.add_imu(imu_time[400], [np.nan, 0.0, 9.8], data.imu.gyro[400])
+    assert estimator.imu_declined == {"non_finite": 1, "not_after_previous": 1}
+
+
+def test_run_marvel_reports_stats_and_latency(circle_track):
+    stats = circle_track.stats["drone"]
+    assert stats["epochs"] == len(circle_track)
+    assert stats["time_ns_p50"] > 0 and stats["time_ns_p99"] >= stats["time_ns_p50"]
+    assert circle_track.latency_quantiles_ns["p99"] == stats["time_ns_p99"]
+    assert set(circle_track.epc) == {"drone"}
+
+
+def test_params_are_checked():
+    with pytest.raises(ValueError, match="unknown Marvel parameter"):
+        MarvelParams.from_kwargs(smoother_lag=3.0)
+    with pytest.raises(ValueError):
+        MarvelEstimator(MarvelParams(), smoother_lag_s=1.0)
+    with pytest.raises(ValueError, match="robust"):
+        MarvelParams(robust="cauchy")
+    with pytest.raises(ValueError, match="smoother_lag_s"):
+        MarvelParams(smoother_lag_s=0.0)
+    defaults = MarvelParams()
+    # docs/marvel.md section 3.
+    assert (defaults.accel_noise_density, defaults.gyro_noise_density) == (1.0e-3, 8.7e-5)
+    assert (defaults.accel_bias_random_walk, defaults.gyro_bias_random_walk) == (1.0e-4, 2.0e-5)
+    assert (defaults.accel_bias_sigma, defaults.gyro_bias_sigma) == (0.02, 0.002)
+    assert defaults.gravity_m_s2 == 9.80665
+
+
+def test_chi_square_gate_quantiles():
+    assert chi_square_gate(0.999, 1) == pytest.approx(10.828, abs=1e-3)
+    assert chi_square_gate(0.999, 2) == pytest.approx(13.816, abs=1e-3)
+    assert chi_square_gate(0.95, 1) == pytest.approx(3.841, abs=1e-3)
+
+
+def test_tilt_from_specific_force():
+    roll, pitch = 0.1, -0.2
+    # R^T (0, 0, g) for R = Ry(pitch) Rx(roll).
+    force = 9.8 * np.array([-math.sin(pitch), math.cos(pitch) * math.sin(roll), math.cos(pitch) * math.cos(roll)])
+    assert tilt_from_specific_force(force) == pytest.approx((roll, pitch))
