@@ -341,10 +341,13 @@ def command_scenarios(args) -> int:
 
 def command_methods(args) -> int:
     from scattertrack import track
+    from scattertrack.track import marvel
 
-    width = max(len(name) for name in track.METHODS)
-    for name in track.METHODS:
-        say(f"{name.ljust(width)}  {METHOD_DESCRIPTIONS.get(name, '')}".rstrip())
+    names = list(track.METHODS) + [name for name in marvel.MARVEL_METHODS if name not in track.METHODS]
+    descriptions = {**METHOD_DESCRIPTIONS, **marvel.METHOD_DESCRIPTIONS}
+    width = max(len(name) for name in names)
+    for name in names:
+        say(f"{name.ljust(width)}  {descriptions.get(name, '')}".rstrip())
     return 0
 
 
@@ -352,9 +355,14 @@ def command_track(args) -> int:
     from scattertrack import io
 
     from scattertrack import track as tracking
+    from scattertrack.track import marvel
 
     scene = io.read_scene(args.scene)
     params = dict(args.param or [])
+    if args.method in marvel.MARVEL_METHODS:
+        return track_marvel(args, scene, params)
+    if args.features or args.imu:
+        raise UsageError(f"--features and --imu are inputs of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
     # Before reading the input: a typo should not wait for a large file to load.
     check_parameters(args.method, scene, params)
     wideband = args.method in tracking.WIDEBAND_METHODS
@@ -375,6 +383,55 @@ def command_track(args) -> int:
     if not len(result):
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
     print_tracker_summary(result, reads, wall_s)
+    return 0
+
+
+def track_marvel(args, scene, params: dict) -> int:
+    """``track`` for the drone pipeline: IMU plus features.csv (or a LoRa recording)."""
+    from scattertrack import io
+    from scattertrack.track import marvel
+
+    known = marvel.default_params(args.method)
+    for name in params:
+        if name not in known:
+            raise UsageError(f"unknown parameter '{name}' for method '{args.method}' (known: {', '.join(sorted(known))})")
+    if args.reads or args.frames:
+        raise UsageError(f"method '{args.method}' takes --imu with --features or --sigmf, not --reads or --frames")
+    if not args.imu:
+        raise UsageError(f"method '{args.method}' needs the drone's inertial samples: give --imu")
+    if scene.reader.kind != "lora-backscatter":
+        raise UsageError(f"method '{args.method}' needs a scene with [reader] kind = \"lora-backscatter\", not {scene.reader.kind!r}")
+    imu = io.read_imu(args.imu)
+    say(f"read {plural(len(imu), 'IMU sample')} from {args.imu}; {imu.skipped.summary() if imu.skipped.total else 'none skipped'}, {plural(imu.gaps, 'gap')}")
+    start = time.perf_counter()
+    if args.sigmf:
+        result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
+        epochs = int(result.stats.get("drone", {}).get("epochs", len(result)))
+        source = args.sigmf
+    else:
+        if args.method != "marvel":
+            raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
+        features = io.read_features(args.features)
+        say(f"read {plural(len(features), 'feature row')} from {args.features}; {features.reordered} out of time order (sorted)")
+        result = marvel.run_features(args.method, scene, imu, features, progress=show_progress(args), **params)
+        epochs = len(features)
+        source = args.features
+    wall_s = time.perf_counter() - start
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    io.write_track(out, result)
+    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} to {out} (from {source})")
+    say(f"  {result.skipped.summary() if result.skipped.total else 'nothing declined'}")
+    stats = result.stats.get("drone", {})
+    controller = stats.get("controller")
+    if controller is not None:
+        say("  controller estimated at (" + ", ".join(f"{v:.2f}" for v in controller) + ") m")
+    q = result.latency_quantiles_ns
+    rate = epochs / wall_s if wall_s > 0 else math.inf
+    say(
+        f"  speed: {rate:,.0f} epochs/s wall clock ({format_duration(wall_s)} for {epochs} epochs); "
+        f"per epoch {format_nanoseconds(q.get('p50', 0))} p50, {format_nanoseconds(q.get('p99', 0))} p99"
+    )
     return 0
 
 
@@ -624,7 +681,13 @@ def build_parser() -> argparse.ArgumentParser:
     source = track.add_mutually_exclusive_group(required=True)
     source.add_argument("--reads", help="reads.csv (COTS reader methods: glac...)")
     source.add_argument("--frames", help="frames.csv (localization-helper methods: turbotrack...)")
-    source.add_argument("--sigmf", help="a SigMF IQ recording of the helper (.sigmf-meta), turned into frames first")
+    source.add_argument("--features", help="features.csv (LoRa-backscatter pose features: marvel)")
+    source.add_argument(
+        "--sigmf",
+        help="a SigMF IQ recording (.sigmf-meta): of the helper (turned into frames first), or of a LoRa "
+        "controller (marvel, ulocate: turned into features first)",
+    )
+    track.add_argument("--imu", help="imu.csv (marvel, ulocate: the drone's inertial samples)")
     track.add_argument(
         "--calibration",
         help="with --sigmf: the calibration recording (default: calibration.sigmf-meta beside the recording)",

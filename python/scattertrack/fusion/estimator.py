@@ -89,6 +89,20 @@ class MarvelParams:
     """1-sigma of a yaw when the features give none, rad."""
     use_yaw: bool = True
 
+    correlation_distance_m: float = 0.5
+    """Distance travelled over which the features' multipath errors
+    decorrelate, m (a few wavelengths at 915 MHz); 0: treat every row as
+    independent. See ``correlation_time_s``."""
+    correlation_time_s: float = 5.0
+    """Time over which they decorrelate at rest (people, doors), s. Rows
+    closer together than one decorrelation carry one measurement's worth of
+    information between them, not one each: the feature sigmas are inflated
+    by sqrt(rows per decorrelation), the standard treatment of time-correlated
+    errors in aided inertial navigation. Without it the take-off rows, whose
+    multipath error is one and the same, would pin the controller (and with
+    it the whole trajectory: range and angle do not see a common shift) to
+    that one error with a far too small covariance."""
+
     prior_position_sigma_m: float = 0.05
     """Take-off prior: at rest at the origin, 1-sigma per axis, m."""
     prior_velocity_sigma_m_s: float = 0.1
@@ -404,6 +418,10 @@ class MarvelEstimator:
         stamps[CONTROLLER] = time_s
 
         used = {"range": True, "direction": True, "yaw": has_yaw, "baro": False}
+        inflation = self._correlation_inflation(time_s, predicted)
+        range_sigma *= inflation
+        angle_sigma *= inflation
+        yaw_sigma *= inflation
         direction_sigma = factors.direction_sigmas(elevation_rad, angle_sigma)
         if gated:
             used["range"], used["direction"], yaw_ok = self._innovation_tests(
@@ -439,6 +457,21 @@ class MarvelEstimator:
         estimate.wall_time_s = time.perf_counter() - started
         self.wall_times_s.append(estimate.wall_time_s)
         return estimate
+
+    def _correlation_inflation(self, time_s: float, predicted) -> float:
+        """sqrt(rows per decorrelation) >= 1 for this row (see ``correlation_time_s``).
+
+        Rows per decorrelation = interval-rate x the time the drone needs to
+        travel ``correlation_distance_m`` at its predicted speed, at most
+        ``correlation_time_s``.
+        """
+        p = self.params
+        if p.correlation_distance_m <= 0.0 or p.correlation_time_s <= 0.0 or self._last_epoch_time is None:
+            return 1.0
+        interval = time_s - self._last_epoch_time
+        speed = float(np.linalg.norm(predicted.velocity()))
+        decorrelation_s = min(p.correlation_time_s, p.correlation_distance_m / speed) if speed > 0.0 else p.correlation_time_s
+        return math.sqrt(max(1.0, decorrelation_s / interval))
 
     def step(self, measurement) -> Estimate | None:
         """Either an IMU sample ``("imu", time_s, accel, gyro[, baro_z])`` or a

@@ -22,10 +22,13 @@ from scattertrack.fusion import (
 )
 from scattertrack.io.types import Features
 
+WHITE = {"correlation_distance_m": 0.0}
+"""The synthetic features of conftest.py have white noise: no correlation inflation."""
+
 
 @pytest.fixture(scope="module")
 def circle_track(circle_flight):
-    return run_marvel(circle_flight.imu, circle_flight.features)
+    return run_marvel(circle_flight.imu, circle_flight.features, **WHITE)
 
 
 def _position_errors(track, data) -> np.ndarray:
@@ -84,7 +87,7 @@ def test_position_sigma_is_consistent(circle_flight, circle_track):
 def test_yaw_is_observable_without_yaw_features(flight_factory, rotation_errors):
     """IMU + range/direction alone find the heading once the drone accelerates sideways."""
     data = flight_factory(duration_s=15.0, seed=3)
-    track = run_marvel(data.imu, data.features, use_yaw=False)
+    track = run_marvel(data.imu, data.features, use_yaw=False, **WHITE)
     errors = rotation_errors(track.orientation, data.truth_rotation)
     late = track.time_s > 10.0
     assert errors[late].mean() < 8.0
@@ -117,7 +120,7 @@ def test_outliers_and_bad_rows_are_declined_and_counted(flight_factory):
     columns["time_s"][0] = -0.5
     features = Features(**columns)
 
-    track = run_marvel(data.imu, features)
+    track = run_marvel(data.imu, features, **WHITE)
     declined = track.stats["drone"]["declined"]
     assert declined["non_finite"] == 3
     assert declined["before_imu"] == 1
@@ -164,9 +167,9 @@ def test_gate_does_not_lock_out_after_consecutive_declines(flight_factory):
 
 def test_estimates_do_not_change_when_later_data_is_appended(flight_factory, truncate_flight):
     data = flight_factory(duration_s=10.0, seed=7)
-    full = run_marvel(data.imu, data.features)
+    full = run_marvel(data.imu, data.features, **WHITE)
     imu, features = truncate_flight(data, 6.0)
-    part = run_marvel(imu, features)
+    part = run_marvel(imu, features, **WHITE)
     n = len(part)
     assert 50 < n < len(full)
     assert np.array_equal(part.time_s, full.time_s[:n])
@@ -249,3 +252,25 @@ def test_tilt_from_specific_force():
     # R^T (0, 0, g) for R = Ry(pitch) Rx(roll).
     force = 9.8 * np.array([-math.sin(pitch), math.cos(pitch) * math.sin(roll), math.cos(pitch) * math.cos(roll)])
     assert tilt_from_specific_force(force) == pytest.approx((roll, pitch))
+
+
+class _Nav:
+    def __init__(self, velocity):
+        self._velocity = np.asarray(velocity, dtype=float)
+
+    def velocity(self):
+        return self._velocity
+
+
+def test_correlated_rows_are_inflated_by_rows_per_decorrelation():
+    estimator = MarvelEstimator(MarvelParams(correlation_distance_m=0.5, correlation_time_s=5.0))
+    estimator._last_epoch_time = 10.0
+    # At rest: 5 s / 0.1 s = 50 rows share one multipath error.
+    assert estimator._correlation_inflation(10.1, _Nav([0.0, 0.0, 0.0])) == pytest.approx(math.sqrt(50.0))
+    # At 2.5 m/s the error decorrelates in 0.2 s: two rows each.
+    assert estimator._correlation_inflation(10.1, _Nav([1.5, 2.0, 0.0])) == pytest.approx(math.sqrt(2.0))
+    # Faster than one decorrelation per row: never below 1 (no deflation).
+    assert estimator._correlation_inflation(10.1, _Nav([30.0, 0.0, 0.0])) == 1.0
+    off = MarvelEstimator(MarvelParams(correlation_distance_m=0.0))
+    off._last_epoch_time = 10.0
+    assert off._correlation_inflation(10.1, _Nav([0.0, 0.0, 0.0])) == 1.0

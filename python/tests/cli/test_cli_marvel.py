@@ -1,0 +1,101 @@
+"""``scattertrack track --method marvel`` from imu.csv + features.csv, and its input errors."""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from scattertrack.cli import main
+from scattertrack.io import read_track
+
+
+@pytest.fixture(scope="module")
+def flight(tmp_path_factory) -> Path:
+    """A 6 s hover flight (scene.toml, imu.csv, features.csv, truth.csv), shared read-only."""
+    folder = tmp_path_factory.mktemp("flight")
+    assert main(["simulate", "--scenario", "marvel-hover", "--out", str(folder), "--duration", "6"]) == 0
+    return folder
+
+
+def run(capsys, *argv) -> tuple[int, str, str]:
+    code = main([str(a) for a in argv])
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_marvel_tracks_features_and_imu(capsys, flight, tmp_path):
+    out = tmp_path / "track.csv"
+    code, stdout, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--imu", flight / "imu.csv", "--out", out,
+    )
+    assert code == 0, err
+    assert "controller estimated at" in stdout and "per epoch" in stdout
+    track = read_track(out)
+    assert len(track) > 40
+    assert track.orientation is not None and np.allclose(np.linalg.norm(track.orientation, axis=1), 1.0, atol=1e-5)
+    assert track.sigma is not None and np.all(track.sigma > 0)
+    code, stdout, err = run(capsys, "eval", "--truth", flight / "truth.csv", "--track", out)
+    assert code == 0, err
+    assert "rot mean" in stdout  # orientation columns appear when both sides have them
+
+
+def test_marvel_method_is_listed(capsys):
+    code, stdout, _ = run(capsys, "methods")
+    assert code == 0 and "marvel" in stdout and "ulocate" in stdout
+
+
+@pytest.mark.parametrize(
+    "drop, extra, fragment",
+    [
+        ("--imu", [], "give --imu"),
+        (None, ["--param", "no_such=1"], "unknown parameter 'no_such'"),
+    ],
+)
+def test_marvel_usage_errors(capsys, flight, tmp_path, drop, extra, fragment):
+    argv = ["track", "--method", "marvel", "--scene", flight / "scene.toml", "--features", flight / "features.csv",
+            "--imu", flight / "imu.csv", "--out", tmp_path / "t.csv", *extra]
+    if drop:
+        i = argv.index(drop)
+        del argv[i : i + 2]
+    code, _, err = run(capsys, *argv)
+    assert code == 2 and err.startswith("scattertrack: error: ") and fragment in err
+
+
+def test_ulocate_needs_a_recording(capsys, flight, tmp_path):
+    code, _, err = run(
+        capsys, "track", "--method", "ulocate", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--imu", flight / "imu.csv", "--out", tmp_path / "t.csv",
+    )
+    assert code == 2 and "give --sigmf" in err
+
+
+def test_features_are_refused_by_other_methods(capsys, flight, tmp_path):
+    code, _, err = run(
+        capsys, "track", "--method", "glac", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--out", tmp_path / "t.csv",
+    )
+    assert code == 2 and "--features and --imu are inputs of marvel" in err
+
+
+def test_empty_features_file_names_the_file(capsys, flight, tmp_path):
+    empty = tmp_path / "features.csv"
+    empty.write_text("time_s,range_m,azimuth_rad,elevation_rad\n")
+    code, _, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml",
+        "--features", empty, "--imu", flight / "imu.csv", "--out", tmp_path / "t.csv",
+    )
+    assert code == 2 and str(empty) in err and "Traceback" not in err
+
+
+def test_non_monotonic_imu_is_counted_and_reported(capsys, flight, tmp_path):
+    lines = (flight / "imu.csv").read_text().splitlines()
+    lines.insert(50, lines[20])  # a sample whose time goes backwards
+    imu = tmp_path / "imu.csv"
+    imu.write_text("\n".join(lines) + "\n")
+    code, stdout, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--imu", imu, "--out", tmp_path / "t.csv",
+    )
+    assert code == 0, err
+    assert "skipped 1" in stdout
