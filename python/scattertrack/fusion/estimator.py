@@ -103,6 +103,25 @@ class MarvelParams:
     it the whole trajectory: range and angle do not see a common shift) to
     that one error with a far too small covariance."""
 
+    use_ground: bool = True
+    """Before take-off the drone sits at rest at the origin: every epoch until
+    the IMU first shows motion gets "still at the origin, not moving, not
+    turning" factors (zero-velocity and zero-rotation updates, standard in
+    inertial navigation). The zero rotation makes the gyroscope bias
+    observable at rest; without it the bias is free to absorb the features'
+    correlated errors, and the tilt it integrates drags the trajectory away
+    by metres within seconds."""
+    rest_gyro_threshold_rad_s: float = 0.05
+    """An IMU sample with a larger angular rate means the drone has left the ground, rad/s."""
+    rest_accel_threshold_m_s2: float = 0.3
+    """... or with a specific force whose magnitude differs from g by more, m/s^2."""
+    ground_position_sigma_m: float = 0.02
+    """1-sigma of "at the origin" on the ground (the detector lags take-off by a few mm), m."""
+    ground_velocity_sigma_m_s: float = 0.01
+    """1-sigma of "not moving" on the ground, m/s."""
+    ground_rotation_sigma_rad: float = 1.0e-4
+    """1-sigma of "not turning" between two ground epochs, rad."""
+
     prior_position_sigma_m: float = 0.05
     """Take-off prior: at rest at the origin, 1-sigma per axis, m."""
     prior_velocity_sigma_m_s: float = 0.1
@@ -298,6 +317,12 @@ class MarvelEstimator:
         self._cov_yaw = float("nan")
         self._cov_controller = np.full((3, 3), np.nan)
         self._declined_run = 0
+        self._left_ground = not p.use_ground  # True once any IMU sample showed motion
+
+    @property
+    def on_ground(self) -> bool:
+        """Whether every IMU sample so far was at rest (the drone has not taken off)."""
+        return not self._left_ground
 
     # --- IMU ---------------------------------------------------------------
 
@@ -320,6 +345,13 @@ class MarvelEstimator:
             self.imu_declined["not_after_previous"] += 1
             return
         self.imu_samples += 1
+        if not self._left_ground:
+            g = self.params.gravity_m_s2
+            if (
+                np.linalg.norm(gyro) > self.params.rest_gyro_threshold_rad_s
+                or abs(np.linalg.norm(accel) - g) > self.params.rest_accel_threshold_m_s2
+            ):
+                self._left_ground = True
         if self._first_imu_time is None:
             self._first_imu_time = time_s
             self._integrated_to = time_s
@@ -344,6 +376,24 @@ class MarvelEstimator:
             self._baro.append((time_s, float(baro_z)))
             while self._baro and self._baro[0][0] <= time_s - self.params.baro_window_s:
                 self._baro.popleft()
+
+    def predict(self, time_s: float) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """The newest state propagated by the IMU to ``time_s`` (s): position (m),
+        velocity (m/s), world_R_body (3x3); None before the first epoch.
+
+        Causal: it uses the IMU samples received so far (the newest one held up
+        to ``time_s``). The pose sensing calls it to remove the translational
+        Doppler shift of the epoch at ``time_s`` before that epoch's features
+        exist (paper sec. III-B: "the super-accuracy algorithm corrects the
+        drift and feeds back"). ``time_s`` must not precede the newest sample.
+        """
+        if self._nav is None or self._last_sample is None:
+            return None
+        self._integrate_to(time_s)
+        state = self._preintegrated.predict(self._nav, self._bias)
+        return np.asarray(state.position(), dtype=float), np.asarray(state.velocity(), dtype=float), np.asarray(
+            state.attitude().matrix(), dtype=float
+        )
 
     def _integrate_to(self, time_s: float) -> None:
         """Extends the preintegration to ``time_s`` holding the newest sample
@@ -408,6 +458,8 @@ class MarvelEstimator:
         k = self._key
         for key in (X(k), V(k), B(k)):
             stamps[key] = time_s
+        if not self._left_ground:
+            self._add_ground(graph, k)
         predicted = self._nav
 
         # Controller: initialised from the first row, rho = p - d u.
@@ -509,6 +561,21 @@ class MarvelEstimator:
             stamps[key] = self._first_imu_time
         self._nav = gtsam.NavState(pose, np.zeros(3))
         self._bias = gtsam.imuBias.ConstantBias()
+
+    def _add_ground(self, graph, k: int) -> None:
+        """At rest at the origin before take-off: position, zero velocity and,
+        from the previous epoch, zero rotation (which pins the gyroscope bias)."""
+        p = self.params
+        # Pose3 tangent order is (rotation, translation): the position prior
+        # leaves the rotation free (its sigma is effectively infinite).
+        position_sigmas = np.array([1.0e3] * 3 + [p.ground_position_sigma_m] * 3)
+        graph.add(gtsam.PriorFactorPose3(X(k), gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(position_sigmas)))
+        graph.add(gtsam.PriorFactorVector(V(k), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, p.ground_velocity_sigma_m_s)))
+        if k > 0:
+            rotation_sigmas = np.array([p.ground_rotation_sigma_rad] * 3 + [1.0e3] * 3)
+            graph.add(
+                gtsam.BetweenFactorPose3(X(k - 1), X(k), gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(rotation_sigmas))
+            )
 
     def _add_imu_factor(self, graph, initial, previous: int) -> None:
         k = self._key
