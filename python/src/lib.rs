@@ -2,6 +2,7 @@
 //! nothing else. Type stubs: `python/scattertrack/_core.pyi`.
 
 mod dsp;
+mod lora;
 
 use nalgebra::Vector3;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
@@ -759,6 +760,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(methods, m)?)?;
     m.add_function(wrap_pyfunction!(default_params, m)?)?;
     dsp::register(m)?;
+    lora::register(m)?;
     Ok(())
 }
 

@@ -15,6 +15,12 @@
 //!   the real-time path's time-domain symbol sums and projection from them;
 //!   `front_known_grid` (one antenna's worker job) and `finish_4rx` (the
 //!   fusion's).
+//! * `lora/*` (Marvel, docs/marvel.md section 7): `epoch` is one sensing
+//!   epoch, 2 channels x 4 tags x 3 antennas = 24 chirps of 4096 samples
+//!   (SF 12, 500 kHz) at -10 dB per sample, through peaks, MUSIC per tag,
+//!   Doppler/CFO, phases, range and yaw (`EpochProcessor::process`); the
+//!   epoch rate is 10 Hz, so the budget is 100 ms per epoch. `peak` is one
+//!   chirp's dechirp + FFT + refinement, `music_tag` one tag's MUSIC.
 
 #[path = "../tests/common/mod.rs"]
 mod common;
@@ -24,13 +30,14 @@ use std::time::Duration;
 
 use common::Reply;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use num_complex::Complex32;
+use num_complex::{Complex32, Complex64};
 use scattertrack_dsp::backscatter::{preamble_chips, Encoding};
 use scattertrack_dsp::detect::{
     combined_magnitude, combined_projection, combined_projection_from_sums, detect_preamble, DetectionOptions, Feature,
     FeatureSums, Template,
 };
 use scattertrack_dsp::estimate::{symbol_states, tag_channel, ChipGrid, SymbolSums};
+use scattertrack_dsp::lora::{music, Corrections, EpochConfig, EpochProcessor, PeakFinder, PeakOptions};
 use scattertrack_dsp::ofdm::{symbol_timing, ChannelMatrix, ChannelTransform, Demodulator};
 use scattertrack_dsp::reply::{AntennaFront, AntennaSymbols, ReplyOptions, ReplyProcessor};
 
@@ -118,5 +125,66 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// One synthetic Marvel epoch: per (channel, tag, antenna) a dechirpable
+/// tone of a few hertz with an antenna phase for a drone at (az 1.2, el
+/// 0.2), plus complex white noise at -10 dB per sample.
+fn lora_epoch(config: &EpochConfig) -> Vec<Complex32> {
+    use rand::rngs::StdRng;
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, Normal};
+    let mut rng = StdRng::seed_from_u64(12);
+    let noise = Normal::new(0.0, (10f64.powf(1.0) / 2.0).sqrt()).unwrap();
+    let up = config.chirp.upchirp();
+    let fs = config.chirp.sample_rate_hz();
+    let u = scattertrack_dsp::lora::geometry::direction(1.2, 0.2);
+    let mut out = Vec::with_capacity(config.samples_per_epoch());
+    for j in 0..2 {
+        for k in 0..4 {
+            let f = config.carrier_hz(j, k);
+            for e in config.array.elements() {
+                let phase = std::f64::consts::TAU * f / scattertrack_dsp::SPEED_OF_LIGHT * (e[0] * u[0] + e[1] * u[1] + e[2] * u[2]);
+                let tone = 3.0 + k as f64 - 0.5 * j as f64;
+                for (n, c) in up.iter().enumerate() {
+                    let s = c * Complex64::from_polar(1.0, phase + std::f64::consts::TAU * tone * n as f64 / fs)
+                        + Complex64::new(noise.sample(&mut rng), noise.sample(&mut rng));
+                    out.push(Complex32::new(s.re as f32, s.im as f32));
+                }
+            }
+        }
+    }
+    out
+}
+
+fn bench_lora(c: &mut Criterion) {
+    let config = EpochConfig::marvel();
+    let samples = lora_epoch(&config);
+    let mut processor = EpochProcessor::new(config.clone()).unwrap();
+    let corrections = Corrections {
+        clock_error: 1e-6,
+        velocity: Some([1.0, 0.5, 0.0]),
+        attitude: Some(scattertrack_dsp::lora::geometry::IDENTITY),
+        omega_body: Some([0.0, 0.0, 1.0]),
+        ..Default::default()
+    };
+    let check = processor.process(&samples, &corrections).unwrap();
+    println!(
+        "lora epoch: az {:.3} el {:.3} rad, snr {:.1} dB, timing range {:.2} m",
+        check.azimuth, check.elevation, check.snr_db, check.timing_range_m
+    );
+    let mut group = c.benchmark_group("lora");
+    group.measurement_time(Duration::from_secs(4));
+    group.throughput(Throughput::Elements(1));
+    group.bench_function("epoch", |b| b.iter(|| black_box(processor.process(black_box(&samples), &corrections).unwrap())));
+    let mut finder = PeakFinder::new(config.chirp, PeakOptions::default()).unwrap();
+    let n = config.chirp.samples();
+    group.bench_function("peak", |b| b.iter(|| black_box(finder.process(black_box(&samples[..n])).unwrap())));
+    let phases: Vec<f64> = (0..3).flat_map(|m| (0..2).map(move |j| (j, m))).map(|(j, m)| check.peaks[j * 12 + m].amplitude_centre.arg()).collect();
+    let freqs = [config.carrier_hz(0, 0), config.carrier_hz(1, 0)];
+    group.bench_function("music_tag", |b| {
+        b.iter(|| black_box(music(&config.array, &config.music, black_box(&phases), &freqs).unwrap()))
+    });
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_lora);
 criterion_main!(benches);

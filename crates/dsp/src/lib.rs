@@ -34,6 +34,10 @@
 //! - [`detect`]: detection features and the normalised preamble correlation.
 //! - [`estimate`]: edge elimination, tag channel, EMA, calibration.
 //! - [`reply`]: the per-reply pipeline.
+//! - [`lora`]: Marvel's LoRa-backscatter pose sensing (docs/marvel.md
+//!   section 7): chirp, dechirp peak, Doppler/CFO, channel phase, range,
+//!   MUSIC angle, heading, and the per-epoch chain. Samples there are
+//!   `Complex32` or `Complex64` (`lora::Sample`).
 //!
 //! Units are SI (Hz, s, m); time inside a window is counted in samples
 //! (`1 / B` s) or OFDM symbols (`N / B` s), as each doc comment says.
@@ -43,6 +47,7 @@ pub mod backscatter;
 pub mod detect;
 pub mod error;
 pub mod estimate;
+pub mod lora;
 pub mod ofdm;
 pub mod reply;
 
