@@ -36,6 +36,7 @@ bench: setup
 	cargo bench -p scattertrack-dsp --bench dsp -- --quick
 	$(PY) bench/run.py
 	$(PY) bench/turbotrack.py
+	$(PY) bench/marvel.py
 
 clean:
 	rm -rf target out $(VENV) python/scattertrack/*.so
