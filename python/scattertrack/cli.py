@@ -254,13 +254,18 @@ def command_simulate(args) -> int:
 
 
 def simulate_iq_and_write(args) -> int:
-    """``simulate --iq``: the helper's raw IQ (SigMF) for a turbotrack scenario."""
+    """``simulate --iq``: the raw IQ (SigMF) of a turbotrack scenario's helper or a marvel scenario's controller."""
     from scattertrack import sim
 
     scenario = sim.load_scenario(args.scenario)
     declared = scenario.get("pipeline", "glac")
+    if declared == "marvel" and args.pipeline in (None, "marvel"):
+        return simulate_marvel_iq_and_write(args, scenario)
     if declared != "turbotrack" or (args.pipeline not in (None, "turbotrack")):
-        raise UsageError(f"--iq simulates the localization helper: scenario {args.scenario} is for the {declared} pipeline")
+        raise UsageError(
+            f"--iq simulates the raw IQ of a turbotrack scenario's helper or a marvel scenario's controller: "
+            f"scenario {args.scenario} is for the {declared} pipeline"
+        )
     if args.duration is not None and not args.duration > 0:
         raise UsageError(f"--duration must be > 0, got {args.duration}")
     simulation = sim.simulate_iq_scenario(scenario, seed=args.seed, duration_s=args.duration)
@@ -272,6 +277,31 @@ def simulate_iq_and_write(args) -> int:
     say(f"  scenario {scenario.get('name', args.scenario)} (turbotrack, IQ), seed {simulation.seed}, {duration:g} s")
     say(f"  {plural(replies, 'reply window')}, {size / 1e6:.1f} MB of samples; "
         f"track with: scattertrack stream --scene {out}/scene.toml --sigmf {out}/recording.sigmf-meta --out TRACK.csv")
+    return 0
+
+
+def simulate_marvel_iq_and_write(args, scenario: dict) -> int:
+    """``simulate --iq`` for a marvel scenario: the controller's LoRa recording (ci16 SigMF) of
+    the flight, with scene.toml, imu.csv, truth.csv and simulation.json (no features.csv: the
+    pose sensing makes them from the recording). Duration: the scenario's unless --duration."""
+    from scattertrack.sim import marvel
+
+    if args.duration is not None:
+        if not args.duration > 0:
+            raise UsageError(f"--duration must be > 0, got {args.duration}")
+        scenario = scenario | {"duration_s": args.duration}
+    simulation, recording = marvel.simulate_marvel_iq(scenario, seed=args.seed)
+    out = marvel.write_marvel_iq_simulation(simulation, recording, args.out)
+    duration = float(simulation.scenario["duration_s"])
+    size = (Path(out) / "recording.sigmf-data").stat().st_size
+    snr = simulation.details["snr_db"]
+    say(f"wrote {out}: recording.sigmf-meta/-data, scene.toml, imu.csv, truth.csv, simulation.json")
+    say(f"  scenario {scenario.get('name', args.scenario)} (marvel, IQ), seed {simulation.seed}, {duration:g} s, "
+        f"{plural(simulation.details['walls'], 'wall')}")
+    say(f"  {plural(recording.n_epochs, 'sensing epoch')}, {size / 1e6:.1f} MB of samples; per-sample SNR "
+        f"{snr['median']:.1f} dB median ({snr['min']:.1f} to {snr['max']:.1f}); {plural(len(simulation.imu), 'IMU sample')}")
+    say(f"  track with: scattertrack track --method marvel --scene {out}/scene.toml --sigmf {out}/recording.sigmf-meta "
+        f"--imu {out}/imu.csv --out TRACK.csv")
     return 0
 
 
@@ -660,7 +690,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--iq",
         action="store_true",
         help="turbotrack scenarios: write the helper's raw IQ as SigMF (recording + calibration) instead of "
-        "frames.csv (default duration 1 s: IQ is about 144 MB per second)",
+        "frames.csv (default duration 1 s: IQ is about 144 MB per second); marvel scenarios: the controller's "
+        "LoRa recording (ci16 SigMF, about 4 MB per second) instead of features.csv",
     )
     simulate.set_defaults(run=command_simulate)
 

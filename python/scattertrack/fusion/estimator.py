@@ -317,7 +317,10 @@ class MarvelEstimator:
         self._cov_yaw = float("nan")
         self._cov_controller = np.full((3, 3), np.nan)
         self._declined_run = 0
+        self._range_declined_run = 0
         self._left_ground = not p.use_ground  # True once any IMU sample showed motion
+        self._rest_force_sum = np.zeros(3)  # specific force summed over the first tilt_window_s, m/s^2
+        self._rest_force_count = 0
 
     @property
     def on_ground(self) -> bool:
@@ -346,12 +349,7 @@ class MarvelEstimator:
             return
         self.imu_samples += 1
         if not self._left_ground:
-            g = self.params.gravity_m_s2
-            if (
-                np.linalg.norm(gyro) > self.params.rest_gyro_threshold_rad_s
-                or abs(np.linalg.norm(accel) - g) > self.params.rest_accel_threshold_m_s2
-            ):
-                self._left_ground = True
+            self._watch_take_off(time_s, accel, gyro)
         if self._first_imu_time is None:
             self._first_imu_time = time_s
             self._integrated_to = time_s
@@ -394,6 +392,30 @@ class MarvelEstimator:
         return np.asarray(state.position(), dtype=float), np.asarray(state.velocity(), dtype=float), np.asarray(
             state.attitude().matrix(), dtype=float
         )
+
+    def _watch_take_off(self, time_s: float, accel: np.ndarray, gyro: np.ndarray) -> None:
+        """Ends the ground phase at the first sample that shows motion.
+
+        Motion: an angular rate above ``rest_gyro_threshold_rad_s``, or a
+        specific force that differs, as a VECTOR, from the mean of the first
+        ``tilt_window_s`` (gravity seen at rest) by more than
+        ``rest_accel_threshold_m_s2``. Not the magnitude: a level body
+        accelerated horizontally (the paper's rail, sec. V-B) changes
+        ``|f| = sqrt(g^2 + a^2)`` only to second order (0.045 m/s^2 for
+        0.94 m/s^2), so a magnitude test would keep it "at the origin" for the
+        whole run.
+        """
+        p = self.params
+        if np.linalg.norm(gyro) > p.rest_gyro_threshold_rad_s:
+            self._left_ground = True
+            return
+        if self._first_imu_time is None or time_s <= self._first_imu_time + p.tilt_window_s:
+            self._rest_force_sum += accel
+            self._rest_force_count += 1
+            return  # the reference is still being averaged (the ground may not be level)
+        reference = self._rest_force_sum / self._rest_force_count
+        if np.linalg.norm(accel - reference) > p.rest_accel_threshold_m_s2:
+            self._left_ground = True
 
     def _integrate_to(self, time_s: float) -> None:
         """Extends the preintegration to ``time_s`` holding the newest sample
@@ -463,7 +485,14 @@ class MarvelEstimator:
         predicted = self._nav
 
         # Controller: initialised from the first row, rho = p - d u.
-        gated = self._controller is not None and self._gate is not None and self._declined_run < p.max_declined_epochs
+        # No gate on the ground: the controller is placed by the rest rows
+        # together (a least-squares mean), not by whichever row came first.
+        gated = (
+            self._controller is not None
+            and self._gate is not None
+            and self._declined_run < p.max_declined_epochs
+            and self._left_ground
+        )
         if self._controller is None:
             self._controller = predicted.position() - range_m * factors.direction(azimuth_rad, elevation_rad)
             initial.insert(CONTROLLER, self._controller)
@@ -481,6 +510,13 @@ class MarvelEstimator:
                 range_sigma, direction_sigma, yaw_sigma,
             )
             used["yaw"] = has_yaw and yaw_ok
+            # Recovery of one measurement on its own: ranges gated for
+            # max_declined_epochs epochs in a row while the directions pass
+            # mean the range's fringe (or the controller's range) is what is
+            # wrong; the next range is taken ungated so the state can move.
+            if not used["range"] and self._range_declined_run >= p.max_declined_epochs:
+                used["range"] = True
+            self._range_declined_run = 0 if used["range"] else self._range_declined_run + 1
             for name in ("range", "direction", "yaw"):
                 if (name != "yaw" or has_yaw) and not used[name]:
                     self.declined[f"{name}_gate"] += 1

@@ -42,7 +42,8 @@ LoRa-backscatter tags and an IMU at the feature level
 ``imu.csv`` and ``features.csv``. The drone's flights
 (``flight(params, t) -> FlightTruth``, ``tag_positions``, ``DEFAULT_TAGS``),
 the IMU (``simulate_imu``, ``IMU_MODEL_DEFAULTS``) and the feature model
-(``simulate_marvel``, ``FEATURE_MODEL_DEFAULTS``) are exported here;
+(``simulate_marvel``, ``FEATURE_MODEL_DEFAULTS``) and the same flight at IQ
+level (``simulate_marvel_iq``: a LoRa recording instead of features) are exported here;
 quaternion helpers are in :mod:`scattertrack.sim.rotation`.
 
 The reads follow FORMATS.md's monostatic phase model
@@ -68,7 +69,7 @@ from scattertrack.sim.scenario import PIPELINES, resolve_helper_model, scenario_
 from scattertrack.sim.iq import IQ_MODEL_DEFAULTS, IqSimulation, simulate_iq, simulate_iq_scenario, write_iq_simulation
 from scattertrack.sim.drone import DEFAULT_TAGS, FlightError, FlightTruth, TagLayout, flight, tag_positions
 from scattertrack.sim.imu import IMU_MODEL_DEFAULTS, simulate_imu
-from scattertrack.sim.marvel import FEATURE_MODEL_DEFAULTS, simulate_marvel
+from scattertrack.sim.marvel import FEATURE_MODEL_DEFAULTS, simulate_marvel, simulate_marvel_iq
 from scattertrack.sim.wideband import (
     HELPER_MODEL_DEFAULTS,
     bistatic_path_lengths,
@@ -89,6 +90,7 @@ __all__ = [
     "flight",
     "simulate_imu",
     "simulate_marvel",
+    "simulate_marvel_iq",
     "tag_positions",
     "HELPER_MODEL_DEFAULTS",
     "IQ_MODEL_DEFAULTS",

@@ -44,6 +44,11 @@ unit and source; the derivations are in docs/marvel.md section 9):
    relative to the azimuth, eq. 8). No yaw when ``|omega_z| <
    min_yaw_rate`` or when its sigma exceeds ``max_yaw_sigma_rad``.
 
+At IQ level, :func:`simulate_marvel_iq` gives the same flight, IMU and
+truth with the controller's LoRa recording (:mod:`scattertrack.sim.lora`,
+the scenario's optional ``[lora_model]``) instead of feature rows;
+:func:`write_marvel_iq_simulation` writes it as SigMF beside ``imu.csv``.
+
 Multipath errors and shadowing are first-order Gauss-Markov processes over
 epochs with correlation ``exp(-|dp| / multipath_distance_m - dt /
 multipath_time_s)``: frozen while the drone hovers (a stationary bias, as
@@ -481,3 +486,103 @@ def simulate_marvel(scenario_data: dict, seed: int | None = None):
         imu=imu,
         features=features,
     )
+
+
+# --------------------------------------------------------------------------
+# IQ level: the controller's LoRa recording of the same flight
+
+
+LORA_SEED_STREAM = 2
+"""Spawn key of the LoRa recording's seed under the scenario seed: ``simulate_marvel``
+spawns streams 0 (IMU) and 1 (features), so the recording's draws are independent of both."""
+
+
+def lora_seed(seed: int) -> int:
+    """The seed :func:`scattertrack.sim.lora.simulate_lora_iq` gets for scenario seed ``seed``.
+
+    A child of the scenario's seed sequence that the feature-level run does
+    not use (:data:`LORA_SEED_STREAM`), so the IQ noise, clock and receiver
+    draws neither repeat nor shift the IMU's.
+    """
+    state = np.random.SeedSequence(int(seed), spawn_key=(LORA_SEED_STREAM,)).generate_state(1, np.uint32)
+    return int(state[0])
+
+
+def simulate_marvel_iq(scenario_data: dict, seed: int | None = None):
+    """Run a ``pipeline = "marvel"`` scenario at IQ level: ``(Simulation, LoraRecording)``.
+
+    The flight, the IMU and the truth are those of :func:`simulate_marvel`
+    with the same scenario and seed (identical arrays); instead of
+    feature-level rows (``Simulation.features`` is None) the controller's
+    channelised LoRa streams come from :func:`scattertrack.sim.lora.simulate_lora_iq`
+    over the scenario's ``duration_s``: the drone's pose at every sample
+    time from :func:`scattertrack.sim.drone.flight`, the scenario's
+    ``[controller]`` (position m, array, walls) and its optional
+    ``[lora_model]`` table (keys of :data:`scattertrack.sim.lora.LORA_MODEL_DEFAULTS`).
+    The recording's seed is :func:`lora_seed` of the scenario seed.
+
+    ``Simulation.details`` keeps the hidden controller position, walls and
+    seed, and replaces the feature-level counts with the recording's:
+    ``counts`` (``epochs``, ``imu_samples``, ``imu_gaps``), ``snr_db``
+    (per-sample SNR of the direct path over epochs, tags and antennas, dB;
+    the dechirp adds ``10 log10(2^SF)``) and ``lora`` (its seed, the tags'
+    clock error ``eps``, their CFOs in Hz, the switching phase in rad). The
+    recording's own ``details`` hold the per-epoch truth (see
+    :func:`scattertrack.sim.lora.simulate_lora_iq`).
+    """
+    from scattertrack.sim.lora import simulate_lora_iq
+
+    simulation = simulate_marvel(scenario_data, seed)
+    data = simulation.scenario
+    flight_params = data["flight"]
+
+    def pose_at(times):
+        state = flight(flight_params, times)
+        return state.position, state.orientation
+
+    controller = data["controller"]
+    iq_seed = lora_seed(simulation.seed)
+    recording = simulate_lora_iq(
+        pose_at,
+        {"position": controller["position"], "array": controller["array"], "walls": int(controller["walls"])},
+        data.get("lora_model"),
+        float(data["duration_s"]),
+        iq_seed,
+    )
+    lora_details = recording.details
+    snr = np.asarray(lora_details["snr_db"], dtype=float)
+    details = dict(simulation.details)
+    details["counts"] = {
+        "epochs": recording.n_epochs,
+        "imu_samples": len(simulation.imu),
+        "imu_gaps": simulation.imu.gaps,
+    }
+    details["snr_db"] = {
+        "min": float(np.min(snr)),
+        "median": float(np.median(snr)),
+        "max": float(np.max(snr)),
+        "dechirp_gain": 10.0 * math.log10(int(recording.metadata["samples_per_chirp"])),
+    }
+    details["lora"] = {
+        "seed": iq_seed,
+        "clock_error": float(lora_details["clock_error"]),
+        "cfo_hz": [float(v) for v in lora_details["cfo_hz"]],
+        "tag_phase_rad": float(lora_details["tag_phase_rad"]),
+        "model": recording.metadata["model"],
+    }
+    simulation.details = details
+    simulation.features = None
+    return simulation, recording
+
+
+def write_marvel_iq_simulation(simulation, recording, out_dir, *, datatype: str = "ci16_le"):
+    """Write ``recording.sigmf-meta``/``.sigmf-data`` (``datatype``, default ci16),
+    ``scene.toml``, ``imu.csv``, ``truth.csv`` and ``simulation.json`` into ``out_dir``; returns the folder."""
+    from pathlib import Path
+
+    from scattertrack.io.sigmf_lora import write_lora_sigmf
+    from scattertrack.sim.scenario import write_simulation
+
+    out = write_simulation(simulation, out_dir)
+    write_lora_sigmf(Path(out) / "recording", recording, datatype=datatype)
+    return out

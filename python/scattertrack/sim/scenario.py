@@ -10,7 +10,10 @@ COTS reader, ``[reader_model]``, output ``reads.csv``), ``"turbotrack"``
 ``role = "tx"``/``"rx"``, output ``frames.csv``) or ``"marvel"`` (a drone
 with LoRa-backscatter tags and an IMU, :mod:`scattertrack.sim.marvel`:
 ``[controller]``, ``[flight]``, ``[imu_model]``, ``[feature_model]``,
-output ``imu.csv`` and ``features.csv``; docs/marvel.md section 9).
+output ``imu.csv`` and ``features.csv``; docs/marvel.md section 9; at IQ
+level, :func:`scattertrack.sim.marvel.simulate_marvel_iq`, the optional
+``[lora_model]`` with the keys of :data:`scattertrack.sim.lora.LORA_MODEL_DEFAULTS`,
+output a LoRa SigMF recording instead of ``features.csv``).
 The schema, with every key, unit and default, is in ``docs/simulator.md``;
 named scenarios live in ``<repo>/scenarios/NAME.toml``.
 
@@ -46,7 +49,7 @@ from scattertrack.io.types import (
     Scene,
     Truth,
 )
-from scattertrack.sim import cots, drone, marvel, trajectory, wideband
+from scattertrack.sim import cots, drone, lora, marvel, trajectory, wideband
 from scattertrack.sim import imu as imu_sim
 
 SCENARIOS_DIR = Path(__file__).resolve().parents[3] / "scenarios"
@@ -366,6 +369,7 @@ _MARVEL_TOP_LEVEL = (
     "flight",
     "imu_model",
     "feature_model",
+    "lora_model",
     *TOP_LEVEL_DEFAULTS,
 )
 _MARVEL_SCENE_KEYS = ("name", "region")
@@ -429,6 +433,18 @@ def _resolve_marvel(check: _Checker, data: dict) -> dict:
             data[table] = resolve(check.table(data.get(table, {}), table))
         except drone.ParameterError as error:
             check.fail(table if error.key is None else f"{table}.{error.key}", error.message)
+    if "lora_model" in data:
+        # The IQ-level model (sim/lora.py) is only used by ``simulate --iq``;
+        # it is checked here so a typo surfaces at load time, and kept as written.
+        table = check.table(data["lora_model"], "lora_model")
+        try:
+            lora.resolve_lora_model(table)
+        except ValueError as error:
+            message = str(error)
+            named = next((key for key in sorted(table, key=len, reverse=True) if message.startswith(key)), None)
+            if named is None and message.startswith("unknown LoRa model key"):
+                named = next((key for key in table if key not in lora.LORA_MODEL_DEFAULTS), None)
+            check.fail("lora_model" if named is None else f"lora_model.{named}", message)
 
     # Geometry over the session: the drone never reaches the controller, and
     # stays in front of a planar array (docs/marvel.md section 4), and inside the region.
@@ -791,9 +807,12 @@ def write_simulation(sim: Simulation, out_dir) -> Path:
     write_scene(out / "scene.toml", sim.scene)
     if sim.frames is not None:
         write_frames(out / "frames.csv", sim.frames)
-    elif sim.features is not None:
+    elif sim.imu is not None:
+        # A marvel scenario; at IQ level (simulate --iq) it has no features:
+        # the recording beside these files is what the pose sensing reads.
         write_imu(out / "imu.csv", sim.imu)
-        write_features(out / "features.csv", sim.features)
+        if sim.features is not None:
+            write_features(out / "features.csv", sim.features)
     else:
         write_reads(out / "reads.csv", sim.reads)
     write_truth(out / "truth.csv", sim.truth)

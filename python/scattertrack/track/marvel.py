@@ -13,13 +13,83 @@ Methods (``MARVEL_METHODS``):
 
 The estimate at an epoch uses only samples and rows at or before it
 (causal); rows the estimator declines are counted in ``Track.skipped``.
+
+Pose sensing from a recording (:func:`sense_epochs`, :func:`run_sigmf`)
+-----------------------------------------------------------------------
+docs/marvel.md sections 5-8. The recording (``NAME.sigmf-meta``, read by
+:mod:`scattertrack.io.sigmf_lora`, or a :class:`LoraRecording` in memory) is
+streamed one epoch at a time, in time order, and the fusion runs alongside,
+because the sensing of an epoch needs the fusion's prediction for it:
+
+1. The epoch's features are stamped at its reference time ``t = t_0 +
+   t_ref``: the first chirp's start plus the DSP's reference time (the mean
+   chirp centre, 8.192 ms after ``t_0`` with two back-to-back SF12 chirps),
+   where its phases and its range refer. Every IMU sample at or before ``t``
+   goes to the :class:`~scattertrack.fusion.MarvelEstimator` first.
+2. **Tag clock** (paper sec. III-B, DSP note 3): while the estimator says the
+   drone is still on the ground (no IMU sample has shown motion) the epochs'
+   peak frequencies are collected and the tags' clock error ``eps`` (the
+   CFO ``eps s_k`` of every tag) is estimated from all rest epochs so far
+   (``lora_clock_error``: the two opposing pairs' means give ``eps`` and the
+   common chirp timing); the rest epoch is then sensed with that estimate.
+   From take-off on it is fixed. Until the estimate's uncertainty moves the
+   chirp-timing range by less than ``clock_settle_m`` (or less than the
+   epoch's own timing sigma, which waiting cannot reduce), rest epochs are
+   sensed but not fused (counted as ``clock_unsettled``): the timing range
+   picks the phase range's fringe (5.8 m apart), the first fused row places
+   the controller, and a fringe error there would stay. A recording that starts in flight has no
+   rest epoch: the first ``clock_flight_epochs`` epochs are used instead (the
+   pair means cancel the rotational shift, and the translational one is
+   common to all tags to 1 part in 900).
+3. **Doppler** (``marvel``): the IMU-propagated state at ``t``
+   (``MarvelEstimator.predict``) gives the velocity (m/s) and the attitude;
+   the gyroscope's newest rate minus the estimated bias gives the body rate
+   (rad/s), for the gear centre's lever-arm velocity and the heading; the
+   direction is this epoch's own MUSIC angle (which needs no Doppler
+   correction: the ramps are common to the antennas) unless
+   ``doppler_direction`` says otherwise. ``ulocate`` removes no Doppler
+   (``ignore_doppler``) and reports no heading.
+4. The Rust ``LoraEpochProcessor`` senses the epoch: the range and the
+   direction of the **tags' centroid** (the landing-gear centre, body
+   ``c = (0, 0, -0.30)`` m) from the array centre, the yaw.
+5. **Lever arm**: the feature row is about the body origin, so ``r u_body =
+   r_c u_c - R c`` with the predicted attitude ``R`` (identity before the
+   first estimate: the drone rests level on the ground); range ``|r u|``,
+   azimuth and elevation of ``u`` in the world frame (FORMATS.md section 7).
+6. **Sigmas**: range = the DSP's range sigma and ``range_sigma_floor_m`` in
+   quadrature; angle = the phase-noise bound of the array (the DSP's phase
+   sigmas over the 8 channels and the antennas' spread along each tangent
+   axis) and ``angle_sigma_floor_rad``; yaw = the DSP's and
+   ``yaw_sigma_floor_rad``. The floors stand for what the thermal bounds
+   leave out (multipath, the signal model's small approximations).
+7. The row goes to ``MarvelEstimator.add_features``.
+
+Declined epochs never vanish: each is counted by reason
+(:data:`SENSING_DECLINE_REASONS`) in ``Track.skipped`` and
+``stats["drone"]["sensing_declined"]``; the estimator's own declines are
+counted as in :func:`scattertrack.fusion.run_marvel`.
+
+Units: SI throughout (s, m, m/s, rad, rad/s, Hz, dB where named).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
 
-from scattertrack.io.types import Features, Imu, Scene, Track
+import numpy as np
+
+from scattertrack.io.types import (
+    SPEED_OF_LIGHT,
+    Features,
+    Imu,
+    Scene,
+    SkipReport,
+    Track,
+)
 
 MARVEL_METHODS = ("marvel", "ulocate")
 """The drone pipeline's methods (inputs: IMU plus features or a LoRa recording)."""
@@ -31,27 +101,628 @@ METHOD_DESCRIPTIONS = {
     "fused the same way: the paper's Fig. 9 baseline",
 }
 
+EPC = "drone"
+"""The track's ``epc`` column: the pipeline tracks one body, the drone."""
+
+SENSING_DEFAULTS = {
+    # An epoch whose per-sample SNR (mean over its 2 x 4 x M dechirped peaks)
+    # is below this is not decoded: the SX1276's SF12 demodulation limit
+    # (docs/marvel.md section 9), 16 dB after the 36 dB dechirp gain. Pure
+    # noise reads about -27 dB (the largest of 4096 bins).
+    "min_snr_db": -20.0,  # dB per sample
+    # Floors added in quadrature to the DSP's thermal sigmas (module docstring, step 6).
+    "range_sigma_floor_m": 0.1,  # m
+    "angle_sigma_floor_rad": 0.01,  # rad, per tangent axis
+    "yaw_sigma_floor_rad": 0.05,  # rad
+    # Where the translational Doppler's direction comes from: "epoch" (this
+    # epoch's MUSIC angle), "previous" (the previous sensed epoch's), or
+    # "predicted" (the IMU-predicted gear centre minus the estimated controller).
+    "doppler_direction": "epoch",
+    # Epochs used for the clock error when the recording has no rest epoch.
+    "clock_flight_epochs": 20,
+    # While the clock error is still being estimated, an epoch goes to the
+    # fusion only once the estimate's uncertainty moves the chirp-timing range
+    # by less than this (m) or less than the epoch's own timing sigma: the
+    # timing range picks the phase range's fringe (5.8 m apart), and the
+    # first row places the controller (module docstring, step 2).
+    "clock_settle_m": 0.5,
+    # The speed the Doppler correction may assume, m/s: a predicted velocity
+    # above it is scaled down to it. A drone flies at most ~3 m/s here (paper
+    # sec. V); a diverging velocity would otherwise feed a wrong Doppler back
+    # into the sensing (a wrong timing range, a wrong fringe, a worse velocity).
+    "max_doppler_speed_m_s": 5.0,
+}
+"""Parameters of the pose sensing from a recording (SI units; module docstring)."""
+
+DOPPLER_DIRECTIONS = ("epoch", "previous", "predicted")
+
+SENSING_DECLINE_REASONS = {
+    "non_finite_samples": "LoRa epoch with non-finite samples (declined)",
+    "no_signal": "LoRa epoch with a chirp of all-zero samples (declined)",
+    "clock_unsettled": "LoRa epoch at rest before the tags' clock error settled (sensed, not fused)",
+    "low_snr": "LoRa epoch below the decoding SNR (declined)",
+    "dsp_error": "LoRa epoch the pose-sensing DSP could not process (declined)",
+    "no_range": "LoRa epoch without a range (declined)",
+    "non_finite_features": "LoRa epoch with a non-finite or zero range, or a non-finite angle (declined)",
+}
+"""Why the pose sensing declines an epoch: counter key -> the text in ``Track.skipped``."""
+
 
 def default_params(method: str = "marvel") -> dict:
-    """The fusion parameters ``method`` accepts, with their defaults (SI units; see MarvelParams)."""
+    """The parameters ``method`` accepts, with their defaults (SI units).
+
+    The fusion's (:class:`scattertrack.fusion.MarvelParams` fields) and the
+    pose sensing's (:data:`SENSING_DEFAULTS`, used with a recording only).
+    """
     _check_method(method)
     from scattertrack.fusion.estimator import MarvelParams
 
-    return {field.name: field.default for field in dataclasses.fields(MarvelParams)}
+    fusion = {field.name: field.default for field in dataclasses.fields(MarvelParams)}
+    return {**fusion, **SENSING_DEFAULTS}
 
 
 def run_features(method: str, scene: Scene | None, imu: Imu, features: Features, *, progress: bool = False, **params) -> Track:
     """Fuses ``features`` (FORMATS.md 7) with ``imu`` (FORMATS.md 6): one track row per accepted epoch.
 
     ``params`` are :class:`scattertrack.fusion.MarvelParams` fields. Raises
-    ValueError for a method outside :data:`MARVEL_METHODS`, or an unknown parameter.
+    ValueError for a method outside :data:`MARVEL_METHODS`, an unknown
+    parameter, or a pose-sensing parameter (those need a recording).
     """
     _check_method(method)
     from scattertrack.fusion import run_marvel
 
+    sensing = sorted(set(params) & set(SENSING_DEFAULTS))
+    if sensing:
+        raise ValueError(f"parameter(s) {', '.join(sensing)} tune the pose sensing of a LoRa recording: give --sigmf, not features")
     return run_marvel(imu, features, scene, progress=progress, **params)
 
 
 def _check_method(method: str) -> None:
     if method not in MARVEL_METHODS:
         raise ValueError(f"unknown Marvel method '{method}' (known: {', '.join(MARVEL_METHODS)})")
+
+
+# --------------------------------------------------------------------------
+# pose sensing from a LoRa recording
+
+
+@dataclass
+class SensedEpoch:
+    """What :func:`sense_epochs` yields for one epoch of the recording (SI units)."""
+
+    index: int
+    """The epoch's index in the recording."""
+    time_s: float
+    """The feature row's time: the first chirp's start plus the DSP's reference time, s."""
+    declined: str | None
+    """None, or the key of :data:`SENSING_DECLINE_REASONS` that declined the epoch."""
+    range_m: float = float("nan")
+    """Body origin's range from the array centre, m (after the lever arm)."""
+    azimuth_rad: float = float("nan")
+    elevation_rad: float = float("nan")
+    """Direction of the body origin from the array centre, world frame, rad."""
+    yaw_rad: float = float("nan")
+    range_sigma_m: float = float("nan")
+    angle_sigma_rad: float = float("nan")
+    yaw_sigma_rad: float = float("nan")
+    centroid_range_m: float = float("nan")
+    """The DSP's range of the tags' centroid, m (before the lever arm)."""
+    centroid_direction: np.ndarray = field(default_factory=lambda: np.full(3, np.nan))
+    """The DSP's unit direction to the tags' centroid, world frame."""
+    snr_db: float = float("nan")
+    """Mean per-sample SNR of the epoch's peaks, dB (nan when not processed)."""
+    on_ground: bool = False
+    """Whether the estimator still had the drone at rest on the ground (a clock-error epoch)."""
+    clock_error: float = float("nan")
+    """The tags' clock error used for this epoch (dimensionless, cfo_k = eps s_k)."""
+    dsp_time_s: float = 0.0
+    """Wall time in the DSP for this epoch (both passes on the ground), s."""
+    fusion_time_s: float = float("nan")
+    """Wall time of ``add_features`` for this row, s (nan when not fused)."""
+    estimate: object = None
+    """The estimator's :class:`~scattertrack.fusion.Estimate` of the row, or None (declined, or not fused)."""
+    dsp: dict | None = None
+    """The DSP's whole output for the epoch, when ``keep_dsp`` was asked."""
+
+    @property
+    def accepted(self) -> bool:
+        """Sensed and given to the fusion."""
+        return self.declined is None
+
+    @property
+    def sensed(self) -> bool:
+        """Has a feature row (given to the fusion, or held back while the clock error settled)."""
+        return self.declined in (None, "clock_unsettled")
+
+
+class _Recording:
+    """A recording as metadata plus an epoch iterator (memory map for a file: bounded memory)."""
+
+    def __init__(self, recording):
+        from scattertrack.io.sigmf_lora import LoraEpoch, LoraRecording, open_lora_sigmf
+
+        if isinstance(recording, LoraRecording):
+            self.metadata = recording.metadata
+            self.n_epochs = recording.n_epochs
+            self.source = "<LoraRecording>"
+
+            def epochs():
+                for e in range(recording.n_epochs):
+                    yield LoraEpoch(e, float(recording.epoch_time_s[e]), np.asarray(recording.chirp_start_s[e]),
+                                    recording.samples[e])
+
+            self._epochs = epochs
+        else:
+            handle = open_lora_sigmf(recording)
+            self.metadata = handle.metadata
+            self.n_epochs = handle.n_epochs
+            self.source = str(handle.meta_path)
+            self._epochs = lambda: iter(handle)
+
+    def __iter__(self):
+        return self._epochs()
+
+
+class _Sensor:
+    """The DSP configured from a recording's metadata, one processor per chirp layout."""
+
+    def __init__(self, metadata: dict, ignore_doppler: bool, source: str):
+        from scattertrack import _core
+
+        self._core = _core
+        frequencies = np.asarray(metadata["channel_frequencies_hz"], dtype=float)
+        excitation = [int(i) for i in metadata["excitation_channels"]]
+        shifts = [float(s) for s in metadata["tag_shifts_hz"]]
+        if len(excitation) != 2 or len(shifts) != 4:
+            raise ValueError(
+                f"{source}: the pose sensing takes 2 excitation channels x 4 tags (docs/marvel.md sections 2 and 5), "
+                f"this recording has {len(excitation)} x {len(shifts)}"
+            )
+        self.tags = np.asarray(metadata["tag_body_positions_m"], dtype=float)  # (4, 3) body m
+        self.centroid = self.tags.mean(axis=0)  # body m: the landing-gear centre
+        self.elements = np.asarray(metadata["array_offsets_m"], dtype=float)  # (M, 3) world m
+        offsets = np.asarray(metadata["rx_phase_offsets_rad"], dtype=float)  # (J, K, M)
+        antennas = self.elements.shape[0]
+        self.options = {
+            "spreading_factor": int(metadata["spreading_factor"]),
+            "bandwidth_hz": float(metadata["bandwidth_hz"]),
+            "channels_hz": (float(frequencies[excitation[0]]), float(frequencies[excitation[1]])),
+            "tag_shifts_hz": shifts,
+            "tag_positions": self.tags,
+            "array_elements": self.elements,
+            # The DSP wants (antenna, received channel j * 4 + k).
+            "calibration_rad": np.ascontiguousarray(np.transpose(offsets, (2, 0, 1)).reshape(antennas, -1)),
+            "ignore_doppler": ignore_doppler,
+        }
+        self.shifts = np.asarray(shifts)
+        self.carriers = np.add.outer(np.asarray(self.options["channels_hz"]), self.shifts / 2.0)  # (2, 4) Hz
+        # Half the spacing of the phase range's fringes, m: one tag's two
+        # carriers repeat every c / (2 |f_1 - f_0|) of range (5.78 m for 25.9 MHz).
+        spacing = abs(self.options["channels_hz"][1] - self.options["channels_hz"][0])
+        self.half_fringe_m = 0.25 * SPEED_OF_LIGHT / spacing if spacing > 0.0 else math.inf
+        self._processors: dict[tuple[float, float], object] = {}
+
+    def processor(self, chirp_offsets_s) -> object:
+        """The processor for chirps starting ``chirp_offsets_s`` (s) after the epoch's origin (cached per layout)."""
+        key = tuple(round(float(v), 9) for v in chirp_offsets_s)
+        if key not in self._processors:
+            self._processors[key] = self._core.LoraEpochProcessor(chirp_starts_s=key, **self.options)
+        return self._processors[key]
+
+    def angle_sigma(self, phase_sigma_rad: np.ndarray, direction: np.ndarray) -> float:
+        """Phase-noise bound of the direction along each tangent axis (RMS of the two), rad.
+
+        ``lambda / (2 pi) sigma_phi / sqrt(N sum_m (e . x_m)^2)`` over the
+        ``N`` = 8 received channels, ``x_m`` the antennas' offsets from their
+        centroid, ``e`` the azimuth and elevation tangents of ``direction``
+        (the bound docs/marvel.md section 9 uses). An axis the array cannot
+        see (endfire) is floored at a projection of 1 cm.
+        """
+        sigma_phi = float(np.sqrt(np.mean(np.square(phase_sigma_rad))))
+        u = direction / np.linalg.norm(direction)
+        azimuth, elevation = math.atan2(u[1], u[0]), math.asin(max(-1.0, min(1.0, u[2])))
+        e_az = np.array([-math.sin(azimuth), math.cos(azimuth), 0.0])
+        e_el = np.array([-math.sin(elevation) * math.cos(azimuth), -math.sin(elevation) * math.sin(azimuth),
+                         math.cos(elevation)])
+        centred = self.elements - self.elements.mean(axis=0)
+        wavelength = SPEED_OF_LIGHT / float(self.carriers.mean())
+        channels = self.carriers.size
+        sigmas = []
+        for axis in (e_az, e_el):
+            aperture = max(float(np.sum((centred @ axis) ** 2)), 1e-4)
+            sigmas.append(wavelength / (2.0 * math.pi) * sigma_phi / math.sqrt(channels * aperture))
+        return float(min(math.sqrt(0.5 * (sigmas[0] ** 2 + sigmas[1] ** 2)), math.pi / 2.0))
+
+
+def _resolve_sensing(params: dict) -> dict:
+    """:data:`SENSING_DEFAULTS` updated by ``params``, validated (ValueError naming the parameter)."""
+    unknown = sorted(set(params) - set(SENSING_DEFAULTS))
+    if unknown:
+        raise ValueError(f"unknown pose-sensing parameter(s): {', '.join(unknown)} (known: {', '.join(SENSING_DEFAULTS)})")
+    out = {**SENSING_DEFAULTS, **params}
+    for name in ("min_snr_db", "range_sigma_floor_m", "angle_sigma_floor_rad", "yaw_sigma_floor_rad", "clock_settle_m"):
+        value = out[name]
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+            raise ValueError(f"parameter {name} must be a finite number, got {value!r}")
+        if name != "min_snr_db" and value < 0:
+            raise ValueError(f"parameter {name} must be >= 0, got {value!r}")
+        out[name] = float(value)
+    if out["doppler_direction"] not in DOPPLER_DIRECTIONS:
+        raise ValueError(f"parameter doppler_direction must be one of {', '.join(DOPPLER_DIRECTIONS)}, got {out['doppler_direction']!r}")
+    count = out["clock_flight_epochs"]
+    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
+        raise ValueError(f"parameter clock_flight_epochs must be a positive integer, got {count!r}")
+    return out
+
+
+def _split_params(params: dict) -> tuple[dict, dict]:
+    """``(fusion, sensing)`` parameters; ValueError for a name that is neither."""
+    from scattertrack.fusion.estimator import MarvelParams
+
+    fusion_names = {f.name for f in dataclasses.fields(MarvelParams)}
+    unknown = sorted(set(params) - fusion_names - set(SENSING_DEFAULTS))
+    if unknown:
+        known = ", ".join(sorted(fusion_names | set(SENSING_DEFAULTS)))
+        raise ValueError(f"unknown Marvel parameter(s): {', '.join(unknown)} (known: {known})")
+    fusion = {k: v for k, v in params.items() if k in fusion_names}
+    sensing = {k: v for k, v in params.items() if k in SENSING_DEFAULTS}
+    return fusion, sensing
+
+
+def _rest_rows(frequency_hz: np.ndarray) -> np.ndarray:
+    """The DSP's peak frequencies (2, 4, M) Hz as ``lora_clock_error`` rows (2 M, 4): one per (channel, antenna)."""
+    return np.transpose(frequency_hz, (0, 2, 1)).reshape(-1, frequency_hz.shape[1])
+
+
+def sense_epochs(
+    method: str,
+    recording,
+    imu: Imu,
+    estimator=None,
+    *,
+    keep_dsp: bool = False,
+    **sensing,
+) -> Iterator[SensedEpoch]:
+    """Sense a LoRa recording epoch by epoch, fusing as it goes (module docstring, steps 1-7).
+
+    ``recording``: a ``.sigmf-meta`` path (streamed from a memory map) or a
+    :class:`~scattertrack.io.sigmf_lora.LoraRecording`. ``imu``: the drone's
+    :class:`Imu`. ``estimator``: a :class:`~scattertrack.fusion.MarvelEstimator`
+    (default: a new one with default parameters); it receives every IMU
+    sample up to each epoch and every sensed row, so after the loop it
+    holds the fused state and its counters. ``sensing``: keys of
+    :data:`SENSING_DEFAULTS`. ``keep_dsp``: attach the DSP's whole output
+    dict to each :class:`SensedEpoch`.
+
+    Yields one :class:`SensedEpoch` per epoch of the recording, in time
+    order, declined ones included. Causal: an epoch's row uses only samples
+    and IMU data at or before its time. Raises FormatError for a bad
+    recording (:mod:`scattertrack.io.sigmf_lora`), ValueError for a bad method or parameter.
+    """
+    _check_method(method)
+    options = _resolve_sensing(sensing)
+    if estimator is None:
+        from scattertrack.fusion import MarvelEstimator
+
+        estimator = MarvelEstimator()
+    source = _Recording(recording)
+    sensor = _Sensor(source.metadata, ignore_doppler=(method == "ulocate"), source=source.source)
+    core = sensor._core
+    shifts = [float(s) for s in sensor.shifts]
+
+    imu_time = np.asarray(imu.time_s, dtype=float)
+    accel = np.asarray(imu.accel, dtype=float)
+    gyro = np.asarray(imu.gyro, dtype=float)
+    baro = np.asarray(imu.baro_z, dtype=float) if imu.baro_z is not None else np.full(len(imu_time), np.nan)
+    next_imu = 0
+
+    rest_rows: list[np.ndarray] = []  # peak rows for the clock error
+    flight_rows: list[np.ndarray] = []
+    clock_error = 0.0
+    clock_fixed = False
+    previous_direction: np.ndarray | None = None
+    gyro_bias = np.zeros(3)
+    marvel = method == "marvel"
+
+    # Range (m) per unit of clock error: the timing term's CFO is eps times
+    # the mean shift (Hz), the chirp rate BW / T turns hertz into delay.
+    chirp_rate = float(source.metadata["bandwidth_hz"]) ** 2 / 2 ** int(source.metadata["spreading_factor"])
+    range_per_clock_error = 0.5 * SPEED_OF_LIGHT * float(np.mean(sensor.shifts)) / chirp_rate
+    clock_range_sigma = math.inf  # m, the clock error's share of the timing range's sigma
+
+    def estimate_clock(rows: list[np.ndarray]) -> float:
+        nonlocal clock_range_sigma
+        fit = core.lora_clock_error(np.concatenate(rows), tag_shifts_hz=shifts)
+        clock_range_sigma = math.inf if fit["sigma"] is None else range_per_clock_error * float(fit["sigma"])
+        return float(fit["clock_error"])
+
+    for epoch in source:
+        processor = sensor.processor(np.asarray(epoch.chirp_start_s, dtype=float) - epoch.time_s)
+        time_s = float(epoch.time_s + processor.reference_time_s)
+        # Every IMU sample at or before the epoch's time first (causal).
+        end = int(np.searchsorted(imu_time, time_s, side="right"))
+        for i in range(next_imu, end):
+            estimator.add_imu(imu_time[i], accel[i], gyro[i], baro[i])
+        next_imu = max(next_imu, end)
+        on_ground = estimator.on_ground
+        # Which peak rows this epoch adds to the clock error (None: it is fixed).
+        collect = None
+        if on_ground:
+            collect = rest_rows
+        elif not clock_fixed:
+            if rest_rows:
+                clock_error, clock_fixed = estimate_clock(rest_rows), True
+            elif len(flight_rows) < options["clock_flight_epochs"]:
+                collect = flight_rows
+            else:
+                clock_fixed = True
+        sensed = SensedEpoch(index=int(epoch.index), time_s=time_s, declined=None, on_ground=on_ground)
+
+        samples = np.ascontiguousarray(epoch.samples, dtype=np.complex64)
+        if not np.all(np.isfinite(samples.view(np.float32))):
+            sensed.declined = "non_finite_samples"
+            yield sensed
+            continue
+        if np.any(np.max(np.abs(samples.view(np.float32)), axis=-1) == 0.0):  # per chirp
+            sensed.declined = "no_signal"
+            yield sensed
+            continue
+
+        # Corrections: the IMU-propagated state at the epoch (None before the first row).
+        predicted = estimator.predict(time_s)
+        attitude = predicted[2] if predicted is not None else None
+        omega = None
+        if end > 0:
+            omega = gyro[end - 1] - gyro_bias
+        corrections: dict = {"epoch_time_s": float(epoch.time_s)}
+        if marvel:
+            velocity = np.asarray(predicted[1], dtype=float) if predicted is not None else np.zeros(3)
+            speed = float(np.linalg.norm(velocity))
+            if not math.isfinite(speed):
+                velocity = np.zeros(3)
+            elif speed > options["max_doppler_speed_m_s"]:
+                velocity = velocity * (options["max_doppler_speed_m_s"] / speed)
+            corrections["velocity"] = velocity
+            if attitude is not None and omega is not None:
+                corrections["attitude"] = np.ascontiguousarray(attitude)
+                corrections["omega_body"] = np.ascontiguousarray(omega, dtype=float)
+            direction = None
+            if options["doppler_direction"] == "previous":
+                direction = previous_direction
+            elif options["doppler_direction"] == "predicted" and predicted is not None and estimator.controller is not None:
+                gear = predicted[0] + predicted[2] @ sensor.centroid - estimator.controller
+                direction = gear / np.linalg.norm(gear)
+            if direction is not None:
+                corrections["direction"] = np.asarray(direction, dtype=float)
+
+        started = time.perf_counter()
+        try:
+            result = processor.process(samples, clock_error=clock_error, **corrections)
+            if collect is not None and result["mean_snr_db"] >= options["min_snr_db"]:
+                # The clock error from every collected epoch so far, this one
+                # included (its peaks do not depend on the corrections), then
+                # this epoch again with it. An epoch below the decoding SNR
+                # would add noise peaks: it is left out (and declined below).
+                collect.append(_rest_rows(np.asarray(result["frequency_hz"])))
+                clock_error = estimate_clock(collect)
+                result = processor.process(samples, clock_error=clock_error, **corrections)
+        except core.DspError:
+            sensed.dsp_time_s = time.perf_counter() - started
+            sensed.declined = "dsp_error"
+            yield sensed
+            continue
+        sensed.dsp_time_s = time.perf_counter() - started
+        sensed.clock_error = clock_error
+        sensed.snr_db = float(result["mean_snr_db"])
+        if keep_dsp:
+            sensed.dsp = result
+        if not sensed.snr_db >= options["min_snr_db"]:
+            sensed.declined = "low_snr"
+            yield sensed
+            continue
+        if result["range_m"] is None:
+            sensed.declined = "no_range"
+            yield sensed
+            continue
+        centroid_range = float(result["range_m"])
+        u_centroid = np.asarray(result["direction"], dtype=float)
+        if not (math.isfinite(centroid_range) and centroid_range > 0.0 and np.all(np.isfinite(u_centroid))):
+            sensed.declined = "non_finite_features"
+            yield sensed
+            continue
+        u_centroid = u_centroid / np.linalg.norm(u_centroid)
+        previous_direction = u_centroid
+        # Settled: the clock's share of the timing range's uncertainty is
+        # below clock_settle_m or below the epoch's own (thermal) share, which
+        # no wait can reduce (at 50 m or through walls the latter is metres).
+        own_sigma = result["timing_range_sigma_m"]
+        own_sigma = float(own_sigma) if own_sigma is not None and math.isfinite(own_sigma) else 0.0
+        unsettled = collect is not None and not clock_range_sigma <= max(options["clock_settle_m"], own_sigma)
+
+        # Lever arm: the DSP sees the gear centre, the row is about the body origin.
+        rotation = attitude if attitude is not None else np.eye(3)
+        body = centroid_range * u_centroid - rotation @ sensor.centroid
+        range_m = float(np.linalg.norm(body))
+        sensed.centroid_range_m = centroid_range
+        sensed.centroid_direction = u_centroid
+        sensed.range_m = range_m
+        sensed.azimuth_rad = math.atan2(body[1], body[0])
+        sensed.elevation_rad = math.asin(max(-1.0, min(1.0, body[2] / range_m)))
+        dsp_range_sigma = result["range_sigma_m"]
+        dsp_range_sigma = float(dsp_range_sigma) if dsp_range_sigma is not None and math.isfinite(dsp_range_sigma) else 0.0
+        sensed.range_sigma_m = math.hypot(dsp_range_sigma, options["range_sigma_floor_m"])
+        # Fringe ambiguity: the phases place the range to centimetres within
+        # the fringe the timing range picked; when the timing range's own
+        # sigma (thermal and clock) reaches a third of the half fringe, a
+        # wrong fringe is no longer rare, and the row's range is only as good
+        # as the timing range: its sigma becomes the row's.
+        timing_sigma = math.hypot(own_sigma, clock_range_sigma if math.isfinite(clock_range_sigma) else 0.0)
+        if 3.0 * timing_sigma > sensor.half_fringe_m:
+            sensed.range_sigma_m = max(sensed.range_sigma_m, timing_sigma)
+        sensed.angle_sigma_rad = math.hypot(
+            sensor.angle_sigma(np.asarray(result["phase_sigma_rad"], dtype=float), u_centroid),
+            options["angle_sigma_floor_rad"],
+        )
+        if marvel and result["yaw"] is not None and math.isfinite(result["yaw"]):
+            sensed.yaw_rad = float(result["yaw"])
+            yaw_sigma = result["yaw_sigma_rad"]
+            yaw_sigma = float(yaw_sigma) if yaw_sigma is not None and math.isfinite(yaw_sigma) else 0.0
+            sensed.yaw_sigma_rad = math.hypot(yaw_sigma, options["yaw_sigma_floor_rad"])
+        if unsettled:
+            sensed.declined = "clock_unsettled"
+            yield sensed
+            continue
+
+        estimate = estimator.add_features(
+            time_s, sensed.range_m, sensed.azimuth_rad, sensed.elevation_rad, sensed.yaw_rad,
+            sensed.range_sigma_m, sensed.angle_sigma_rad, sensed.yaw_sigma_rad,
+        )
+        sensed.estimate = estimate
+        if estimate is not None:
+            sensed.fusion_time_s = float(estimate.wall_time_s)
+            gyro_bias = np.asarray(estimate.gyro_bias, dtype=float)
+        yield sensed
+
+
+def features_of(epochs: list[SensedEpoch]) -> Features:
+    """The sensed rows (body origin, FORMATS.md section 7) as :class:`Features`: the epochs given
+    to the fusion and those held back at rest while the clock error settled."""
+    kept = [e for e in epochs if e.sensed]
+
+    def column(name):
+        return np.array([getattr(e, name) for e in kept], dtype=float)
+
+    return Features(
+        time_s=column("time_s"),
+        range_m=column("range_m"),
+        azimuth_rad=column("azimuth_rad"),
+        elevation_rad=column("elevation_rad"),
+        yaw_rad=column("yaw_rad"),
+        range_sigma_m=column("range_sigma_m"),
+        angle_sigma_rad=column("angle_sigma_rad"),
+        yaw_sigma_rad=column("yaw_sigma_rad"),
+    )
+
+
+def _quantiles_ns(seconds) -> dict:
+    values = np.asarray([s for s in seconds if math.isfinite(s)], dtype=float) * 1e9
+    if not values.size:
+        return {}
+    return {
+        "p50": float(np.percentile(values, 50)),
+        "p99": float(np.percentile(values, 99)),
+        "mean": float(np.mean(values)),
+        "max": float(np.max(values)),
+    }
+
+
+def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress: bool = False, **params) -> Track:
+    """Pose sensing of a LoRa recording fused with the IMU: one track row per fused epoch.
+
+    ``recording``: a ``.sigmf-meta`` path or a
+    :class:`~scattertrack.io.sigmf_lora.LoraRecording`; ``method``:
+    ``marvel`` or ``ulocate`` (module docstring). ``params``: fusion
+    (:class:`scattertrack.fusion.MarvelParams`) and sensing
+    (:data:`SENSING_DEFAULTS`) parameters, SI units. ``scene`` is accepted
+    for the common tracker signature (the controller's position is estimated).
+
+    The track carries orientation and 1-sigma position like
+    :func:`scattertrack.fusion.run_marvel`; ``skipped`` counts the epochs the
+    sensing declined and the rows and measurements the estimator declined;
+    ``stats["drone"]`` has the estimator's counters, ``sensing_declined``,
+    ``features`` (the sensed rows as :class:`Features`, for scoring
+    snapshots), ``epochs`` (recording epochs), ``rows`` (sensed rows),
+    ``clock`` (the clock error used after take-off, the rest epochs behind
+    it), the DSP's and the fusion's wall time per epoch (``dsp_time_ns_p50``,
+    ``dsp_time_ns_p99``, ``time_ns_p50``, ``time_ns_p99``) and their sum per
+    fused epoch in ``epoch_times_ns``; ``latency_quantiles_ns`` is the
+    fusion's, as for features.
+    """
+    _check_method(method)
+    del scene  # the controller is a state of the estimator; nothing in the scene is needed
+    from scattertrack.fusion import (
+        DECLINE_REASONS,
+        IMU_DECLINE_REASONS,
+        MarvelEstimator,
+        MarvelParams,
+    )
+
+    fusion, sensing = _split_params(params)
+    estimator = MarvelEstimator(MarvelParams.from_kwargs(**fusion))
+    bar = None
+    epochs: list[SensedEpoch] = []
+    stream = sense_epochs(method, recording, imu, estimator, **sensing)
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(unit="epoch", desc=method, leave=False)
+    for sensed in stream:
+        epochs.append(sensed)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    rows = [e.estimate for e in epochs if e.estimate is not None]
+
+    skipped = SkipReport()
+    for reason, n in imu.skipped.counts.items():
+        skipped.counts[reason] = skipped.counts.get(reason, 0) + n
+        skipped.examples.setdefault(reason, []).extend(imu.skipped.examples.get(reason, [])[:5])
+    sensing_declined = {key: 0 for key in SENSING_DECLINE_REASONS}
+    for e in epochs:
+        if e.declined is not None:
+            sensing_declined[e.declined] += 1
+    for counts, reasons in (
+        (sensing_declined, SENSING_DECLINE_REASONS),
+        (estimator.declined, DECLINE_REASONS),
+        (estimator.imu_declined, IMU_DECLINE_REASONS),
+    ):
+        for key, n in counts.items():
+            if n:
+                skipped.add(reasons[key], n=n)
+
+    n = len(rows)
+    fusion_latency = estimator.latency_ns()
+    dsp = _quantiles_ns([e.dsp_time_s for e in epochs if e.declined not in ("non_finite_samples", "no_signal")])
+    fused = [e for e in epochs if math.isfinite(e.fusion_time_s)]
+    rest = [e for e in epochs if e.on_ground and math.isfinite(e.clock_error)]
+    after = next((e for e in epochs if not e.on_ground and math.isfinite(e.clock_error)), None)
+    track = Track(
+        time_s=np.array([r.time_s for r in rows], dtype=float),
+        epc=np.full(n, EPC),
+        position=np.array([r.position for r in rows], dtype=float).reshape(n, 3),
+        velocity=np.array([r.velocity for r in rows], dtype=float).reshape(n, 3),
+        sigma=np.array([r.sigma for r in rows], dtype=float).reshape(n, 3),
+        orientation=np.array([r.orientation for r in rows], dtype=float).reshape(n, 4),
+        skipped=skipped,
+    )
+    track.stats = {
+        EPC: {
+            "method": method,
+            "epochs": len(epochs),
+            "rows": sum(e.sensed for e in epochs),
+            "fused": n,
+            "imu_samples": estimator.imu_samples,
+            "sensing_declined": sensing_declined,
+            "declined": dict(estimator.declined),
+            "imu_declined": dict(estimator.imu_declined),
+            "controller": estimator.controller,
+            "controller_sigma": rows[-1].controller_sigma if rows else None,
+            "clock": {
+                "clock_error": after.clock_error if after is not None else (epochs[-1].clock_error if epochs else None),
+                "rest_epochs": len(rest),
+                "source": "rest" if rest else "flight",
+            },
+            "features": features_of(epochs),
+            "snr_db": np.array([e.snr_db for e in epochs], dtype=float),
+            "time_ns_p50": fusion_latency.get("p50", float("nan")),
+            "time_ns_p99": fusion_latency.get("p99", float("nan")),
+            "dsp_time_ns_p50": dsp.get("p50", float("nan")),
+            "dsp_time_ns_p99": dsp.get("p99", float("nan")),
+            "epoch_times_ns": np.array([(e.dsp_time_s + e.fusion_time_s) * 1e9 for e in fused], dtype=float),
+            "imu_time_ns_per_sample": estimator.imu_wall_time_s * 1e9 / max(estimator.imu_samples, 1),
+        }
+    }
+    track.latency_quantiles_ns = {k: fusion_latency[k] for k in ("p50", "p99")} if fusion_latency else {}
+    track.latency = (n, fusion_latency["mean"], fusion_latency["max"]) if fusion_latency else None
+    return track

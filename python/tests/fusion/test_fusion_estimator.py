@@ -316,3 +316,16 @@ def test_on_ground_until_the_imu_shows_motion_and_predict_propagates():
     assert not estimator.on_ground
     position, velocity, _ = estimator.predict(0.99)
     assert velocity[2] == pytest.approx(0.44, abs=0.02)
+
+
+def test_level_horizontal_acceleration_ends_the_ground_phase_on_tilted_ground():
+    estimator = MarvelEstimator()
+    g = estimator.params.gravity_m_s2
+    tilt = 0.05  # rad: a drone resting on uneven ground reads gravity off its z axis
+    rest = np.array([-g * math.sin(tilt), 0.0, g * math.cos(tilt)])
+    for i in range(100):
+        estimator.add_imu(i * 0.01, rest, [0.0, 0.0, 0.0])
+    assert estimator.on_ground  # tilted, but not moving
+    # A rail's 0.5 m/s ramp: 0.94 m/s^2 forward changes |f| by only 0.045 m/s^2.
+    estimator.add_imu(1.0, rest + [0.94, 0.0, 0.0], [0.0, 0.0, 0.0])
+    assert not estimator.on_ground
