@@ -76,17 +76,8 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
             if n:
                 skipped.add(reasons[key], n=n)
 
-    n = len(rows)
     latency = estimator.latency_ns()
-    track = Track(
-        time_s=np.array([e.time_s for e in rows], dtype=float),
-        epc=np.full(n, EPC),
-        position=np.array([e.position for e in rows], dtype=float).reshape(n, 3),
-        velocity=np.array([e.velocity for e in rows], dtype=float).reshape(n, 3),
-        sigma=np.array([e.sigma for e in rows], dtype=float).reshape(n, 3),
-        orientation=np.array([e.orientation for e in rows], dtype=float).reshape(n, 4),
-        skipped=skipped,
-    )
+    track = track_from_estimates(rows, skipped)
     track.stats = {
         EPC: {
             "epochs": estimator.epochs,
@@ -103,3 +94,18 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
     track.latency_quantiles_ns = {k: latency[k] for k in ("p50", "p99")} if latency else {}
     track.latency = (n, latency["mean"], latency["max"]) if latency else None
     return track
+
+
+def track_from_estimates(rows: list, skipped: SkipReport) -> Track:
+    """The drone's track (epc ``drone``) from the estimator's :class:`Estimate` rows, in order:
+    position (m), velocity (m/s), 1-sigma position (m), orientation (qw, qx, qy, qz)."""
+    n = len(rows)
+    return Track(
+        time_s=np.array([e.time_s for e in rows], dtype=float),
+        epc=np.full(n, EPC),
+        position=np.array([e.position for e in rows], dtype=float).reshape(n, 3),
+        velocity=np.array([e.velocity for e in rows], dtype=float).reshape(n, 3),
+        sigma=np.array([e.sigma for e in rows], dtype=float).reshape(n, 3),
+        orientation=np.array([e.orientation for e in rows], dtype=float).reshape(n, 4),
+        skipped=skipped,
+    )

@@ -315,14 +315,7 @@ def resolve_scenario(scenario: dict) -> dict:
                 f"found {roles.count('tx')} and {roles.count('rx')}",
             )
     if "region" in scene:
-        region = check.table(scene["region"], "scene.region")
-        check.keys(region, ("min", "max"), "scene.region")
-        for key in ("min", "max"):
-            if key not in region:
-                check.fail(f"scene.region.{key}", "missing")
-            region[key] = check.point(region[key], f"scene.region.{key}")
-        if any(lo >= hi for lo, hi in zip(region["min"], region["max"])):
-            check.fail("scene.region", "min must be below max on every axis")
+        _check_region(check, scene)
 
     if helper:
         data["helper_model"] = resolve_helper_model(
@@ -403,14 +396,7 @@ def _resolve_marvel(check: _Checker, data: dict) -> dict:
     scene.setdefault("name", data["name"])
     check.string(scene["name"], "scene.name")
     if "region" in scene:
-        region = check.table(scene["region"], "scene.region")
-        check.keys(region, ("min", "max"), "scene.region")
-        for key in ("min", "max"):
-            if key not in region:
-                check.fail(f"scene.region.{key}", "missing")
-            region[key] = check.point(region[key], f"scene.region.{key}")
-        if any(lo >= hi for lo, hi in zip(region["min"], region["max"])):
-            check.fail("scene.region", "min must be below max on every axis")
+        _check_region(check, scene)
 
     if "controller" not in data:
         check.fail("controller", "missing (the controller's [controller] position, hidden from the estimator)")
@@ -532,6 +518,18 @@ def _resolve_reader_model(check: _Checker, given: dict, antenna_ids: set, phase_
         model[name] = check.number(model[name], key + name)
     _check_reflectors(check, model["reflectors"], key)
     return model
+
+
+def _check_region(check: _Checker, scene: dict) -> None:
+    """Validates ``scene.region`` in place: ``min`` and ``max`` points (m), min below max."""
+    region = check.table(scene["region"], "scene.region")
+    check.keys(region, ("min", "max"), "scene.region")
+    for key in ("min", "max"):
+        if key not in region:
+            check.fail(f"scene.region.{key}", "missing")
+        region[key] = check.point(region[key], f"scene.region.{key}")
+    if any(lo >= hi for lo, hi in zip(region["min"], region["max"])):
+        check.fail("scene.region", "min must be below max on every axis")
 
 
 def _check_reflectors(check: _Checker, reflectors, key: str) -> None:

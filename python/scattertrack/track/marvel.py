@@ -646,6 +646,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
         MarvelEstimator,
         MarvelParams,
     )
+    from scattertrack.fusion.run import track_from_estimates
 
     fusion, sensing = _split_params(params)
     estimator = MarvelEstimator(MarvelParams.from_kwargs(**fusion))
@@ -687,15 +688,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     fused = [e for e in epochs if math.isfinite(e.fusion_time_s)]
     rest = [e for e in epochs if e.on_ground and math.isfinite(e.clock_error)]
     after = next((e for e in epochs if not e.on_ground and math.isfinite(e.clock_error)), None)
-    track = Track(
-        time_s=np.array([r.time_s for r in rows], dtype=float),
-        epc=np.full(n, EPC),
-        position=np.array([r.position for r in rows], dtype=float).reshape(n, 3),
-        velocity=np.array([r.velocity for r in rows], dtype=float).reshape(n, 3),
-        sigma=np.array([r.sigma for r in rows], dtype=float).reshape(n, 3),
-        orientation=np.array([r.orientation for r in rows], dtype=float).reshape(n, 4),
-        skipped=skipped,
-    )
+    track = track_from_estimates(rows, skipped)
     track.stats = {
         EPC: {
             "method": method,
