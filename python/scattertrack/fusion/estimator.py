@@ -47,6 +47,7 @@ DECLINE_REASONS = {
     "range_gate": "range outside the innovation gate (declined)",
     "direction_gate": "direction outside the innovation gate (declined)",
     "yaw_gate": "yaw outside the innovation gate (declined)",
+    "solver_failure": "feature row on which the smoother's linear system failed (declined; smoother restarted)",
 }
 
 # IMU samples the estimator ignores, counted in ``MarvelEstimator.imu_declined``.
@@ -318,6 +319,8 @@ class MarvelEstimator:
         self._cov_controller = np.full((3, 3), np.nan)
         self._declined_run = 0
         self._range_declined_run = 0
+        self.restarts = 0
+        """Times the smoother was restarted after a solver failure."""
         self._left_ground = not p.use_ground  # True once any IMU sample showed motion
         self._rest_force_sum = np.zeros(3)  # specific force summed over the first tilt_window_s, m/s^2
         self._rest_force_count = 0
@@ -534,11 +537,23 @@ class MarvelEstimator:
             graph.add(factors.yaw_factor(X(k), float(yaw_rad), self._noise(np.array([yaw_sigma]))))
         used["baro"] = self._add_baro(graph, initial, stamps, time_s, predicted)
 
-        self._smoother.update(graph, initial, stamps)
-        for _ in range(p.extra_iterations):
-            self._smoother.update()
+        try:
+            self._smoother.update(graph, initial, stamps)
+            for _ in range(p.extra_iterations):
+                self._smoother.update()
+            estimate = self._read_estimate(time_s, used)
+        except RuntimeError:
+            # GTSAM reports an ill-conditioned system (IndeterminateLinearSystem)
+            # by throwing; the smoother's state is then unusable. The row is
+            # declined and the smoother restarts from the predicted state,
+            # with priors as wide as the last covariances, so a bad row never
+            # ends the run.
+            self._restart(k, time_s, predicted)
+            self._last_epoch_time = time_s
+            self._preintegrated.resetIntegrationAndSetBias(self._bias)
+            self.restarts += 1
+            return self._decline("solver_failure")
         self._last_epoch_time = time_s
-        estimate = self._read_estimate(time_s, used)
         # The next interval integrates against the newest bias estimate.
         self._preintegrated.resetIntegrationAndSetBias(self._bias)
         self.epochs += 1
@@ -597,6 +612,38 @@ class MarvelEstimator:
             stamps[key] = self._first_imu_time
         self._nav = gtsam.NavState(pose, np.zeros(3))
         self._bias = gtsam.imuBias.ConstantBias()
+
+    def _restart(self, k: int, time_s: float, predicted) -> None:
+        """A fresh smoother holding state ``k`` (the IMU prediction ``predicted``), the bias and
+        the controller, each with a prior as wide as its last covariance (or a loose default)."""
+        p = self.params
+
+        def spread(covariance: np.ndarray, default: float) -> np.ndarray:
+            diagonal = np.diag(covariance) if np.all(np.isfinite(covariance)) else np.full(3, default**2)
+            return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
+
+        isam_params = gtsam.ISAM2Params()
+        isam_params.setRelinearizeThreshold(p.relinearize_threshold)
+        isam_params.relinearizeSkip = 1
+        isam_params.setFactorization(p.factorization)
+        self._smoother = gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
+        graph = gtsam.NonlinearFactorGraph()
+        initial = gtsam.Values()
+        pose = predicted.pose()
+        pose_sigmas = np.concatenate([np.full(3, 0.05), spread(self._cov_position, 1.0)])
+        graph.add(gtsam.PriorFactorPose3(X(k), pose, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
+        graph.add(gtsam.PriorFactorVector(V(k), predicted.velocity(), gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_velocity, 0.5))))
+        bias_sigmas = np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3)
+        graph.add(gtsam.PriorFactorConstantBias(B(k), self._bias, gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
+        graph.add(gtsam.PriorFactorPoint3(CONTROLLER, self._controller, gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_controller, 5.0))))
+        initial.insert(X(k), pose)
+        initial.insert(V(k), predicted.velocity())
+        initial.insert(B(k), self._bias)
+        initial.insert(CONTROLLER, self._controller)
+        stamps = {X(k): time_s, V(k): time_s, B(k): time_s, CONTROLLER: time_s}
+        self._baro_chain = False  # a new barometer offset chain starts with the next epoch
+        self._smoother.update(graph, initial, stamps)
+        self._nav = predicted
 
     def _add_ground(self, graph, k: int) -> None:
         """At rest at the origin before take-off: position, zero velocity and,
@@ -768,3 +815,24 @@ class MarvelEstimator:
     def controller(self) -> np.ndarray | None:
         """Current estimate of the controller position, (3,) m, or None before the first row."""
         return None if self._controller is None else self._controller.copy()
+
+    @property
+    def velocity_covariance(self) -> np.ndarray | None:
+        """World-frame covariance of the newest smoothed velocity, (3, 3) (m/s)^2, or None before the first row.
+
+        With the yaw still loose (no yaw feature: a rail, a hover) it is about
+        ``|v|^2 sigma_yaw^2`` across the velocity: the IMU-integrated velocity's
+        direction is only as good as the yaw."""
+        if not np.all(np.isfinite(self._cov_velocity)):
+            return None
+        return self._cov_velocity.copy()
+
+    @property
+    def position_covariance(self) -> np.ndarray | None:
+        """World-frame covariance of the newest position, (3, 3) m^2, or None before the first row."""
+        return self._cov_position.copy() if np.all(np.isfinite(self._cov_position)) else None
+
+    @property
+    def controller_covariance(self) -> np.ndarray | None:
+        """Covariance of the controller estimate, (3, 3) m^2, or None before the first row."""
+        return self._cov_controller.copy() if np.all(np.isfinite(self._cov_controller)) else None

@@ -140,6 +140,7 @@ SENSING_DECLINE_REASONS = {
     "non_finite_samples": "LoRa epoch with non-finite samples (declined)",
     "no_signal": "LoRa epoch with a chirp of all-zero samples (declined)",
     "clock_unsettled": "LoRa epoch at rest before the tags' clock error settled (sensed, not fused)",
+    "fringe_unsettled": "LoRa epoch at rest before the rest epochs' timing ranges settled the range fringe (sensed, not fused)",
     "low_snr": "LoRa epoch below the decoding SNR (declined)",
     "dsp_error": "LoRa epoch the pose-sensing DSP could not process (declined)",
     "no_range": "LoRa epoch without a range (declined)",
@@ -232,7 +233,7 @@ class SensedEpoch:
     @property
     def sensed(self) -> bool:
         """Has a feature row (given to the fusion, or held back while the clock error settled)."""
-        return self.declined in (None, "clock_unsettled")
+        return self.declined in (None, "clock_unsettled", "fringe_unsettled")
 
 
 class _Recording:
@@ -369,6 +370,29 @@ def _split_params(params: dict) -> tuple[dict, dict]:
     return fusion, sensing
 
 
+def _predicted_range(estimator, predicted, centroid: np.ndarray) -> tuple[float, float] | None:
+    """The fusion's predicted range (m) of the gear centre from the controller and its 1-sigma (m).
+
+    From the IMU-propagated state (``predicted``: position, velocity,
+    world_R_body) and the controller estimate, with the newest position and
+    controller covariances projected on the line of sight; None before
+    there is a controller or a covariance.
+    """
+    controller = estimator.controller
+    position_cov, controller_cov = estimator.position_covariance, estimator.controller_covariance
+    if predicted is None or controller is None or position_cov is None or controller_cov is None:
+        return None
+    gear = predicted[0] + predicted[2] @ centroid - controller
+    distance = float(np.linalg.norm(gear))
+    if not distance > 0.0:
+        return None
+    u = gear / distance
+    variance = float(u @ (position_cov + controller_cov) @ u)
+    if not (math.isfinite(variance) and variance > 0.0):
+        return None
+    return distance, math.sqrt(variance)
+
+
 def _rest_rows(frequency_hz: np.ndarray) -> np.ndarray:
     """The DSP's peak frequencies (2, 4, M) Hz as ``lora_clock_error`` rows (2 M, 4): one per (channel, antenna)."""
     return np.transpose(frequency_hz, (0, 2, 1)).reshape(-1, frequency_hz.shape[1])
@@ -428,7 +452,13 @@ def sense_epochs(
     # the mean shift (Hz), the chirp rate BW / T turns hertz into delay.
     chirp_rate = float(source.metadata["bandwidth_hz"]) ** 2 / 2 ** int(source.metadata["spreading_factor"])
     range_per_clock_error = 0.5 * SPEED_OF_LIGHT * float(np.mean(sensor.shifts)) / chirp_rate
+    # Range (m) per m/s of radial velocity: the translational Doppler 2 f v / c0
+    # removed from the timing term moves it by f / (BW / T) (about 15 m per m/s
+    # at 915 MHz, BW 500 kHz, SF12): an error of the fused velocity along the
+    # line of sight biases the timing range (and so the fringe) by that much.
+    range_per_velocity = float(np.mean(sensor.carriers)) / chirp_rate
     clock_range_sigma = math.inf  # m, the clock error's share of the timing range's sigma
+    rest_timing = [0.0, 0.0]  # sum of 1/sigma^2 and of range/sigma^2 of the rest epochs' timing ranges (m^-2, m^-1)
 
     def estimate_clock(rows: list[np.ndarray]) -> float:
         nonlocal clock_range_sigma
@@ -539,6 +569,60 @@ def sense_epochs(
         own_sigma = float(own_sigma) if own_sigma is not None and math.isfinite(own_sigma) else 0.0
         unsettled = collect is not None and not clock_range_sigma <= max(options["clock_settle_m"], own_sigma)
 
+        # Fringe (docs/marvel.md section 7, step 4): the phases place the range
+        # to centimetres within the fringe (2 x half_fringe_m apart) the DSP's
+        # timing range picked. The timing range's sigma has a thermal, a clock
+        # and — for marvel — a Doppler share: the fused velocity's uncertainty
+        # along the line of sight times range_per_velocity (about 15 m per m/s;
+        # with the yaw still loose, |v| sigma_yaw across the track). The
+        # fusion's own predicted range of the gear centre is a second opinion
+        # that does not depend on the Doppler; the fringe nearest to the two
+        # combined (inverse-variance) is taken. Without the prior, a radial
+        # velocity error of 0.4 m/s picks a wrong fringe, the wrong range pulls
+        # the yaw and the velocity, and the next epochs' Doppler picks wrong
+        # fringes in turn (measured: a steady 2-fringe, 11.8 m, error at 30 m).
+        timing_sigma = math.hypot(own_sigma, clock_range_sigma if math.isfinite(clock_range_sigma) else 0.0)
+        fringe_sigma = timing_sigma
+        fringe_unsettled = False
+        if marvel:
+            velocity_cov = estimator.velocity_covariance
+            if velocity_cov is not None:
+                radial_var = float(u_centroid @ velocity_cov @ u_centroid)
+                if math.isfinite(radial_var) and radial_var > 0.0:
+                    timing_sigma = math.hypot(timing_sigma, range_per_velocity * math.sqrt(radial_var))
+            fringe_sigma = timing_sigma
+            prior = _predicted_range(estimator, predicted, sensor.centroid)
+            timing_range = result.get("timing_range_m")
+            usable = timing_range is not None and math.isfinite(timing_range) and timing_sigma > 0.0
+            if usable and on_ground:
+                # At rest the range does not change: the timing ranges of all
+                # rest epochs so far average (inverse variance) to the fringe
+                # choice. The fusion's prediction is no second opinion yet — it
+                # was built from these same rows.
+                # Each was computed with the clock error of its time; the
+                # timing range grows by range_per_clock_error per unit of clock
+                # error (the CFO eps s_k is subtracted from the tone), so the
+                # sums keep the clock-free part and the newest clock error is
+                # added back: early epochs' worse clock estimates do not bias it.
+                rest_timing[0] += 1.0 / timing_sigma**2
+                rest_timing[1] += (timing_range - range_per_clock_error * clock_error) / timing_sigma**2
+                centre = rest_timing[1] / rest_timing[0] + range_per_clock_error * clock_error
+                fringe_sigma = 1.0 / math.sqrt(rest_timing[0])
+                fringe = 2.0 * sensor.half_fringe_m
+                centroid_range += round((centre - centroid_range) / fringe) * fringe
+                # Until the fringe is settled (3 sigma inside half a fringe) a
+                # rest row is not fused: the first fused rows place the
+                # controller, and a later change of fringe would be a 5.8 m
+                # jump of a range the ground factors do not let the drone follow.
+                fringe_unsettled = 3.0 * fringe_sigma > sensor.half_fringe_m
+            elif usable and prior is not None:
+                predicted_range, predicted_sigma = prior
+                weights = (1.0 / timing_sigma**2, 1.0 / predicted_sigma**2)
+                centre = (weights[0] * timing_range + weights[1] * predicted_range) / sum(weights)
+                fringe_sigma = 1.0 / math.sqrt(sum(weights))
+                fringe = 2.0 * sensor.half_fringe_m
+                centroid_range += round((centre - centroid_range) / fringe) * fringe
+
         # Lever arm: the DSP sees the gear centre, the row is about the body origin.
         rotation = attitude if attitude is not None else np.eye(3)
         body = centroid_range * u_centroid - rotation @ sensor.centroid
@@ -551,14 +635,8 @@ def sense_epochs(
         dsp_range_sigma = result["range_sigma_m"]
         dsp_range_sigma = float(dsp_range_sigma) if dsp_range_sigma is not None and math.isfinite(dsp_range_sigma) else 0.0
         sensed.range_sigma_m = math.hypot(dsp_range_sigma, options["range_sigma_floor_m"])
-        # Fringe ambiguity: the phases place the range to centimetres within
-        # the fringe the timing range picked; when the timing range's own
-        # sigma (thermal and clock) reaches a third of the half fringe, a
-        # wrong fringe is no longer rare, and the row's range is only as good
-        # as the timing range: its sigma becomes the row's.
-        timing_sigma = math.hypot(own_sigma, clock_range_sigma if math.isfinite(clock_range_sigma) else 0.0)
-        if 3.0 * timing_sigma > sensor.half_fringe_m:
-            sensed.range_sigma_m = max(sensed.range_sigma_m, timing_sigma)
+        if 3.0 * fringe_sigma > sensor.half_fringe_m:
+            sensed.range_sigma_m = max(sensed.range_sigma_m, fringe_sigma)
         sensed.angle_sigma_rad = math.hypot(
             sensor.angle_sigma(np.asarray(result["phase_sigma_rad"], dtype=float), u_centroid),
             options["angle_sigma_floor_rad"],
@@ -568,8 +646,8 @@ def sense_epochs(
             yaw_sigma = result["yaw_sigma_rad"]
             yaw_sigma = float(yaw_sigma) if yaw_sigma is not None and math.isfinite(yaw_sigma) else 0.0
             sensed.yaw_sigma_rad = math.hypot(yaw_sigma, options["yaw_sigma_floor_rad"])
-        if unsettled:
-            sensed.declined = "clock_unsettled"
+        if unsettled or fringe_unsettled:
+            sensed.declined = "clock_unsettled" if unsettled else "fringe_unsettled"
             yield sensed
             continue
 

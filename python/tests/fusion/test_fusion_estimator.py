@@ -329,3 +329,35 @@ def test_level_horizontal_acceleration_ends_the_ground_phase_on_tilted_ground():
     # A rail's 0.5 m/s ramp: 0.94 m/s^2 forward changes |f| by only 0.045 m/s^2.
     estimator.add_imu(1.0, rest + [0.94, 0.0, 0.0], [0.0, 0.0, 0.0])
     assert not estimator.on_ground
+
+
+def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flight):
+    data = circle_flight
+    estimator = MarvelEstimator(MarvelParams(correlation_distance_m=0.0))
+    imu, features = data.imu, data.features
+    j = 0
+    failed_at = 30
+    results = []
+    for i in range(60):
+        while j < len(imu) and imu.time_s[j] <= features.time_s[i]:
+            estimator.add_imu(imu.time_s[j], imu.accel[j], imu.gyro[j], imu.baro_z[j])
+            j += 1
+        if i == failed_at:
+            smoother = estimator._smoother
+
+            class Failing:
+                def update(self, *args):
+                    raise RuntimeError("Indeterminate linear system detected")
+
+            estimator._smoother = Failing()
+        results.append(estimator.add_features(
+            features.time_s[i], features.range_m[i], features.azimuth_rad[i], features.elevation_rad[i],
+            features.yaw_rad[i], features.range_sigma_m[i], features.angle_sigma_rad[i], features.yaw_sigma_rad[i],
+        ))
+        if i == failed_at:
+            assert estimator._smoother is not smoother  # restarted, not the failing one
+    assert results[failed_at] is None
+    assert estimator.declined["solver_failure"] == 1 and estimator.restarts == 1
+    assert all(r is not None for r in results[failed_at + 1 :])
+    truth = np.array([np.interp(results[-1].time_s, data.truth_time, data.truth_position[:, a]) for a in range(3)])
+    assert np.linalg.norm(results[-1].position - truth) < 1.0
