@@ -59,6 +59,9 @@ DISTANCES = (1.0, 5.0, 10.0, 20.0, 30.0, 40.0, 50.0)
 WALLS = (0, 1, 2, 3)
 """Fig. 10 wall counts at :data:`WALL_DISTANCE_M`."""
 WALL_DISTANCE_M = 10.0
+FLIGHTS = {"marvel-circle-20m": (0.3366, 4.99), "marvel-circle-20m+ground": (0.3366, 4.99),
+           "marvel-square-walls": (0.5256, 6.64)}
+"""The paper's two flights (Figs. 12, 13) at IQ level: scenario -> (mean position error m, orientation deg)."""
 GROUND_DISTANCES = (1.0, 5.0, 20.0, 50.0)
 """Fig. 10 distances repeated with the ground reflection (multipath) of :data:`GROUND_REFLECTOR`."""
 GROUND_REFLECTOR = {"kind": "plane", "point": [0.0, 0.0, -0.35], "normal": [0.0, 0.0, 1.0], "coefficient": -0.6}
@@ -102,6 +105,12 @@ def _scenario(kind: str, value) -> dict:
         # decimetres longer than the direct one: no 26 MHz aperture resolves it.
         scenario = _scenario("distance", value)
         scenario["lora_model"] = {**scenario.get("lora_model", {}), "reflectors": [GROUND_REFLECTOR]}
+        return scenario
+    if kind == "flight":
+        name, _, ground = str(value).partition("+")
+        scenario = load_scenario(name)
+        if ground:  # "NAME+ground": the same flight over the open field's ground
+            scenario["lora_model"] = {**scenario.get("lora_model", {}), "reflectors": [GROUND_REFLECTOR]}
         return scenario
     if kind == "walls":
         scenario = load_scenario("marvel-distance") | {"duration_s": DURATION_S}
@@ -164,6 +173,10 @@ def score_run(task: tuple) -> dict:
             fused = np.linalg.norm(track.position - position, axis=1)
         else:
             fused = np.zeros(0)
+        from scattertrack.eval import compare
+
+        report = compare(truth, track).overall if len(track) else None
+        rotation_deg = float(report.mean_orientation_deg) if report is not None else float("nan")
         out["methods"][method] = {
             "snapshot_m": snapshot[scored],
             "range_error_m": range_error[scored],
@@ -174,6 +187,7 @@ def score_run(task: tuple) -> dict:
             "yaw_rows": int(np.count_nonzero(has_yaw)),
             "rows": len(features),
             "fused_m": fused,
+            "rotation_deg": rotation_deg,
             "dsp_ns": float(stats["dsp_time_ns_p50"]),
             "dsp_ns_p99": float(stats["dsp_time_ns_p99"]),
             "fusion_ns": float(stats["time_ns_p50"]),
@@ -236,6 +250,8 @@ def sensing_block(seeds, show: bool = True, workers: int | None = None) -> dict:
         tasks += [("ground", distance, seed, ("marvel",)) for seed in seeds]
     for walls in (0, 3):
         tasks += [("turntable", walls, seed, ("marvel",)) for seed in seeds]
+    for name in FLIGHTS:
+        tasks += [("flight", name, seed, ("marvel",)) for seed in seeds]
     workers = workers or max(1, min(2, os.cpu_count() or 1))
     started = time.perf_counter()
     runs = []
@@ -265,6 +281,14 @@ def sensing_block(seeds, show: bool = True, workers: int | None = None) -> dict:
                "paper": PAPER_FIG10.get(v)} for v in GROUND_DISTANCES]
     fig11 = [{"walls": w, "marvel": _aggregate(group("turntable", w), "marvel"), "paper_deg": PAPER_FIG11[w]}
              for w in (0, 3)]
+    flights = []
+    for name in FLIGHTS:
+        group_runs = [r["methods"]["marvel"] for r in group("flight", name)]
+        flights.append({"scenario": name, "runs": len(group_runs),
+                        "mean_3d_m": float(np.mean([np.mean(m["fused_m"]) for m in group_runs])),
+                        "worst_seed_m": float(np.max([np.mean(m["fused_m"]) for m in group_runs])),
+                        "rotation_deg": float(np.nanmean([m["rotation_deg"] for m in group_runs])),
+                        "paper": FLIGHTS[name]})
     timing = [m for r in runs for m in r["methods"].values()]
     return {
         "seeds": seeds,
@@ -274,6 +298,7 @@ def sensing_block(seeds, show: bool = True, workers: int | None = None) -> dict:
         "fig9": fig9,
         "fig10": fig10,
         "fig11": fig11,
+        "flights": flights,
         "dsp_ms_p50": float(np.median([m["dsp_ns"] for m in timing]) / 1e6),
         "dsp_ms_p99": float(np.max([m["dsp_ns_p99"] for m in timing]) / 1e6),
         "fusion_ms_p50": float(np.nanmedian([m["fusion_ns"] for m in timing]) / 1e6),
@@ -355,6 +380,13 @@ def print_sensing(result: dict, command: str) -> None:
         cells.append([setting, _f(m["snr_db_median"], 1), _f(100 * m["yaw_fraction"], 0) + " %",
                       _f(m["yaw_mean_deg"]), _f(m["fused_mean_m"]), _f(row["paper_deg"], 1)])
     print(_table(headers, cells))
+    print(f"\n## 2d. fused flights from raw IQ (paper Figs. 12-13, {seed_text})\n$ {command}")
+    headers = ["scenario", "runs", "mean 3D m", "worst seed m", "rot mean deg", "paper m / deg"]
+    cells = [[row["scenario"], str(row["runs"]), _f(row["mean_3d_m"]), _f(row["worst_seed_m"]), _f(row["rotation_deg"]),
+              "{:.2f} / {:.2f}".format(*row["paper"])] for row in result["flights"]]
+    print(_table(headers, cells))
+    print("the whole chain: LoRa IQ (no reflectors but the scenario's walls) -> pose sensing -> fusion, "
+          "errors in the take-off frame")
     print(f"\nper epoch: DSP {result['dsp_ms_p50']:.1f} ms p50 ({result['dsp_ms_p99']:.1f} ms p99 worst run), "
           f"fusion {result['fusion_ms_p50']:.1f} ms p50 ({result['fusion_ms_p99']:.1f} ms p99 worst run); "
           f"block wall time {result['wall_s']:.0f} s on {result['workers']} process(es), "

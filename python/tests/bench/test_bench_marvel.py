@@ -1,0 +1,51 @@
+"""Smoke tests of bench/marvel.py and bench/sensing_bench.py: one short point each, every number finite."""
+
+import importlib.util
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+BENCH = Path(__file__).resolve().parents[3] / "bench"
+
+
+def _load(name: str, file: str):
+    sys.path.insert(0, str(BENCH))  # bench/marvel.py imports its sibling sensing_bench
+    try:
+        spec = importlib.util.spec_from_file_location(name, BENCH / file)
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(BENCH))
+    return module
+
+
+@pytest.fixture(scope="module")
+def marvel_bench():
+    return _load("scattertrack_bench_marvel", "marvel.py")
+
+
+@pytest.fixture(scope="module")
+def sensing_bench():
+    return _load("scattertrack_bench_sensing", "sensing_bench.py")
+
+
+def test_fusion_scores_a_short_flight(marvel_bench):
+    from scattertrack.sim import load_scenario, simulate
+
+    sim = simulate(load_scenario("marvel-circle-20m") | {"duration_s": 8.0}, seed=1000)
+    run = marvel_bench.fuse_and_score(sim)
+    assert run["rows"] > 50
+    for key in ("mean_3d_m", "mean_aligned_m", "mean_orientation_deg", "controller_error_m", "epoch_p50_ns"):
+        assert math.isfinite(run[key]) and run[key] >= 0.0, key
+
+
+def test_sensing_scores_one_iq_point_for_both_methods(sensing_bench):
+    run = sensing_bench.score_run(("speed", 3.0, 1000, ("marvel", "ulocate")))
+    marvel, ulocate = run["methods"]["marvel"], run["methods"]["ulocate"]
+    assert marvel["scored"] > 0 and ulocate["scored"] > 0
+    assert np.all(np.isfinite(marvel["snapshot_m"]))
+    # The Doppler-blind baseline is measurably worse at 3 m/s (paper Fig. 9).
+    assert np.mean(ulocate["snapshot_m"]) > 5.0 * np.mean(marvel["snapshot_m"])
