@@ -336,6 +336,17 @@ def read_sigmf(path, verify_checksum: bool = False) -> Recording:
     return Recording(meta_path, data_path, meta, data, datatype, windows)
 
 
+def _global_number(meta_path, global_info: dict, key: str, positive: bool = True) -> float:
+    """A finite (and, if ``positive``, > 0) number of the metadata's ``global`` object; a
+    FormatError naming the file and ``global.KEY`` otherwise."""
+    value = global_info[key]
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise FormatError(meta_path, None, f"global.{key}", f"must be a finite number, got {value!r}")
+    if positive and value <= 0:
+        raise FormatError(meta_path, None, f"global.{key}", f"must be positive, got {value!r}")
+    return float(value)
+
+
 def _load_meta(meta_path: Path) -> dict:
     """The metadata JSON, checked against the SigMF schema."""
     import jsonschema
@@ -374,12 +385,7 @@ def _check_header(meta_path: Path, g: dict) -> int:
         raise FormatError(meta_path, None, f"global.{key}", message)
 
     def number(key, positive=True):
-        value = g[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            fail(key, f"must be a finite number, got {value!r}")
-        if positive and value <= 0:
-            fail(key, f"must be positive, got {value!r}")
-        return float(value)
+        return _global_number(meta_path, g, key, positive)
 
     ns = NAMESPACE
     bandwidth = number(f"{ns}:bandwidth_hz")

@@ -65,7 +65,7 @@ from pathlib import Path
 
 import numpy as np
 
-from scattertrack.io.sigmf import DATATYPES, NAMESPACE, _base, _load_meta
+from scattertrack.io.sigmf import DATATYPES, NAMESPACE, _base, _global_number, _load_meta
 from scattertrack.io.types import FormatError
 
 LORA_LAYOUT = (
@@ -325,12 +325,7 @@ def _check_global(meta_path: Path, g: dict) -> tuple[str, float, tuple[int, int,
             fail(key, "missing required key")
 
     def number(key, positive=True):
-        value = g[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-            fail(key, f"must be a finite number, got {value!r}")
-        if positive and value <= 0:
-            fail(key, f"must be positive, got {value!r}")
-        return float(value)
+        return _global_number(meta_path, g, key, positive)
 
     def integer(key, low):
         value = g[key]
