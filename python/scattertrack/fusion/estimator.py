@@ -278,15 +278,7 @@ class MarvelEstimator:
         self._imu_params.setIntegrationCovariance(eye * p.integration_sigma**2)
         self._preintegrated = gtsam.PreintegratedCombinedMeasurements(self._imu_params)
 
-        isam_params = gtsam.ISAM2Params()
-        isam_params.setRelinearizeThreshold(p.relinearize_threshold)
-        isam_params.relinearizeSkip = 1
-        # QR on the Jacobian instead of Cholesky on J^T J: the bias random
-        # walk between 0.1 s epochs (1/sigma ~ 2e5 for the gyroscope) next to
-        # metre-level feature noise gives cond(J) ~ 1e6, cond(J^T J) ~ 1e12,
-        # where iSAM2's Cholesky reports an indeterminate system.
-        isam_params.setFactorization(p.factorization)
-        self._smoother = gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
+        self._smoother = self._new_smoother()
 
         self._gate = (
             {1: chi_square_gate(p.gate_probability, 1), 2: chi_square_gate(p.gate_probability, 2)}
@@ -613,6 +605,19 @@ class MarvelEstimator:
         self._nav = gtsam.NavState(pose, np.zeros(3))
         self._bias = gtsam.imuBias.ConstantBias()
 
+    def _new_smoother(self):
+        """An empty iSAM2 fixed-lag smoother with this estimator's settings."""
+        p = self.params
+        isam_params = gtsam.ISAM2Params()
+        isam_params.setRelinearizeThreshold(p.relinearize_threshold)
+        isam_params.relinearizeSkip = 1
+        # QR on the Jacobian instead of Cholesky on J^T J: the bias random
+        # walk between 0.1 s epochs (1/sigma ~ 2e5 for the gyroscope) next to
+        # metre-level feature noise gives cond(J) ~ 1e6, cond(J^T J) ~ 1e12,
+        # where iSAM2's Cholesky reports an indeterminate system.
+        isam_params.setFactorization(p.factorization)
+        return gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
+
     def _restart(self, k: int, time_s: float, predicted) -> None:
         """A fresh smoother holding state ``k`` (the IMU prediction ``predicted``), the bias and
         the controller, each with a prior as wide as its last covariance (or a loose default)."""
@@ -622,11 +627,7 @@ class MarvelEstimator:
             diagonal = np.diag(covariance) if np.all(np.isfinite(covariance)) else np.full(3, default**2)
             return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
 
-        isam_params = gtsam.ISAM2Params()
-        isam_params.setRelinearizeThreshold(p.relinearize_threshold)
-        isam_params.relinearizeSkip = 1
-        isam_params.setFactorization(p.factorization)
-        self._smoother = gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
+        self._smoother = self._new_smoother()
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
         pose = predicted.pose()
