@@ -114,6 +114,7 @@ import numpy as np
 
 from scattertrack.io.sigmf_lora import LoraRecording
 from scattertrack.io.types import SPEED_OF_LIGHT
+from scattertrack.sim.rotation import quat_to_matrix, wrap_angle
 from scattertrack.sim.wideband import bent_leg_lengths
 
 BOLTZMANN = 1.380649e-23
@@ -323,29 +324,6 @@ def link_budget_snr_db(distance_m, walls: int = 0, model: dict | None = None, *,
     return 10.0 * np.log10(power / noise_power_w(model))
 
 
-def quaternion_matrices(orientation) -> np.ndarray:
-    """Rotation matrices ``(n, 3, 3)`` of Hamilton quaternions ``(n, 4)`` ``qw, qx, qy, qz`` (normalised first)."""
-    q = np.asarray(orientation, dtype=np.float64)
-    q = q / np.linalg.norm(q, axis=1, keepdims=True)
-    w, x, y, z = q.T
-    out = np.empty((len(q), 3, 3))
-    out[:, 0, 0] = 1.0 - 2.0 * (y * y + z * z)
-    out[:, 0, 1] = 2.0 * (x * y - w * z)
-    out[:, 0, 2] = 2.0 * (x * z + w * y)
-    out[:, 1, 0] = 2.0 * (x * y + w * z)
-    out[:, 1, 1] = 1.0 - 2.0 * (x * x + z * z)
-    out[:, 1, 2] = 2.0 * (y * z - w * x)
-    out[:, 2, 0] = 2.0 * (x * z - w * y)
-    out[:, 2, 1] = 2.0 * (y * z + w * x)
-    out[:, 2, 2] = 1.0 - 2.0 * (x * x + y * y)
-    return out
-
-
-def _wrap(angle_rad):
-    """Wrap to (-pi, pi] (docs/marvel.md section 1; the formula of ``fusion.factors.wrap_angle``, which needs gtsam)."""
-    return np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=np.float64), 2.0 * np.pi)
-
-
 # --------------------------------------------------------------------------
 # the simulator
 
@@ -381,9 +359,9 @@ class _Simulator:
         uplink = self.excitation[:, None] + self.shifts[None, :]  # f_j + s_k (J, K) Hz
         phase_m = streams["receiver"].uniform(0.0, 2.0 * np.pi, m)
         delay_m = streams["receiver"].uniform(0.0, model["rx_delay_max_s"], m)
-        self.theta = _wrap(phase_m[None, None, :] - 2.0 * np.pi * uplink[:, :, None] * delay_m[None, None, :])  # (J, K, M)
+        self.theta = wrap_angle(phase_m[None, None, :] - 2.0 * np.pi * uplink[:, :, None] * delay_m[None, None, :])  # (J, K, M)
         residual = streams["calibration"].normal(0.0, 1.0, self.theta.shape) * model["calibration_residual_rad"]
-        self.theta_calibrated = _wrap(self.theta - residual)
+        self.theta_calibrated = wrap_angle(self.theta - residual)
 
         # Carrier of the round trip (the mean of downlink and uplink frequencies) and link constants.
         self.carrier = self.excitation[:, None] + self.shifts[None, :] / 2.0  # (J, K) Hz
@@ -414,7 +392,7 @@ class _Simulator:
         jj, kk, mm, n = self.shape
         t = chirp_start[:, None] + self.sample_time[None, :]  # (J, N) s
         position, orientation = self.pose(t.ravel())
-        rotation = quaternion_matrices(orientation)
+        rotation = quat_to_matrix(orientation)
         tags = position[:, None, :] + np.swapaxes(rotation @ self.body.T, 1, 2)  # p_k = R b_k + x, (J N, K, 3) m
         down = np.linalg.norm(tags - self.tx, axis=-1)  # (J N, K) m
         up = np.linalg.norm(tags[:, :, None, :] - self.rx[None, None, :, :], axis=-1)  # (J N, K, M) m
@@ -478,7 +456,7 @@ class _Simulator:
         slope = self.bandwidth / self.duration  # BW / T, Hz/s
         t_mid = t[:, mid][:, None, None]
         peak_frequency = self.cfo[None, :, None] + doppler - slope * tau
-        peak_phase = _wrap(-2.0 * np.pi * carrier * tau + 2.0 * np.pi * self.cfo[None, :, None] * t_mid
+        peak_phase = wrap_angle(-2.0 * np.pi * carrier * tau + 2.0 * np.pi * self.cfo[None, :, None] * t_mid
                            + self.phi_tag + self.theta + np.pi * slope * tau**2)
         offset = position[0] - self.rho
         horizontal = math.hypot(offset[0], offset[1])

@@ -248,9 +248,9 @@ def test_the_yaw_follows_the_turntable():
 
 
 def _matrices(sim, times):
-    from scattertrack.sim.lora import quaternion_matrices
+    from scattertrack.sim.rotation import quat_to_matrix
 
-    return quaternion_matrices(flight_at(sim.scenario["flight"], times).orientation)
+    return quat_to_matrix(flight_at(sim.scenario["flight"], times).orientation)
 
 
 def test_a_level_rail_start_ends_the_ground_phase():
