@@ -300,6 +300,18 @@ class CsvReader:
         return kept_rows, kept_lines, blank_line
 
 
+def whole_group(reader: CsvReader, names: list[str]) -> bool:
+    """Whether an optional column group (``sx, sy, sz``; ``qw, qx, qy, qz``) is present.
+
+    Half a group is an error naming the first missing column, at line 1.
+    """
+    present = [name in reader.column_position for name in names]
+    if any(present) and not all(present):
+        missing = names[present.index(False)]
+        raise FormatError(reader.path, 1, missing, f"missing column (needed with {names[0]}..)")
+    return all(present)
+
+
 def format_fixed(values: np.ndarray, decimals: int, empty_nan: bool = False) -> list[str]:
     """Format floats with ``decimals`` places; nan as "" if ``empty_nan`` else "nan"."""
     values = np.asarray(values, dtype=np.float64)

@@ -13,6 +13,7 @@ import numpy as np
 
 from scattertrack.io.csvutil import (
     CsvReader,
+    whole_group,
     format_fixed,
     require_finite,
     text_column,
@@ -39,8 +40,8 @@ def read_track(path) -> Track:
     parts = {"time": [], "epc": [], "position": [], "velocity": [], "sigma": [], "q": []}
     lines = []
     with CsvReader(path, REQUIRED, SIGMA + ORIENTATION) as reader:
-        has_sigma = _whole_group(reader, SIGMA)
-        has_orientation = _whole_group(reader, ORIENTATION)
+        has_sigma = whole_group(reader, SIGMA)
+        has_orientation = whole_group(reader, ORIENTATION)
         for chunk in reader.chunks():
             parts["time"].append(chunk.floats("time_s"))
             parts["epc"].append(np.array(chunk.texts("epc"), dtype=str))
@@ -65,15 +66,6 @@ def read_track(path) -> Track:
     )
     _check_time_order(path, track, np.concatenate(lines))
     return track
-
-
-def _whole_group(reader: CsvReader, names: list[str]) -> bool:
-    """Whether an optional column group is present; half a group is an error."""
-    present = [name in reader.column_position for name in names]
-    if any(present) and not all(present):
-        missing = names[present.index(False)]
-        raise FormatError(reader.path, 1, missing, f"missing column (needed with {names[0]}..)")
-    return all(present)
 
 
 def _check_time_order(path, track: Track, lines: np.ndarray) -> None:

@@ -16,12 +16,13 @@ import numpy as np
 
 from scattertrack.io.csvutil import (
     CsvReader,
+    whole_group,
     format_fixed,
     require_finite,
     text_column,
     write_columns,
 )
-from scattertrack.io.types import FormatError, Truth
+from scattertrack.io.types import Truth
 
 POSITION = ["x", "y", "z"]
 VELOCITY = ["vx", "vy", "vz"]
@@ -38,7 +39,7 @@ def read_truth(path) -> Truth:
     """
     times, epcs, positions, velocities, orientations = [], [], [], [], []
     with CsvReader(path, REQUIRED, VELOCITY + ORIENTATION) as reader:
-        has_orientation = _whole_group(reader, ORIENTATION)
+        has_orientation = whole_group(reader, ORIENTATION)
         for chunk in reader.chunks():
             times.append(chunk.floats("time_s"))
             epcs.append(np.array(chunk.texts("epc"), dtype=str))
@@ -64,15 +65,6 @@ def read_truth(path) -> Truth:
         velocity=np.concatenate(velocities)[order],
         orientation=np.concatenate(orientations)[order] if has_orientation else None,
     )
-
-
-def _whole_group(reader: CsvReader, names: list[str]) -> bool:
-    """Whether an optional column group is present; half a group is an error (as in track.csv)."""
-    present = [name in reader.column_position for name in names]
-    if any(present) and not all(present):
-        missing = names[present.index(False)]
-        raise FormatError(reader.path, 1, missing, f"missing column (needed with {names[0]}..)")
-    return all(present)
 
 
 def write_truth(path, truth: Truth) -> None:
