@@ -300,6 +300,20 @@ class CsvReader:
         return kept_rows, kept_lines, blank_line
 
 
+def sort_by_time(columns: dict[str, np.ndarray]) -> tuple[dict[str, np.ndarray], int]:
+    """The columns stably sorted by ``columns["time_s"]`` (s), and how many rows were out of order.
+
+    A row is out of order when an earlier row has a later time; equal times keep the file's order.
+    """
+    time = columns["time_s"]
+    latest_before = np.maximum.accumulate(time)
+    reordered = int(np.count_nonzero(time[1:] < latest_before[:-1]))
+    if reordered:
+        order = np.argsort(time, kind="stable")
+        columns = {name: values[order] for name, values in columns.items()}
+    return columns, reordered
+
+
 def whole_group(reader: CsvReader, names: list[str]) -> bool:
     """Whether an optional column group (``sx, sy, sz``; ``qw, qx, qy, qz``) is present.
 

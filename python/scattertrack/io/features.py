@@ -20,7 +20,7 @@ import math
 
 import numpy as np
 
-from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, write_columns
+from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, sort_by_time, write_columns
 from scattertrack.io.types import Features
 
 REQUIRED = ["time_s", "range_m", "azimuth_rad", "elevation_rad"]
@@ -59,12 +59,7 @@ def read_features(path) -> Features:
             for name, column in values.items():
                 parts[name].append(column)
     columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
-    time = columns["time_s"]
-    latest_before = np.maximum.accumulate(time)
-    reordered = int(np.count_nonzero(time[1:] < latest_before[:-1]))
-    if reordered:
-        order = np.argsort(time, kind="stable")
-        columns = {name: values[order] for name, values in columns.items()}
+    columns, reordered = sort_by_time(columns)
     return Features(**columns, reordered=reordered)
 
 

@@ -17,6 +17,7 @@ from scattertrack.io.csvutil import (
     format_fixed,
     repeated_cells,
     require_finite,
+    sort_by_time,
     text_column,
     write_columns,
 )
@@ -100,13 +101,7 @@ def _finish(columns: dict, lines: np.ndarray) -> Reads:
         skipped.add(DUPLICATE, int(lines[i]))
     if duplicate.any():
         columns = {name: values[~duplicate] for name, values in columns.items()}
-    time = columns["time_s"]
-    # A row is out of order when an earlier row has a later time.
-    latest_before = np.maximum.accumulate(time)
-    reordered = int(np.count_nonzero(time[1:] < latest_before[:-1]))
-    if reordered:
-        order = np.argsort(time, kind="stable")
-        columns = {name: values[order] for name, values in columns.items()}
+    columns, reordered = sort_by_time(columns)
     return Reads(
         time_s=columns["time_s"],
         epc=columns["epc"],
