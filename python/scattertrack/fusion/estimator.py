@@ -2,7 +2,9 @@
 
 One state per sensing epoch k: ``X(k)`` pose (world_T_body), ``V(k)``
 velocity (m/s, world), ``B(k)`` IMU biases, ``O(k)`` the barometer's offset
-(m, when a barometer is used), and one ``L(0)``: the controller's position
+(m, when a barometer is used), ``M(k)`` the features' multipath errors
+(range m, direction's two tangent components rad; ``multipath = "states"``),
+and one ``L(0)``: the controller's position
 ``rho`` (m, world). Between epochs the IMU samples are preintegrated into one
 ``CombinedImuFactor`` (eq. 13, with the bias random walk inside); each
 feature row adds range, direction and yaw factors (eq. 12, see
@@ -25,7 +27,7 @@ from dataclasses import dataclass, field, fields
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, L, O, V, X
+from gtsam.symbol_shorthand import B, L, M, O, V, W, X
 
 from scattertrack.fusion import factors
 
@@ -34,6 +36,8 @@ GRAVITY_M_S2 = 9.80665
 
 CONTROLLER = L(0)
 """Key of the controller's position in the graph."""
+RANGE_BIAS = W(0)
+"""Key of the constant range bias (``range_bias_sigma_m > 0``)."""
 
 # Reasons a feature row (or one of its measurements) is declined; the keys
 # are the counters in ``MarvelEstimator.declined``, the values the text of
@@ -93,16 +97,43 @@ class MarvelParams:
     correlation_distance_m: float = 0.5
     """Distance travelled over which the features' multipath errors
     decorrelate, m (a few wavelengths at 915 MHz); 0: treat every row as
-    independent. See ``correlation_time_s``."""
+    independent. See ``correlation_time_s`` and ``multipath``."""
     correlation_time_s: float = 5.0
     """Time over which they decorrelate at rest (people, doors), s. Rows
     closer together than one decorrelation carry one measurement's worth of
-    information between them, not one each: the feature sigmas are inflated
-    by sqrt(rows per decorrelation), the standard treatment of time-correlated
-    errors in aided inertial navigation. Without it the take-off rows, whose
-    multipath error is one and the same, would pin the controller (and with
-    it the whole trajectory: range and angle do not see a common shift) to
-    that one error with a far too small covariance."""
+    information between them, not one each. Without accounting for it the
+    take-off rows, whose multipath error is one and the same, would pin the
+    controller (and with it the whole trajectory: range and angle do not see
+    a common shift) to that one error with a far too small covariance."""
+    multipath: str = "states"
+    """How the correlation is accounted for. ``"states"``: the range and
+    direction errors are states ``M(k)`` of the graph, a first-order
+    Gauss-Markov process with correlation ``exp(-|dp| / correlation_distance_m
+    - dt / correlation_time_s)`` between epochs (``|dp|`` the IMU-predicted
+    displacement); a hovering drone's rows then inform the frozen error, not
+    its position. ``"inflation"``: the feature sigmas are multiplied by
+    sqrt(rows per decorrelation) and the rows treated as independent (the
+    cheaper approximation; a long hover still adds up to a pull towards its
+    one error). The yaw is always inflated."""
+    white_floor_range_m: float = 0.02
+    """Least white 1-sigma of a range with ``multipath = "states"``, m: a
+    stiffer factor makes the (nonlinear) range, linearised where iSAM2 last
+    relinearised, pull harder than its linearisation error allows."""
+    white_floor_angle_rad: float = 0.002
+    """Least white 1-sigma of each direction component, rad (same reason)."""
+    range_bias_sigma_m: float = 0.5
+    """1-sigma prior of a constant range bias state ``W(0)`` (m, with
+    ``multipath = "states"``): the excess path of walls between the
+    controller and the drone, which the pose sensing cannot tell from range
+    (brick: ``(sqrt(eps_r) - 1) t`` = 0.19 m per 20 cm wall, docs/marvel.md
+    section 9; three walls 0.56 m). It is observable because the line of
+    sight turns as the drone flies while a controller shift would move
+    every range differently. 0: no such state."""
+    multipath_white_fraction: float = 0.5
+    """With ``multipath = "states"``: the share of each feature sigma that is
+    white (thermal) noise; the rest, ``sqrt(1 - f^2)``, is the correlated
+    multipath error's 1-sigma (docs/marvel.md section 9: thermal errors are
+    millimetres to centimetres, multipath decimetres)."""
 
     use_ground: bool = True
     """Before take-off the drone sits at rest at the origin: every epoch until
@@ -187,6 +218,10 @@ class MarvelParams:
             raise ValueError(f"factorization: 'QR' or 'CHOLESKY', not {self.factorization!r}")
         if not self.smoother_lag_s > 0.0:
             raise ValueError("smoother_lag_s must be positive (seconds)")
+        if self.multipath not in ("states", "inflation"):
+            raise ValueError(f"multipath: 'states' or 'inflation', not {self.multipath!r}")
+        if not 0.0 < self.multipath_white_fraction < 1.0:
+            raise ValueError("multipath_white_fraction must be in (0, 1)")
 
 
 @dataclass
@@ -305,6 +340,11 @@ class MarvelEstimator:
         self._baro_key = -1  # index k of the newest O(k)
         self._baro_time = float("nan")
         self._baro_offset = 0.0
+        self._range_bias = 0.0  # estimate of the constant range bias, m
+        self._multipath_chain = False  # M(k) exists for the newest state
+        self._multipath_key = -1  # index k of the newest M(k)
+        self._multipath = np.zeros(3)  # its estimate: range m, direction tangent rad
+        self._multipath_sigma = np.ones(3)  # its stationary 1-sigma
         self._cov_position = np.full((3, 3), np.nan)  # world, m^2
         self._cov_velocity = np.full((3, 3), np.nan)
         self._cov_yaw = float("nan")
@@ -459,6 +499,7 @@ class MarvelEstimator:
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
         stamps: dict[int, float] = {}
+        previous_position = None if self._nav is None else np.asarray(self._nav.position(), dtype=float)
 
         if self._key < 0:
             self._take_off(graph, initial, stamps, float(yaw_rad) if has_yaw else 0.0)
@@ -491,18 +532,32 @@ class MarvelEstimator:
         if self._controller is None:
             self._controller = predicted.position() - range_m * factors.direction(azimuth_rad, elevation_rad)
             initial.insert(CONTROLLER, self._controller)
+            if self._has_range_bias():
+                graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, 0.0, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
+                initial.insert(RANGE_BIAS, 0.0)
         stamps[CONTROLLER] = time_s
+        if self._has_range_bias():
+            stamps[RANGE_BIAS] = time_s
 
         used = {"range": True, "direction": True, "yaw": has_yaw, "baro": False}
         inflation = self._correlation_inflation(time_s, predicted)
-        range_sigma *= inflation
-        angle_sigma *= inflation
+        states = p.multipath == "states"
+        if not states:
+            range_sigma *= inflation
+            angle_sigma *= inflation
         yaw_sigma *= inflation
         direction_sigma = factors.direction_sigmas(elevation_rad, angle_sigma)
+        multipath_predicted = np.zeros(3)
+        if states:
+            multipath_predicted = self._add_multipath(
+                graph, initial, stamps, time_s, np.concatenate([[range_sigma], direction_sigma]),
+                previous_position, predicted,
+            )
         if gated:
             used["range"], used["direction"], yaw_ok = self._innovation_tests(
                 predicted, range_m, azimuth_rad, elevation_rad, yaw_rad if has_yaw else None,
                 range_sigma, direction_sigma, yaw_sigma,
+                multipath_predicted + np.array([self._range_bias if self._has_range_bias() else 0.0, 0.0, 0.0]),
             )
             used["yaw"] = has_yaw and yaw_ok
             # Recovery of one measurement on its own: ranges gated for
@@ -519,14 +574,44 @@ class MarvelEstimator:
         else:
             self._declined_run = 0
 
-        if used["range"]:
-            graph.add(factors.range_factor(X(k), CONTROLLER, range_m, self._noise(np.array([range_sigma]))))
-        if used["direction"]:
-            graph.add(
-                factors.direction_factor(X(k), CONTROLLER, azimuth_rad, elevation_rad, self._noise(direction_sigma))
-            )
+        if states:
+            # The white (thermal) share; the rest is in M(k).
+            white = p.multipath_white_fraction
+            range_white = max(white * range_sigma, p.white_floor_range_m)
+            direction_white = np.maximum(white * direction_sigma, p.white_floor_angle_rad)
+            if used["range"]:
+                graph.add(
+                    factors.range_factor_multipath(
+                        X(k), CONTROLLER, M(k), range_m, self._noise(np.array([range_white])),
+                        RANGE_BIAS if self._has_range_bias() else None,
+                    )
+                )
+            if used["direction"]:
+                graph.add(
+                    factors.direction_factor_multipath(
+                        X(k), CONTROLLER, M(k), azimuth_rad, elevation_rad, self._noise(direction_white)
+                    )
+                )
+        else:
+            if used["range"]:
+                graph.add(factors.range_factor(X(k), CONTROLLER, range_m, self._noise(np.array([range_sigma]))))
+            if used["direction"]:
+                graph.add(
+                    factors.direction_factor(X(k), CONTROLLER, azimuth_rad, elevation_rad, self._noise(direction_sigma))
+                )
         if used["yaw"]:
-            graph.add(factors.yaw_factor(X(k), float(yaw_rad), self._noise(np.array([yaw_sigma]))))
+            if states:
+                # The yaw's azimuth share is M(k)'s; what is left is the
+                # rotational Doppler's own error (inflated: not in M).
+                azimuth_sigma = direction_sigma[0] / max(math.cos(elevation_rad), 1e-3)
+                own = math.sqrt(max(yaw_sigma**2 - (inflation * azimuth_sigma) ** 2, (0.5 * yaw_sigma) ** 2))
+                graph.add(
+                    factors.yaw_factor_multipath(
+                        X(k), M(k), float(yaw_rad), elevation_rad, self._noise(np.array([own]))
+                    )
+                )
+            else:
+                graph.add(factors.yaw_factor(X(k), float(yaw_rad), self._noise(np.array([yaw_sigma]))))
         used["baro"] = self._add_baro(graph, initial, stamps, time_s, predicted)
 
         try:
@@ -552,6 +637,51 @@ class MarvelEstimator:
         estimate.wall_time_s = time.perf_counter() - started
         self.wall_times_s.append(estimate.wall_time_s)
         return estimate
+
+    def _add_multipath(self, graph, initial, stamps, time_s, sigma, previous_position, predicted) -> np.ndarray:
+        """The epoch's multipath state ``M(k)`` (``multipath = "states"``) and
+        its Gauss-Markov link to ``M(k-1)``; returns its prediction ``a m_{k-1}``.
+
+        ``sigma`` (3,): the row's total 1-sigma of range (m) and of the
+        direction's two tangent components (rad); the correlated share is
+        ``sqrt(1 - f^2)`` of it. Correlation ``phi = exp(-|dp| / d - dt / tau)``
+        over the IMU-predicted displacement ``dp`` and the time ``dt`` since
+        the previous epoch (the model of docs/marvel.md section 9).
+        """
+        p = self.params
+        k = self._key
+        correlated = np.asarray(sigma, dtype=float) * math.sqrt(1.0 - p.multipath_white_fraction**2)
+        predicted_error = np.zeros(3)
+        if self._multipath_chain and self._last_epoch_time is not None and previous_position is not None:
+            moved = float(np.linalg.norm(np.asarray(predicted.position(), dtype=float) - previous_position))
+            elapsed = time_s - self._last_epoch_time
+            if p.correlation_distance_m > 0.0 and p.correlation_time_s > 0.0:
+                phi = math.exp(-moved / p.correlation_distance_m - elapsed / p.correlation_time_s)
+            else:
+                phi = 0.0
+            decay = phi * correlated / self._multipath_sigma
+            # Keeps M(k) at 1-sigma `correlated` (stationary); the floor keeps
+            # the factor finite for a frozen error (phi -> 1).
+            walk = correlated * math.sqrt(max(1.0 - phi * phi, 1.0e-6))
+            graph.add(
+                factors.gauss_markov_factor(
+                    M(self._multipath_key), M(k), decay, gtsam.noiseModel.Diagonal.Sigmas(walk)
+                )
+            )
+            predicted_error = decay * self._multipath
+        else:
+            graph.add(gtsam.PriorFactorVector(M(k), np.zeros(3), gtsam.noiseModel.Diagonal.Sigmas(correlated)))
+            self._multipath_chain = True
+        initial.insert(M(k), predicted_error)
+        stamps[M(k)] = time_s
+        self._multipath_key = k
+        self._multipath_sigma = correlated
+        self._multipath = predicted_error
+        return predicted_error
+
+    def _has_range_bias(self) -> bool:
+        """Whether the graph has the constant range bias ``W(0)``."""
+        return self.params.range_bias_sigma_m > 0.0 and self.params.multipath == "states"
 
     def _correlation_inflation(self, time_s: float, predicted) -> float:
         """sqrt(rows per decorrelation) >= 1 for this row (see ``correlation_time_s``).
@@ -637,12 +767,20 @@ class MarvelEstimator:
         bias_sigmas = np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3)
         graph.add(gtsam.PriorFactorConstantBias(B(k), self._bias, gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
         graph.add(gtsam.PriorFactorPoint3(CONTROLLER, self._controller, gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_controller, 5.0))))
+        if self._has_range_bias():
+            # Its prior sigma: its marginal is not kept (one more marginal per
+            # epoch for the rare restart).
+            graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, self._range_bias, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
         initial.insert(X(k), pose)
         initial.insert(V(k), predicted.velocity())
         initial.insert(B(k), self._bias)
         initial.insert(CONTROLLER, self._controller)
         stamps = {X(k): time_s, V(k): time_s, B(k): time_s, CONTROLLER: time_s}
+        if self._has_range_bias():
+            initial.insert(RANGE_BIAS, self._range_bias)
+            stamps[RANGE_BIAS] = time_s
         self._baro_chain = False  # a new barometer offset chain starts with the next epoch
+        self._multipath_chain = False  # and a new multipath chain
         self._smoother.update(graph, initial, stamps)
         self._nav = predicted
 
@@ -724,31 +862,48 @@ class MarvelEstimator:
         return model
 
     def _innovation_tests(
-        self, predicted, range_m, azimuth_rad, elevation_rad, yaw_rad, range_sigma, direction_sigma, yaw_sigma
+        self,
+        predicted,
+        range_m,
+        azimuth_rad,
+        elevation_rad,
+        yaw_rad,
+        range_sigma,
+        direction_sigma,
+        yaw_sigma,
+        multipath=(0.0, 0.0, 0.0),
     ) -> tuple[bool, bool, bool]:
         """Normalised innovation squared of each measurement against the
         IMU-predicted state, ``nu^T S^-1 nu`` with ``S = H P H^T + R``, below
         the chi-square gate. ``P`` is the predicted position covariance plus
         the controller's (their cross-covariance is left out: it is positive
         for a drone measured from the controller, so leaving it out widens
-        ``S`` and the gate errs on accepting)."""
+        ``S`` and the gate errs on accepting). ``multipath``: the predicted
+        multipath errors (range m, direction tangent rad) added to the
+        predicted measurements; ``R`` is then the whole feature sigma, as if
+        that prediction were no better than the stationary 1-sigma (errs on
+        accepting too)."""
         position = predicted.position()
         covariance = np.zeros((3, 3))
         if np.all(np.isfinite(self._cov_position)):
             covariance = covariance + self._cov_position
         if np.all(np.isfinite(self._cov_controller)):
             covariance = covariance + self._cov_controller
+        multipath = np.asarray(multipath, dtype=float)
         residual, (h_position, _) = factors.range_residual(position, self._controller, range_m, jacobians=True)
+        residual = residual + multipath[0]
         s = float((h_position @ covariance @ h_position.T)[0, 0]) + range_sigma**2
         range_ok = residual[0] ** 2 / s <= self._gate[1]
         residual, (h_position, _) = factors.direction_residual(
             position, self._controller, azimuth_rad, elevation_rad, jacobians=True
         )
+        residual = residual + multipath[1:3]
         s = h_position @ covariance @ h_position.T + np.diag(direction_sigma**2)
         direction_ok = float(residual @ np.linalg.solve(s, residual)) <= self._gate[2]
         yaw_ok = True
         if yaw_rad is not None:
             residual = factors.yaw_residual(predicted.attitude().matrix(), yaw_rad)
+            residual = factors.wrap_angle(residual + multipath[1] / max(math.cos(elevation_rad), 1e-3))
             s = (self._cov_yaw if math.isfinite(self._cov_yaw) else 0.0) + yaw_sigma**2
             yaw_ok = residual[0] ** 2 / s <= self._gate[1]
         return bool(range_ok), bool(direction_ok), bool(yaw_ok)
@@ -762,6 +917,10 @@ class MarvelEstimator:
         self._controller = np.asarray(smoother.calculateEstimatePoint3(CONTROLLER), dtype=float)
         if self._baro_chain:
             self._baro_offset = smoother.calculateEstimateDouble(O(self._baro_key))
+        if self._multipath_chain:
+            self._multipath = np.asarray(smoother.calculateEstimateVector(M(self._multipath_key)), dtype=float)
+        if self._has_range_bias():
+            self._range_bias = float(smoother.calculateEstimateDouble(RANGE_BIAS))
         self._nav = gtsam.NavState(pose, velocity)
         rotation = pose.rotation().matrix()
         if self.params.compute_sigma or self._gate is not None:
@@ -832,6 +991,16 @@ class MarvelEstimator:
     def position_covariance(self) -> np.ndarray | None:
         """World-frame covariance of the newest position, (3, 3) m^2, or None before the first row."""
         return self._cov_position.copy() if np.all(np.isfinite(self._cov_position)) else None
+
+    @property
+    def range_bias(self) -> float | None:
+        """Current estimate of the constant range bias ``W(0)`` (m), or None without that state."""
+        return self._range_bias if self._has_range_bias() and self._controller is not None else None
+
+    @property
+    def multipath(self) -> np.ndarray | None:
+        """The newest epoch's multipath errors (range m, direction tangent rad), or None without them."""
+        return self._multipath.copy() if self._multipath_chain else None
 
     @property
     def controller_covariance(self) -> np.ndarray | None:

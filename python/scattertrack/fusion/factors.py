@@ -12,6 +12,9 @@ them into ``gtsam.CustomFactor``s on the graph's variables:
   and from a body rotation-vector Jacobian ``J_omega`` it is ``[J_omega, 0]``.
 - ``L(0)``: the controller's position ``rho`` (m, world frame, a Point3).
 - ``O(k)``: the barometer's offset (m, a double), see :func:`height_residual`.
+- ``M(k)``: the features' multipath errors of epoch k (a 3-vector: range m,
+  then the direction's two tangent components rad), a first-order
+  Gauss-Markov process between epochs, see :func:`gauss_markov_residual`.
 
 Symbols: ``p`` drone (body origin) position, ``rho`` controller position,
 ``delta = p - rho``, ``r = |delta|`` range, ``w = delta / r`` direction from
@@ -176,6 +179,28 @@ def height_residual(height_m: float, offset_m: float, measured_height_m: float, 
     return residual, (np.ones((1, 1)), np.ones((1, 1)))
 
 
+def gauss_markov_residual(previous, current, decay, jacobians: bool = False):
+    """Gauss-Markov transition residual ``e = m_k - a * m_{k-1}`` (per component).
+
+    A first-order Gauss-Markov process ``m_k = a m_{k-1} + w``, ``w ~ N(0,
+    sigma_k^2 (1 - phi^2))``, with ``a = phi sigma_k / sigma_{k-1}`` keeps
+    ``m_k`` stationary at 1-sigma ``sigma_k`` when the sigma changes from
+    epoch to epoch (the feature sigmas follow the SNR). ``decay`` is ``a``
+    (one per component); the noise model carries ``sigma_k sqrt(1 - phi^2)``.
+    The standard model of time-correlated errors in aided navigation
+    (Farrell, *Aided Navigation*, 2008, sec. 4.9): a state per error instead
+    of inflating the measurement noise.
+
+    Returns ``residual (n,)`` or ``(residual, (H_previous (n, n), H_current (n, n)))``.
+    """
+    previous = np.asarray(previous, dtype=float)
+    decay = np.asarray(decay, dtype=float)
+    residual = np.asarray(current, dtype=float) - decay * previous
+    if not jacobians:
+        return residual
+    return residual, (-np.diag(decay), np.eye(residual.size))
+
+
 # --- chain rule onto gtsam's manifolds ---------------------------------------
 
 
@@ -230,6 +255,107 @@ def direction_factor(
     return gtsam.CustomFactor(noise, [pose_key, controller_key], error)
 
 
+def range_factor_multipath(
+    pose_key: int,
+    controller_key: int,
+    multipath_key: int,
+    measured_range_m: float,
+    noise,
+    bias_key: int | None = None,
+) -> gtsam.CustomFactor:
+    """:func:`range_residual` plus the epoch's multipath range error ``m_0`` (m)
+    and, with ``bias_key``, a constant range bias ``beta`` (m, a double: the
+    excess delay of walls): ``e = |p - rho| + m_0 + beta - d_hat``, between
+    ``X(k)``, ``L(0)``, ``M(k)`` (and the bias)."""
+    keys = [pose_key, controller_key, multipath_key] + ([] if bias_key is None else [bias_key])
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians) -> np.ndarray:
+        pose = values.atPose3(this.keys()[0])
+        controller = values.atPoint3(this.keys()[1])
+        offset = values.atVector(this.keys()[2])[0]
+        if bias_key is not None:
+            offset += values.atDouble(this.keys()[3])
+        if jacobians is None:
+            return range_residual(pose.translation(), controller, measured_range_m) + offset
+        residual, (h_position, h_controller) = range_residual(
+            pose.translation(), controller, measured_range_m, jacobians=True
+        )
+        jacobians[0] = position_to_pose_jacobian(h_position, pose.rotation().matrix())
+        jacobians[1] = h_controller
+        jacobians[2] = np.array([[1.0, 0.0, 0.0]])
+        if bias_key is not None:
+            jacobians[3] = np.ones((1, 1))
+        return residual + offset
+
+    return gtsam.CustomFactor(noise, keys, error)
+
+
+def direction_factor_multipath(
+    pose_key: int, controller_key: int, multipath_key: int, azimuth_rad: float, elevation_rad: float, noise
+) -> gtsam.CustomFactor:
+    """:func:`direction_residual` plus the epoch's multipath direction error
+    ``(m_1, m_2)`` (rad, along ``e_az`` and ``e_el``): to first order the
+    measured direction is the true one moved by ``m_1 e_az + m_2 e_el``, so
+    ``E^T w = -(m_1, m_2)`` and the residual is ``E^T w + (m_1, m_2)``."""
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians) -> np.ndarray:
+        pose = values.atPose3(this.keys()[0])
+        controller = values.atPoint3(this.keys()[1])
+        multipath = values.atVector(this.keys()[2])
+        if jacobians is None:
+            return direction_residual(pose.translation(), controller, azimuth_rad, elevation_rad) + multipath[1:3]
+        residual, (h_position, h_controller) = direction_residual(
+            pose.translation(), controller, azimuth_rad, elevation_rad, jacobians=True
+        )
+        jacobians[0] = position_to_pose_jacobian(h_position, pose.rotation().matrix())
+        jacobians[1] = h_controller
+        jacobians[2] = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
+        return residual + multipath[1:3]
+
+    return gtsam.CustomFactor(noise, [pose_key, controller_key, multipath_key], error)
+
+
+def yaw_factor_multipath(
+    pose_key: int, multipath_key: int, measured_yaw_rad: float, elevation_rad: float, noise
+) -> gtsam.CustomFactor:
+    """:func:`yaw_residual` plus the azimuth's multipath error: the pose
+    sensing solves the yaw relative to the *measured* azimuth (paper eq. 8),
+    so the azimuth error ``m_1 / cos(el)`` (``m_1`` rad along ``e_az``) is
+    in the measured yaw as well: ``e = wrap(yaw(R) + m_1 / cos(el) - psi_hat)``,
+    between ``X(k)`` and ``M(k)``. The noise model carries the rest (the
+    rotational Doppler's own error)."""
+    secant = 1.0 / max(math.cos(elevation_rad), 1e-3)
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians) -> np.ndarray:
+        rotation = values.atPose3(this.keys()[0]).rotation().matrix()
+        azimuth_error = values.atVector(this.keys()[1])[1] * secant
+        if jacobians is None:
+            return wrap_angle(yaw_residual(rotation, measured_yaw_rad) + azimuth_error)
+        residual, h_omega = yaw_residual(rotation, measured_yaw_rad, jacobians=True)
+        jacobians[0] = rotation_to_pose_jacobian(h_omega)
+        jacobians[1] = np.array([[0.0, secant, 0.0]])
+        return wrap_angle(residual + azimuth_error)
+
+    return gtsam.CustomFactor(noise, [pose_key, multipath_key], error)
+
+
+def gauss_markov_factor(previous_key: int, current_key: int, decay, noise) -> gtsam.CustomFactor:
+    """:func:`gauss_markov_residual` between two vector states ``M(k-1)`` and ``M(k)``."""
+    decay = np.asarray(decay, dtype=float).copy()
+
+    def error(this: gtsam.CustomFactor, values: gtsam.Values, jacobians) -> np.ndarray:
+        previous = values.atVector(this.keys()[0])
+        current = values.atVector(this.keys()[1])
+        if jacobians is None:
+            return gauss_markov_residual(previous, current, decay)
+        residual, (h_previous, h_current) = gauss_markov_residual(previous, current, decay, jacobians=True)
+        jacobians[0] = h_previous
+        jacobians[1] = h_current
+        return residual
+
+    return gtsam.CustomFactor(noise, [previous_key, current_key], error)
+
+
 def yaw_factor(pose_key: int, measured_yaw_rad: float, noise) -> gtsam.CustomFactor:
     """:func:`yaw_residual` on the pose ``X(k)``."""
 
@@ -268,15 +394,20 @@ __all__ = [
     "direction_basis",
     "direction_factor",
     "direction_residual",
+    "direction_factor_multipath",
     "direction_sigmas",
+    "gauss_markov_factor",
+    "gauss_markov_residual",
     "height_factor",
     "height_residual",
     "position_to_pose_jacobian",
     "range_factor",
+    "range_factor_multipath",
     "range_residual",
     "rotation_to_pose_jacobian",
     "wrap_angle",
     "yaw_factor",
+    "yaw_factor_multipath",
     "yaw_of",
     "yaw_residual",
 ]

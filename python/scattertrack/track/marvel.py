@@ -779,6 +779,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
             "imu_declined": dict(estimator.imu_declined),
             "controller": estimator.controller,
             "controller_sigma": rows[-1].controller_sigma if rows else None,
+            "range_bias_m": estimator.range_bias,
             "clock": {
                 "clock_error": after.clock_error if after is not None else (epochs[-1].clock_error if epochs else None),
                 "rest_epochs": len(rest),

@@ -22,8 +22,9 @@ from scattertrack.fusion import (
 )
 from scattertrack.io.types import Features
 
-WHITE = {"correlation_distance_m": 0.0}
-"""The synthetic features of conftest.py have white noise: no correlation inflation."""
+WHITE = {"correlation_distance_m": 0.0, "range_bias_sigma_m": 0.0}
+"""The synthetic features of conftest.py have white noise and no walls: no
+correlation between rows, no range bias state."""
 
 
 @pytest.fixture(scope="module")
@@ -233,6 +234,10 @@ def test_params_are_checked():
         MarvelParams(robust="cauchy")
     with pytest.raises(ValueError, match="smoother_lag_s"):
         MarvelParams(smoother_lag_s=0.0)
+    with pytest.raises(ValueError, match="multipath"):
+        MarvelParams(multipath="white")
+    with pytest.raises(ValueError, match="multipath_white_fraction"):
+        MarvelParams(multipath_white_fraction=1.0)
     defaults = MarvelParams()
     # docs/marvel.md section 3.
     assert (defaults.accel_noise_density, defaults.gyro_noise_density) == (1.0e-3, 8.7e-5)
@@ -361,3 +366,84 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     assert all(r is not None for r in results[failed_at + 1 :])
     truth = np.array([np.interp(results[-1].time_s, data.truth_time, data.truth_position[:, a]) for a in range(3)])
     assert np.linalg.norm(results[-1].position - truth) < 1.0
+
+
+# --- multipath states and the range bias -------------------------------------------
+
+
+class _Predicted:
+    def __init__(self, position):
+        self._position = np.asarray(position, dtype=float)
+
+    def position(self):
+        return self._position
+
+
+def test_multipath_states_follow_the_gauss_markov_model():
+    """M(k) = a M(k-1) + w with a = phi sigma_k / sigma_(k-1), phi = exp(-|dp| / d - dt / tau):
+    frozen while hovering, renewed once the drone has moved a few decimetres."""
+    import gtsam
+    from gtsam.symbol_shorthand import M
+
+    params = MarvelParams(correlation_distance_m=0.5, correlation_time_s=5.0, multipath_white_fraction=0.6)
+    estimator = MarvelEstimator(params)
+    sigma = np.array([1.0, 0.05, 0.05])  # total sigma: range m, direction rad
+    correlated = sigma * 0.8  # sqrt(1 - 0.6^2)
+    graph, initial, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
+    estimator._key = 0
+    assert np.allclose(estimator._add_multipath(graph, initial, stamps, 10.0, sigma, None, _Predicted([0, 0, 0])), 0.0)
+    assert graph.size() == 1  # the stationary prior N(0, correlated^2)
+    assert np.allclose(graph.at(0).noiseModel().sigmas(), correlated)
+    estimator._last_epoch_time = 10.0
+    estimator._multipath = np.array([0.4, 0.01, -0.02])
+    for moved, expected_phi in ((0.0, math.exp(-0.1 / 5.0)), (0.25, math.exp(-0.5 - 0.1 / 5.0))):
+        graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
+        estimator._key += 1
+        estimator._multipath = np.array([0.4, 0.01, -0.02])
+        estimator._multipath_sigma = correlated
+        wider = 2.0 * sigma  # the next row is less certain (lower SNR)
+        predicted = estimator._add_multipath(
+            graph, initial, stamps, 10.1, wider, np.zeros(3), _Predicted([moved, 0.0, 0.0])
+        )
+        decay = expected_phi * 2.0  # phi * sigma_k / sigma_(k-1)
+        assert np.allclose(predicted, decay * np.array([0.4, 0.01, -0.02]))
+        factor = graph.at(0)
+        assert np.allclose(factor.noiseModel().sigmas(), 2.0 * correlated * math.sqrt(1.0 - expected_phi**2))
+        values = gtsam.Values()
+        values.insert(M(estimator._key - 1), np.array([1.0, 1.0, 1.0]))
+        values.insert(M(estimator._key), np.zeros(3))
+        assert np.allclose(factor.unwhitenedError(values), -decay)
+        assert stamps[M(estimator._key)] == 10.1
+
+
+def test_white_features_do_not_derail_the_multipath_states(flight_factory):
+    """Features whose errors are white (no multipath, e.g. thermal noise at low SNR) but
+    an estimator that assumes them correlated: the model is wrong, the track stays sane.
+    (With a white share of 0.1 these two flights ended metres away.)"""
+    for seed in (4, 7):
+        data = flight_factory(duration_s=30.0, seed=seed)
+        track = run_marvel(data.imu, data.features)
+        errors = np.linalg.norm(
+            track.position - np.column_stack([np.interp(track.time_s, data.truth_time, data.truth_position[:, a]) for a in range(3)]),
+            axis=1,
+        )
+        assert errors.mean() < 0.4
+
+
+def test_the_range_bias_of_walls_is_estimated(flight_factory):
+    """Ranges 0.5 m too long (walls' excess path): the range bias state finds most of it,
+    and the controller lands closer than without the state."""
+    for seed in (3, 5):
+        data = flight_factory(duration_s=30.0, seed=seed)
+        f = data.features
+        biased = Features(
+            f.time_s, f.range_m + 0.5, f.azimuth_rad, f.elevation_rad, f.yaw_rad,
+            f.range_sigma_m, f.angle_sigma_rad, f.yaw_sigma_rad,
+        )
+        with_state = run_marvel(data.imu, biased, correlation_distance_m=0.0).stats["drone"]
+        without = run_marvel(data.imu, biased, correlation_distance_m=0.0, range_bias_sigma_m=0.0).stats["drone"]
+        assert without["range_bias_m"] is None
+        assert abs(with_state["range_bias_m"] - 0.5) < 0.3
+        assert np.linalg.norm(with_state["controller"] - data.controller) < np.linalg.norm(
+            without["controller"] - data.controller
+        )

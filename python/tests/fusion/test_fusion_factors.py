@@ -13,8 +13,14 @@ import math
 import gtsam
 import numpy as np
 import pytest
-from gtsam.symbol_shorthand import L, O, X
-from gtsam.utils.numerical_derivative import numericalDerivative21, numericalDerivative22
+from gtsam.symbol_shorthand import L, M, O, X
+from gtsam.utils.numerical_derivative import (
+    numericalDerivative21,
+    numericalDerivative22,
+    numericalDerivative31,
+    numericalDerivative32,
+    numericalDerivative33,
+)
 
 from scattertrack.fusion import factors
 
@@ -60,7 +66,7 @@ def linearised(factor, values):
 
 def _dimension(key) -> int:
     letter = chr(gtsam.Symbol(key).chr())
-    return {"x": 6, "l": 3, "o": 1}[letter]
+    return {"x": 6, "l": 3, "o": 1, "m": 3}[letter]
 
 
 # --- pure models -------------------------------------------------------------
@@ -235,3 +241,76 @@ def test_factor_jacobian_sign_convention():
     jacobian, b = factor.linearize(values).jacobian()
     assert b[0] == pytest.approx(-5.0)  # -(10 - 5)
     assert jacobian[0, 4] == pytest.approx(1.0)  # d|p - rho| / d p_y = +1 (body y = world y here)
+
+
+# --- multipath (Gauss-Markov) states ------------------------------------------
+
+
+def test_gauss_markov_residual_jacobians():
+    previous, current, decay = np.array([0.3, -0.02, 0.01]), np.array([0.25, -0.01, 0.0]), np.array([0.9, 0.5, 0.1])
+    residual, (h_previous, h_current) = factors.gauss_markov_residual(previous, current, decay, jacobians=True)
+    assert np.allclose(residual, current - decay * previous)
+    assert np.allclose(h_previous, central_difference(lambda m: factors.gauss_markov_residual(m, current, decay), previous))
+    assert np.allclose(h_current, central_difference(lambda m: factors.gauss_markov_residual(previous, m, decay), current))
+
+
+@pytest.mark.parametrize("position, controller, rotation", CASES)
+def test_multipath_factor_jacobians_on_manifold(position, controller, rotation):
+    pose = gtsam.Pose3(rotation, position)
+    multipath = np.array([0.4, -0.03, 0.02])
+    delta = position - controller
+    azimuth = math.atan2(delta[1], delta[0]) + 0.05
+    elevation = math.asin(delta[2] / np.linalg.norm(delta)) + 0.04
+    built = [
+        factors.range_factor_multipath(X(1), L(0), M(1), float(np.linalg.norm(delta)) - 0.2, unit_noise(1)),
+        factors.direction_factor_multipath(X(1), L(0), M(1), azimuth, elevation, unit_noise(2)),
+    ]
+
+    def values_of(p, c, m):
+        values = _pose_controller_values(p, c)
+        values.insert(M(1), np.asarray(m, dtype=float))
+        return values
+
+    for factor in built:
+
+        def error(p, c, m, factor=factor):
+            return factor.unwhitenedError(values_of(p, c, m))
+
+        blocks = linearised(factor, values_of(pose, controller, multipath))
+        args = (pose, np.asarray(controller, dtype=float), multipath)
+        for block, derivative in zip(blocks, (numericalDerivative31, numericalDerivative32, numericalDerivative33)):
+            assert np.allclose(block, derivative(error, *args), atol=1e-7)
+
+
+def test_multipath_factors_add_the_error_to_the_plain_residuals():
+    """Range and direction with the multipath state equal the plain residuals plus m."""
+    pose = gtsam.Pose3(gtsam.Rot3.Ypr(0.3, 0.1, -0.1), np.array([1.0, 2.0, 2.0]))
+    controller = np.array([0.0, -15.0, 1.0])
+    multipath = np.array([0.7, 0.01, -0.02])
+    values = _pose_controller_values(pose, controller)
+    values.insert(M(1), multipath)
+    plain_range = factors.range_factor(X(1), L(0), 16.0, unit_noise(1)).unwhitenedError(values)
+    with_range = factors.range_factor_multipath(X(1), L(0), M(1), 16.0, unit_noise(1)).unwhitenedError(values)
+    assert with_range[0] == pytest.approx(plain_range[0] + 0.7)
+    plain = factors.direction_factor(X(1), L(0), 1.5, 0.1, unit_noise(2)).unwhitenedError(values)
+    with_direction = factors.direction_factor_multipath(X(1), L(0), M(1), 1.5, 0.1, unit_noise(2)).unwhitenedError(values)
+    assert np.allclose(with_direction, plain + multipath[1:])
+
+
+def test_gauss_markov_factor_jacobians():
+    factor = factors.gauss_markov_factor(M(1), M(2), [0.9, 0.8, 0.7], unit_noise(3))
+
+    def error(a, b):
+        values = gtsam.Values()
+        values.insert(M(1), np.asarray(a, dtype=float))
+        values.insert(M(2), np.asarray(b, dtype=float))
+        return factor.unwhitenedError(values)
+
+    a, b = np.array([0.1, 0.2, -0.3]), np.array([0.0, 0.1, 0.2])
+    values = gtsam.Values()
+    values.insert(M(1), a)
+    values.insert(M(2), b)
+    h_a, h_b = linearised(factor, values)
+    assert np.allclose(h_a, numericalDerivative21(error, a, b), atol=1e-7)
+    assert np.allclose(h_b, numericalDerivative22(error, a, b), atol=1e-7)
+    assert np.allclose(error(a, b), b - np.array([0.9, 0.8, 0.7]) * a)
