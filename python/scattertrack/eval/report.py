@@ -35,12 +35,12 @@ _ORIENTATION_COLUMNS = [
 ]
 
 
-def _cell(value, scale: float, decimals: int, width: int) -> str:
-    """A right-aligned number, or '-' for nan (no rows, never converged)."""
+def _cell(value, scale: float, decimals: int) -> str:
+    """A number, or '-' for nan (no rows, never converged)."""
     value = float(value)
     if not math.isfinite(value):
-        return "-".rjust(width)
-    return f"{value * scale:{width}.{decimals}f}"
+        return "-"
+    return f"{value * scale:.{decimals}f}"
 
 
 def format_report(report: Report, *, title: str | None = None) -> str:
@@ -57,20 +57,23 @@ def format_report(report: Report, *, title: str | None = None) -> str:
     names = list(report.per_tag) + ["overall"]
     columns = _COLUMNS + (_ORIENTATION_COLUMNS if report.overall.n_orientation else [])
     tag_width = max(len("tag"), *(len(name) for name in names))
-    header = "tag".ljust(tag_width) + "".join(name.rjust(width) for name, _, width, *_ in columns)
-    units = " " * tag_width + "".join(unit.rjust(width) for _, unit, width, *_ in columns)
+    metrics_of = [*report.per_tag.values(), report.overall]
+    cells = [[_cell(get(m), scale, decimals) for _, _, _, get, scale, decimals in columns] for m in metrics_of]
+    # A column is as wide as its widest cell plus a space (a diverged track's
+    # metres of error would otherwise run into the next column).
+    widths = [max(width, *(len(row[j]) + 1 for row in cells)) for j, (_, _, width, *_) in enumerate(columns)]
+    header = "tag".ljust(tag_width) + "".join(c[0].rjust(w) for c, w in zip(columns, widths))
+    units = " " * tag_width + "".join(c[1].rjust(w) for c, w in zip(columns, widths))
     lines = [title, "=" * len(header)] if title else []
     lines += [header, units]
 
-    def row(name: str, metrics: TagMetrics) -> str:
-        return name.ljust(tag_width) + "".join(
-            _cell(get(metrics), scale, decimals, width) for _, _, width, get, scale, decimals in columns
-        )
+    def row(name: str, values: list[str]) -> str:
+        return name.ljust(tag_width) + "".join(v.rjust(w) for v, w in zip(values, widths))
 
-    for name, metrics in report.per_tag.items():
-        lines.append(row(name, metrics))
+    for name, values in zip(report.per_tag, cells):
+        lines.append(row(name, values))
     lines.append("-" * len(header))
-    lines.append(row("overall", report.overall))
+    lines.append(row("overall", cells[-1]))
 
     converged = sum(math.isfinite(m.convergence_time_s) for m in report.per_tag.values())
     filters = []

@@ -640,7 +640,7 @@ class MarvelEstimator:
 
     def _add_multipath(self, graph, initial, stamps, time_s, sigma, previous_position, predicted) -> np.ndarray:
         """The epoch's multipath state ``M(k)`` (``multipath = "states"``) and
-        its Gauss-Markov link to ``M(k-1)``; returns its prediction ``a m_{k-1}``.
+        its Gauss-Markov link to ``M(k-1)``; returns its prediction ``phi m_{k-1}``.
 
         ``sigma`` (3,): the row's total 1-sigma of range (m) and of the
         direction's two tangent components (rad); the correlated share is
@@ -659,10 +659,18 @@ class MarvelEstimator:
                 phi = math.exp(-moved / p.correlation_distance_m - elapsed / p.correlation_time_s)
             else:
                 phi = 0.0
-            decay = phi * correlated / self._multipath_sigma
-            # Keeps M(k) at 1-sigma `correlated` (stationary); the floor keeps
-            # the factor finite for a frozen error (phi -> 1).
-            walk = correlated * math.sqrt(max(1.0 - phi * phi, 1.0e-6))
+            decay = np.full(3, phi)
+            # Var M(k) = phi^2 Var M(k-1) + Var w = correlated^2 when the
+            # row's sigma grows; when it shrinks (phi sigma_(k-1) > sigma_k)
+            # the walk keeps its stationary share (1 - phi^2) sigma_k^2 and
+            # M(k) stays a little wider than its row. Scaling M(k-1) by
+            # sigma_k / sigma_(k-1) instead would blow M up when a row's
+            # sigma jumps by orders of magnitude (an unsettled fringe). The
+            # floor keeps the factor finite for a frozen error (phi -> 1).
+            variance = np.maximum(
+                correlated**2 - (phi * self._multipath_sigma) ** 2, (1.0 - phi * phi) * correlated**2
+            )
+            walk = np.sqrt(np.maximum(variance, 1.0e-6 * correlated**2))
             graph.add(
                 factors.gauss_markov_factor(
                     M(self._multipath_key), M(k), decay, gtsam.noiseModel.Diagonal.Sigmas(walk)

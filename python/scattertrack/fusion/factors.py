@@ -182,11 +182,11 @@ def height_residual(height_m: float, offset_m: float, measured_height_m: float, 
 def gauss_markov_residual(previous, current, decay, jacobians: bool = False):
     """Gauss-Markov transition residual ``e = m_k - a * m_{k-1}`` (per component).
 
-    A first-order Gauss-Markov process ``m_k = a m_{k-1} + w``, ``w ~ N(0,
-    sigma_k^2 (1 - phi^2))``, with ``a = phi sigma_k / sigma_{k-1}`` keeps
-    ``m_k`` stationary at 1-sigma ``sigma_k`` when the sigma changes from
-    epoch to epoch (the feature sigmas follow the SNR). ``decay`` is ``a``
-    (one per component); the noise model carries ``sigma_k sqrt(1 - phi^2)``.
+    A first-order Gauss-Markov process ``m_k = a m_{k-1} + w`` with decay
+    ``a = phi`` (the correlation between epochs, one per component); the
+    noise model carries the walk ``w``'s 1-sigma (the estimator chooses it so
+    that ``m_k`` keeps the 1-sigma of its row, see
+    ``MarvelEstimator._add_multipath``).
     The standard model of time-correlated errors in aided navigation
     (Farrell, *Aided Navigation*, 2008, sec. 4.9): a state per error instead
     of inflating the measurement noise.

@@ -131,6 +131,11 @@ SENSING_DEFAULTS = {
     # sec. V); a diverging velocity would otherwise feed a wrong Doppler back
     # into the sensing (a wrong timing range, a wrong fringe, a worse velocity).
     "max_doppler_speed_m_s": 5.0,
+    # In flight the fringe is picked by the timing range and the fusion's
+    # predicted range together, unless they differ by more than this many of
+    # their combined sigmas: then by the timing range alone (a diverging
+    # fusion would otherwise pick fringes that confirm its error).
+    "fringe_consistency_sigmas": 4.0,
 }
 """Parameters of the pose sensing from a recording (SI units; module docstring)."""
 
@@ -214,6 +219,9 @@ class SensedEpoch:
     """Mean per-sample SNR of the epoch's peaks, dB (nan when not processed)."""
     on_ground: bool = False
     """Whether the estimator still had the drone at rest on the ground (a clock-error epoch)."""
+    fringe_from_timing: bool = False
+    """In flight: the fusion's predicted range contradicted the timing range,
+    which alone picked the fringe (``fringe_consistency_sigmas``)."""
     clock_error: float = float("nan")
     """The tags' clock error used for this epoch (dimensionless, cfo_k = eps s_k)."""
     dsp_time_s: float = 0.0
@@ -617,10 +625,23 @@ def sense_epochs(
                 fringe_unsettled = 3.0 * fringe_sigma > sensor.half_fringe_m
             elif usable and prior is not None:
                 predicted_range, predicted_sigma = prior
-                weights = (1.0 / timing_sigma**2, 1.0 / predicted_sigma**2)
-                centre = (weights[0] * timing_range + weights[1] * predicted_range) / sum(weights)
-                fringe_sigma = 1.0 / math.sqrt(sum(weights))
                 fringe = 2.0 * sensor.half_fringe_m
+                disagreement = abs(predicted_range - timing_range) / math.hypot(timing_sigma, predicted_sigma)
+                if disagreement <= options["fringe_consistency_sigmas"]:
+                    weights = (1.0 / timing_sigma**2, 1.0 / predicted_sigma**2)
+                    centre = (weights[0] * timing_range + weights[1] * predicted_range) / sum(weights)
+                    fringe_sigma = 1.0 / math.sqrt(sum(weights))
+                else:
+                    # The two opinions contradict each other: the fusion's
+                    # prediction is the one that can be wrong by many fringes
+                    # (a diverging state picks fringes that confirm it, the
+                    # measured runaway was one fringe per second to 50 m in a
+                    # room with reflecting walls); the timing range is this
+                    # epoch's own, at worst a fringe or so off. It alone
+                    # picks the fringe, and the row says so in its sigma.
+                    centre = timing_range
+                    fringe_sigma = timing_sigma
+                    sensed.fringe_from_timing = True
                 centroid_range += round((centre - centroid_range) / fringe) * fringe
 
         # Lever arm: the DSP sees the gear centre, the row is about the body origin.
@@ -727,6 +748,12 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     from scattertrack.fusion.run import track_from_estimates
 
     fusion, sensing = _split_params(params)
+    # The DSP's sigmas are thermal plus floors: they say nothing about the
+    # multipath error, so the Gauss-Markov states (whose 1-sigma is the row's)
+    # would model it as centimetres. Measured in a room with three reflecting
+    # walls (docs/marvel.md section 8): the states diverged to 13 m mean, the
+    # inflation stayed at 0.7 m. The feature files' sigmas do include it.
+    fusion.setdefault("multipath", "inflation")
     estimator = MarvelEstimator(MarvelParams.from_kwargs(**fusion))
     bar = None
     epochs: list[SensedEpoch] = []
@@ -780,6 +807,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
             "controller": estimator.controller,
             "controller_sigma": rows[-1].controller_sigma if rows else None,
             "range_bias_m": estimator.range_bias,
+            "fringe_from_timing": sum(e.fringe_from_timing for e in epochs),
             "clock": {
                 "clock_error": after.clock_error if after is not None else (epochs[-1].clock_error if epochs else None),
                 "rest_epochs": len(rest),

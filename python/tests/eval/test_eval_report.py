@@ -36,6 +36,16 @@ def test_format_report_lists_tags_overall_and_units():
     assert "E2000C03" in text  # truth but no track
 
 
+def test_format_report_keeps_columns_apart_for_huge_errors():
+    """A diverged track (kilometres of error) widens its columns instead of running numbers together."""
+    truth = make_truth()
+    far = track_from(truth, position_offset=(3000.0, 400.0, 0.0))
+    lines = format_report(compare(truth, far)).splitlines()
+    row = next(line for line in lines if line.startswith("E2000A01"))
+    assert row.split() == ["E2000A01", "501", "0", "3026549.2", "3026549.2", "3000000.0", "400000.0", "0.0", "0.0", "-", "0.00"]
+    assert len(lines[0]) == len(row) == len(lines[3])  # header, row and rule line up
+
+
 def test_format_report_without_rows():
     truth = make_truth()
     never = track_from(truth, position_offset=(0.05, 0.0, 0.0))

@@ -380,8 +380,8 @@ class _Predicted:
 
 
 def test_multipath_states_follow_the_gauss_markov_model():
-    """M(k) = a M(k-1) + w with a = phi sigma_k / sigma_(k-1), phi = exp(-|dp| / d - dt / tau):
-    frozen while hovering, renewed once the drone has moved a few decimetres."""
+    """M(k) = phi M(k-1) + w, phi = exp(-|dp| / d - dt / tau): frozen while hovering,
+    renewed once the drone has moved a few decimetres; M(k) keeps its row's sigma."""
     import gtsam
     from gtsam.symbol_shorthand import M
 
@@ -395,25 +395,28 @@ def test_multipath_states_follow_the_gauss_markov_model():
     assert graph.size() == 1  # the stationary prior N(0, correlated^2)
     assert np.allclose(graph.at(0).noiseModel().sigmas(), correlated)
     estimator._last_epoch_time = 10.0
-    estimator._multipath = np.array([0.4, 0.01, -0.02])
-    for moved, expected_phi in ((0.0, math.exp(-0.1 / 5.0)), (0.25, math.exp(-0.5 - 0.1 / 5.0))):
-        graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
-        estimator._key += 1
-        estimator._multipath = np.array([0.4, 0.01, -0.02])
-        estimator._multipath_sigma = correlated
-        wider = 2.0 * sigma  # the next row is less certain (lower SNR)
-        predicted = estimator._add_multipath(
-            graph, initial, stamps, 10.1, wider, np.zeros(3), _Predicted([moved, 0.0, 0.0])
-        )
-        decay = expected_phi * 2.0  # phi * sigma_k / sigma_(k-1)
-        assert np.allclose(predicted, decay * np.array([0.4, 0.01, -0.02]))
-        factor = graph.at(0)
-        assert np.allclose(factor.noiseModel().sigmas(), 2.0 * correlated * math.sqrt(1.0 - expected_phi**2))
-        values = gtsam.Values()
-        values.insert(M(estimator._key - 1), np.array([1.0, 1.0, 1.0]))
-        values.insert(M(estimator._key), np.zeros(3))
-        assert np.allclose(factor.unwhitenedError(values), -decay)
-        assert stamps[M(estimator._key)] == 10.1
+    previous = np.array([0.4, 0.01, -0.02])
+    for moved, phi in ((0.0, math.exp(-0.1 / 5.0)), (0.25, math.exp(-0.5 - 0.1 / 5.0))):
+        for scale in (2.0, 0.5, 1e6):  # the next row is less / more certain; an unsettled fringe
+            graph, initial = gtsam.NonlinearFactorGraph(), gtsam.Values()
+            estimator._key += 1
+            estimator._multipath = previous
+            estimator._multipath_sigma = correlated
+            predicted = estimator._add_multipath(
+                graph, initial, stamps, 10.1, scale * sigma, np.zeros(3), _Predicted([moved, 0.0, 0.0])
+            )
+            assert np.allclose(predicted, phi * previous)  # never scaled up by the sigma ratio
+            walk = graph.at(0).noiseModel().sigmas()
+            # phi^2 Var M(k-1) + Var w: the row's own sigma, or a bit more when it shrank.
+            total = phi**2 * correlated**2 + walk**2
+            assert np.all(total >= (scale * correlated) ** 2 * (1 - 1e-9))
+            assert np.allclose(walk**2, np.maximum((scale * correlated) ** 2 - (phi * correlated) ** 2,
+                                                   (1 - phi**2) * (scale * correlated) ** 2))
+            values = gtsam.Values()
+            values.insert(M(estimator._key - 1), np.array([1.0, 1.0, 1.0]))
+            values.insert(M(estimator._key), np.zeros(3))
+            assert np.allclose(graph.at(0).unwhitenedError(values), -phi)
+            assert stamps[M(estimator._key)] == 10.1
 
 
 def test_white_features_do_not_derail_the_multipath_states(flight_factory):

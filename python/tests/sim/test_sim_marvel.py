@@ -28,6 +28,7 @@ MARVEL = [
     "marvel-distance",
     "marvel-hover",
     "marvel-rail",
+    "marvel-square-room",
     "marvel-square-walls",
     "marvel-turntable",
 ]

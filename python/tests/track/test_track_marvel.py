@@ -292,3 +292,33 @@ def test_the_fringe_is_chosen_with_the_rest_average_and_the_fusions_prediction()
     assert at_speed.sum() > 3
     assert np.median(errors) < 1.0, np.median(errors)
     assert np.median(errors[at_speed]) < 1.0, errors[at_speed]
+
+
+def test_a_contradicting_prediction_does_not_pick_the_fringe(recorded, monkeypatch):
+    """A diverged fusion predicting the range five fringes (28.9 m) too long with a
+    confident sigma: the fringe comes from the epoch's own timing range instead,
+    counted, and the ranges stay on the right fringe. Without the check they
+    follow the prediction (the runaway measured in a reflecting room). Three
+    fringes (17 m) are not caught here: early in flight the timing range's sigma
+    (the fused velocity's share, ~15 m per m/s) is over 4 m, so 17 m is no
+    4-sigma contradiction."""
+    offset_m = 5 * 5.78
+    imu = read_imu(recorded / "imu.csv")
+    _, rho = truth_of(recorded)
+    original = marvel._predicted_range
+
+    def wrong(estimator, predicted, centroid):
+        prior = original(estimator, predicted, centroid)
+        return None if prior is None else (prior[0] + offset_m, 0.1)
+
+    monkeypatch.setattr(marvel, "_predicted_range", wrong)
+    errors = {}
+    for sigmas in (4.0, 1e9):
+        track = marvel.run_sigmf("marvel", None, recorded / "recording.sigmf-meta", imu, fringe_consistency_sigmas=sigmas)
+        stats = track.stats["drone"]
+        range_error, _, _ = feature_errors(recorded, stats["features"])
+        flying = stats["features"].time_s > 3.5  # the rail starts at about 3.1 s
+        errors[sigmas] = (np.median(np.abs(range_error[flying])), stats["fringe_from_timing"])
+    assert errors[4.0][1] > 0 and errors[1e9][1] == 0
+    assert errors[4.0][0] < 1.0
+    assert errors[1e9][0] > 5.0
