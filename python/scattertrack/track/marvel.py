@@ -401,9 +401,20 @@ def _predicted_range(estimator, predicted, centroid: np.ndarray) -> tuple[float,
     return distance, math.sqrt(variance)
 
 
-def _rest_rows(frequency_hz: np.ndarray) -> np.ndarray:
-    """The DSP's peak frequencies (2, 4, M) Hz as ``lora_clock_error`` rows (2 M, 4): one per (channel, antenna)."""
-    return np.transpose(frequency_hz, (0, 2, 1)).reshape(-1, frequency_hz.shape[1])
+def _rest_rows(frequency_hz: np.ndarray, snr_db: np.ndarray | None = None, min_snr_db: float = -math.inf) -> np.ndarray:
+    """The DSP's peak frequencies (2, 4, M) Hz as ``lora_clock_error`` rows (2 M, 4): one per (channel, antenna).
+
+    With ``snr_db`` (2, 4, M, per-sample dB) only the rows whose four peaks
+    are all at least ``min_snr_db``: a tag in a multipath fade on one antenna
+    reads noise there, its peak anywhere in +-250 kHz, and one such row made
+    the least-squares clock error a thousand times too large (a reflecting
+    room, docs/marvel.md section 11).
+    """
+    rows = np.transpose(frequency_hz, (0, 2, 1)).reshape(-1, frequency_hz.shape[1])
+    if snr_db is None:
+        return rows
+    clear = np.all(np.transpose(snr_db, (0, 2, 1)).reshape(-1, snr_db.shape[1]) >= min_snr_db, axis=1)
+    return rows[clear]
 
 
 def sense_epochs(
@@ -541,8 +552,11 @@ def sense_epochs(
                 # included (its peaks do not depend on the corrections), then
                 # this epoch again with it. An epoch below the decoding SNR
                 # would add noise peaks: it is left out (and declined below).
-                collect.append(_rest_rows(np.asarray(result["frequency_hz"])))
-                clock_error = estimate_clock(collect)
+                rows = _rest_rows(np.asarray(result["frequency_hz"]), np.asarray(result["snr_db"]), options["min_snr_db"])
+                if len(rows):
+                    collect.append(rows)
+                if collect:
+                    clock_error = estimate_clock(collect)
                 result = processor.process(samples, clock_error=clock_error, **corrections)
         except core.DspError:
             sensed.dsp_time_s = time.perf_counter() - started

@@ -322,3 +322,15 @@ def test_a_contradicting_prediction_does_not_pick_the_fringe(recorded, monkeypat
     assert errors[4.0][1] > 0 and errors[1e9][1] == 0
     assert errors[4.0][0] < 1.0
     assert errors[1e9][0] > 5.0
+
+
+def test_rest_rows_leave_out_faded_peaks():
+    """A (channel, antenna) row whose any tag's peak is below the decoding SNR is noise
+    (its frequency anywhere in +-250 kHz) and stays out of the clock-error fit."""
+    frequency = np.arange(2 * 4 * 3, dtype=float).reshape(2, 4, 3)  # (channel, tag, antenna)
+    snr = np.full((2, 4, 3), -8.0)
+    snr[1, 3, 0] = -26.0  # channel 1, tag 3, antenna 0 in a fade
+    rows = marvel._rest_rows(frequency, snr, -20.0)
+    assert rows.shape == (5, 4)
+    assert np.array_equal(marvel._rest_rows(frequency), np.transpose(frequency, (0, 2, 1)).reshape(6, 4))
+    assert not any(np.array_equal(row, frequency[1, :, 0]) for row in rows)

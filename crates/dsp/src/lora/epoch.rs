@@ -117,6 +117,14 @@ pub struct EpochConfig {
     /// Doppler is removed (phases keep their ramp between the chirps, the
     /// timing range keeps the Doppler).
     pub ignore_doppler: bool,
+    /// A pair enters the chirp-timing range only when both its peaks are at
+    /// least this per-sample SNR, dB (the SX1276's SF12 decoding limit,
+    /// -20 dB: 16 dB after the 36 dB dechirp). A tag in a multipath fade on
+    /// one antenna reads noise there (about -27 dB: the largest of 4096
+    /// bins), and its peak frequency is anywhere in +-250 kHz; one such pair
+    /// in the mean put the timing range kilometres off. If no pair clears it,
+    /// every pair is used.
+    pub min_timing_snr_db: f64,
 }
 
 impl EpochConfig {
@@ -149,6 +157,7 @@ impl EpochConfig {
             angle_combine: AngleCombine::HarmonicMean,
             heading: HeadingConfig { min_omega_rad_s: 0.05, chirp_rate_hz_per_s: Some(chirp.chirp_rate_hz_per_s()) },
             ignore_doppler: false,
+            min_timing_snr_db: -20.0,
         }
     }
 
@@ -368,7 +377,10 @@ impl EpochProcessor {
             .collect();
         let mut pair_mean_hz = vec![0.0; CHANNELS * m_ant * 2];
         let mut rotational_hz = vec![0.0; CHANNELS * m_ant * 2];
-        let (mut timing_sum, mut timing_var) = (0.0, 0.0);
+        // Each pair's timing term and its variance; `clear`: both peaks
+        // above the detection SNR.
+        let mut timing_terms: Vec<(f64, f64, bool)> = Vec::with_capacity(CHANNELS * m_ant * 2);
+        let min_snr = 10f64.powf(c.min_timing_snr_db / 10.0);
         for j in 0..CHANNELS {
             for m in 0..m_ant {
                 for (p, &(a, b)) in c.pairs.iter().enumerate() {
@@ -379,14 +391,12 @@ impl EpochProcessor {
                     let t = pair_mean_hz[i]
                         - 0.5 * (cfo[a] + cfo[b])
                         - 0.5 * (translational[j * TAGS + a] + translational[j * TAGS + b]);
-                    timing_sum += t;
-                    timing_var += 0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
+                    let variance = 0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
+                    timing_terms.push((t, variance, pa.snr >= min_snr && pb.snr >= min_snr));
                 }
             }
         }
-        let count = (CHANNELS * m_ant * 2) as f64;
-        let timing_hz = timing_sum / count;
-        let timing_sigma_hz = timing_var.sqrt() / count;
+        let (timing_hz, timing_sigma_hz) = timing_mean(&timing_terms);
         let tau = delay_from_frequency_s(&c.chirp, timing_hz);
         let timing_range_m = SPEED_OF_LIGHT * tau / 2.0;
         let timing_range_sigma_m = SPEED_OF_LIGHT / 2.0 * timing_sigma_hz / c.chirp.chirp_rate_hz_per_s();
@@ -545,6 +555,23 @@ impl EpochProcessor {
     }
 }
 
+/// The chirp-timing term (Hz) and its 1-sigma from the pairs' terms
+/// `(value Hz, variance Hz^2, clear)`: the inverse-variance mean over the
+/// clear pairs (both peaks detected), or the plain mean over all when none is
+/// clear (the epoch's SNR test declines such an epoch anyway).
+fn timing_mean(terms: &[(f64, f64, bool)]) -> (f64, f64) {
+    let clear: Vec<&(f64, f64, bool)> = terms.iter().filter(|t| t.2 && t.1 > 0.0 && t.1.is_finite()).collect();
+    if clear.is_empty() {
+        let count = terms.len() as f64;
+        let sum: f64 = terms.iter().map(|t| t.0).sum();
+        let variance: f64 = terms.iter().map(|t| t.1).sum();
+        return (sum / count, variance.sqrt() / count);
+    }
+    let weight: f64 = clear.iter().map(|t| 1.0 / t.1).sum();
+    let mean = clear.iter().map(|t| t.0 / t.1).sum::<f64>() / weight;
+    (mean, (1.0 / weight).sqrt())
+}
+
 #[cfg(test)]
 pub(crate) mod sim {
     //! An exact simulator of one epoch per docs/marvel.md section 6 (time of
@@ -696,6 +723,19 @@ mod tests {
 
     fn angle_error(f: &EpochFeatures, az: f64, el: f64) -> f64 {
         dot(&f.direction, &super::super::geometry::direction(az, el)).clamp(-1.0, 1.0).acos()
+    }
+
+    #[test]
+    fn timing_mean_leaves_out_faded_pairs_and_weights_the_rest() {
+        // Two clear pairs (the second twice as precise) and one pair with a
+        // noise peak 200 kHz away: the mean is the clear pairs' weighted one.
+        let terms = [(10.0, 4.0, true), (13.0, 1.0, true), (2.0e5, 1.0, false)];
+        let (mean, sigma) = timing_mean(&terms);
+        assert!((mean - (10.0 / 4.0 + 13.0) / 1.25).abs() < 1e-12, "{mean}");
+        assert!((sigma - (1.0f64 / 1.25).sqrt()).abs() < 1e-12);
+        // None clear: the plain mean of all (as before the test existed).
+        let (mean, sigma) = timing_mean(&[(1.0, 1.0, false), (3.0, 1.0, false)]);
+        assert!((mean - 2.0).abs() < 1e-12 && (sigma - 2f64.sqrt() / 2.0).abs() < 1e-12);
     }
 
     #[test]
