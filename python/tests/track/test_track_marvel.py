@@ -304,7 +304,6 @@ def test_a_contradicting_prediction_does_not_pick_the_fringe(recorded, monkeypat
     4-sigma contradiction."""
     offset_m = 5 * 5.78
     imu = read_imu(recorded / "imu.csv")
-    _, rho = truth_of(recorded)
     original = marvel._predicted_range
 
     def wrong(estimator, predicted, centroid):
