@@ -602,7 +602,10 @@ class MarvelEstimator:
         if used["yaw"]:
             if states:
                 # The yaw's azimuth share is M(k)'s; what is left is the
-                # rotational Doppler's own error (inflated: not in M).
+                # rotational Doppler's own error (inflated: not in M). The
+                # features give one yaw sigma, so the split is a guess: the
+                # own share is kept at half the whole or more, lest a row
+                # whose sigma is mostly azimuth pin the heading to M(k).
                 azimuth_sigma = direction_sigma[0] / max(math.cos(elevation_rad), 1e-3)
                 own = math.sqrt(max(yaw_sigma**2 - (inflation * azimuth_sigma) ** 2, (0.5 * yaw_sigma) ** 2))
                 graph.add(
