@@ -924,8 +924,14 @@ class MarvelEstimator:
         smoother = self._smoother
         pose = smoother.calculateEstimatePose3(X(k))
         velocity = np.asarray(smoother.calculateEstimateVector(V(k)), dtype=float)
+        controller = np.asarray(smoother.calculateEstimatePoint3(CONTROLLER), dtype=float)
+        if not (np.all(np.isfinite(pose.matrix())) and np.all(np.isfinite(velocity)) and np.all(np.isfinite(controller))):
+            # A solve that overflowed (measured in a reflecting room at IQ
+            # level: a position of inf) is a solver failure like a thrown
+            # one: the caller declines the row and restarts the smoother.
+            raise RuntimeError("non-finite estimate")
         self._bias = smoother.calculateEstimateConstantBias(B(k))
-        self._controller = np.asarray(smoother.calculateEstimatePoint3(CONTROLLER), dtype=float)
+        self._controller = controller
         if self._baro_chain:
             self._baro_offset = smoother.calculateEstimateDouble(O(self._baro_key))
         if self._multipath_chain:

@@ -450,3 +450,35 @@ def test_the_range_bias_of_walls_is_estimated(flight_factory):
         assert np.linalg.norm(with_state["controller"] - data.controller) < np.linalg.norm(
             without["controller"] - data.controller
         )
+
+
+def test_a_non_finite_solve_is_a_solver_failure(circle_flight):
+    """A smoother that returns a non-finite state (an overflowed solve) is treated like one
+    that throws: the row is declined, the smoother restarts, and no inf reaches the track."""
+    data = circle_flight
+    estimator = MarvelEstimator(MarvelParams(**WHITE))
+    imu, features = data.imu, data.features
+    j = 0
+    results = []
+    for i in range(40):
+        while j < len(imu) and imu.time_s[j] <= features.time_s[i]:
+            estimator.add_imu(imu.time_s[j], imu.accel[j], imu.gyro[j], imu.baro_z[j])
+            j += 1
+        if i == 30:
+            real = estimator._smoother
+
+            class Overflowing:
+                def __getattr__(self, name):
+                    return getattr(real, name)
+
+                def calculateEstimateVector(self, key):
+                    return np.full(3, np.inf)
+
+            estimator._smoother = Overflowing()
+        results.append(estimator.add_features(
+            features.time_s[i], features.range_m[i], features.azimuth_rad[i], features.elevation_rad[i],
+            features.yaw_rad[i], features.range_sigma_m[i], features.angle_sigma_rad[i], features.yaw_sigma_rad[i],
+        ))
+    assert results[30] is None
+    assert estimator.declined["solver_failure"] == 1 and estimator.restarts == 1
+    assert all(r is not None and np.all(np.isfinite(r.position)) for r in results[31:])
