@@ -687,7 +687,6 @@ class MarvelEstimator:
         stamps[M(k)] = time_s
         self._multipath_key = k
         self._multipath_sigma = correlated
-        self._multipath = predicted_error
         return predicted_error
 
     def _has_range_bias(self) -> bool:

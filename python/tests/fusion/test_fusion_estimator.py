@@ -260,11 +260,17 @@ def test_tilt_from_specific_force():
 
 
 class _Nav:
-    def __init__(self, velocity):
+    """The part of a gtsam.NavState the estimator's helpers read: position (m), velocity (m/s)."""
+
+    def __init__(self, velocity=(0.0, 0.0, 0.0), position=(0.0, 0.0, 0.0)):
         self._velocity = np.asarray(velocity, dtype=float)
+        self._position = np.asarray(position, dtype=float)
 
     def velocity(self):
         return self._velocity
+
+    def position(self):
+        return self._position
 
 
 def test_correlated_rows_are_inflated_by_rows_per_decorrelation():
@@ -336,31 +342,43 @@ def test_level_horizontal_acceleration_ends_the_ground_phase_on_tilted_ground():
     assert not estimator.on_ground
 
 
-def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flight):
-    data = circle_flight
-    estimator = MarvelEstimator(MarvelParams(correlation_distance_m=0.0))
+def _run_with_smoother_swapped(data, estimator, rows: int, at: int, replacement):
+    """Feeds ``rows`` feature rows (and the IMU before each); just before row ``at`` the
+    estimator's smoother is replaced by ``replacement(real_smoother)``. Returns the
+    estimates and the replaced smoother."""
     imu, features = data.imu, data.features
     j = 0
-    failed_at = 30
     results = []
-    for i in range(60):
+    swapped = None
+    for i in range(rows):
         while j < len(imu) and imu.time_s[j] <= features.time_s[i]:
             estimator.add_imu(imu.time_s[j], imu.accel[j], imu.gyro[j], imu.baro_z[j])
             j += 1
-        if i == failed_at:
-            smoother = estimator._smoother
-
-            class Failing:
-                def update(self, *args):
-                    raise RuntimeError("Indeterminate linear system detected")
-
-            estimator._smoother = Failing()
+        if i == at:
+            swapped = replacement(estimator._smoother)
+            estimator._smoother = swapped
         results.append(estimator.add_features(
             features.time_s[i], features.range_m[i], features.azimuth_rad[i], features.elevation_rad[i],
             features.yaw_rad[i], features.range_sigma_m[i], features.angle_sigma_rad[i], features.yaw_sigma_rad[i],
         ))
-        if i == failed_at:
-            assert estimator._smoother is not smoother  # restarted, not the failing one
+    return results, swapped
+
+
+def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flight):
+    data = circle_flight
+    estimator = MarvelEstimator(MarvelParams(correlation_distance_m=0.0))
+    failed_at = 30
+
+    class Failing:
+        def __init__(self, real):
+            self.real = real
+
+        def update(self, *args):
+            raise RuntimeError("Indeterminate linear system detected")
+
+    results, failing = _run_with_smoother_swapped(data, estimator, 60, failed_at, Failing)
+    # Restarted: a fresh smoother, neither the failing one nor the one it replaced.
+    assert estimator._smoother is not failing and estimator._smoother is not failing.real
     assert results[failed_at] is None
     assert estimator.declined["solver_failure"] == 1 and estimator.restarts == 1
     assert all(r is not None for r in results[failed_at + 1 :])
@@ -368,15 +386,29 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     assert np.linalg.norm(results[-1].position - truth) < 1.0
 
 
+def test_a_non_finite_solve_is_a_solver_failure(circle_flight):
+    """A smoother that returns a non-finite state (an overflowed solve) is treated like one
+    that throws: the row is declined, the smoother restarts, and no inf reaches the track."""
+    estimator = MarvelEstimator(MarvelParams(**WHITE))
+
+    class Overflowing:
+        def __init__(self, real):
+            self._real = real
+
+        def __getattr__(self, name):
+            return getattr(self._real, name)
+
+        def calculateEstimateVector(self, key):
+            return np.full(3, np.inf)
+
+    results, overflowing = _run_with_smoother_swapped(circle_flight, estimator, 40, 30, Overflowing)
+    assert estimator._smoother is not overflowing
+    assert results[30] is None
+    assert estimator.declined["solver_failure"] == 1 and estimator.restarts == 1
+    assert all(r is not None and np.all(np.isfinite(r.position)) for r in results[31:])
+
+
 # --- multipath states and the range bias -------------------------------------------
-
-
-class _Predicted:
-    def __init__(self, position):
-        self._position = np.asarray(position, dtype=float)
-
-    def position(self):
-        return self._position
 
 
 def test_multipath_states_follow_the_gauss_markov_model():
@@ -391,7 +423,7 @@ def test_multipath_states_follow_the_gauss_markov_model():
     correlated = sigma * 0.8  # sqrt(1 - 0.6^2)
     graph, initial, stamps = gtsam.NonlinearFactorGraph(), gtsam.Values(), {}
     estimator._key = 0
-    assert np.allclose(estimator._add_multipath(graph, initial, stamps, 10.0, sigma, None, _Predicted([0, 0, 0])), 0.0)
+    assert np.allclose(estimator._add_multipath(graph, initial, stamps, 10.0, sigma, None, _Nav(position=[0, 0, 0])), 0.0)
     assert graph.size() == 1  # the stationary prior N(0, correlated^2)
     assert np.allclose(graph.at(0).noiseModel().sigmas(), correlated)
     estimator._last_epoch_time = 10.0
@@ -403,7 +435,7 @@ def test_multipath_states_follow_the_gauss_markov_model():
             estimator._multipath = previous
             estimator._multipath_sigma = correlated
             predicted = estimator._add_multipath(
-                graph, initial, stamps, 10.1, scale * sigma, np.zeros(3), _Predicted([moved, 0.0, 0.0])
+                graph, initial, stamps, 10.1, scale * sigma, np.zeros(3), _Nav(position=[moved, 0.0, 0.0])
             )
             assert np.allclose(predicted, phi * previous)  # never scaled up by the sigma ratio
             walk = graph.at(0).noiseModel().sigmas()
@@ -450,35 +482,3 @@ def test_the_range_bias_of_walls_is_estimated(flight_factory):
         assert np.linalg.norm(with_state["controller"] - data.controller) < np.linalg.norm(
             without["controller"] - data.controller
         )
-
-
-def test_a_non_finite_solve_is_a_solver_failure(circle_flight):
-    """A smoother that returns a non-finite state (an overflowed solve) is treated like one
-    that throws: the row is declined, the smoother restarts, and no inf reaches the track."""
-    data = circle_flight
-    estimator = MarvelEstimator(MarvelParams(**WHITE))
-    imu, features = data.imu, data.features
-    j = 0
-    results = []
-    for i in range(40):
-        while j < len(imu) and imu.time_s[j] <= features.time_s[i]:
-            estimator.add_imu(imu.time_s[j], imu.accel[j], imu.gyro[j], imu.baro_z[j])
-            j += 1
-        if i == 30:
-            real = estimator._smoother
-
-            class Overflowing:
-                def __getattr__(self, name):
-                    return getattr(real, name)
-
-                def calculateEstimateVector(self, key):
-                    return np.full(3, np.inf)
-
-            estimator._smoother = Overflowing()
-        results.append(estimator.add_features(
-            features.time_s[i], features.range_m[i], features.azimuth_rad[i], features.elevation_rad[i],
-            features.yaw_rad[i], features.range_sigma_m[i], features.angle_sigma_rad[i], features.yaw_sigma_rad[i],
-        ))
-    assert results[30] is None
-    assert estimator.declined["solver_failure"] == 1 and estimator.restarts == 1
-    assert all(r is not None and np.all(np.isfinite(r.position)) for r in results[31:])
