@@ -68,15 +68,18 @@ class Engine:
         correction: npt.NDArray[np.complex128] | None = None,
         ema_alpha: float | None = None,
         workers: int | None = None,
-        shared: bool = False,
+        layout: str = "team",
         queue_depth: int = 64,
         speed: float | None = None,
+        prewake_s: float = 5e-4,
     ) -> dict[str, Any]:
         """Helper IQ through the real-time runtime, from exactly one of
         ``windows`` (K, R, S) in memory or ``file`` = (path, "ci16_le" |
         "cf32_le", channels, scale, window_len, start_sample (K,)), read
         one reply at a time; tx_phase -1 where unknown; correction (R, F);
-        speed None = as fast as possible. Returns the columns of ``run``
+        speed None = as fast as possible; layout "team" | "per-antenna" |
+        "shared" (how antenna jobs meet threads); prewake_s how early idle
+        team workers are woken to poll for a paced reply. Returns the columns of ``run``
         plus latency_ns (K,), receivers (K,), stage_ns (K, 5), stages,
         wall_s, no_channel, unreadable and declined {reason: count}."""
     def trajectory(self, tag: int) -> list[tuple[float, list[float]]]:

@@ -536,11 +536,13 @@ def command_stream(args) -> int:
         raise UsageError(f"--speed must be > 0, got {args.speed}")
     if args.workers is not None and args.workers < 1:
         raise UsageError(f"--workers must be >= 1, got {args.workers}")
+    if not 0.0 <= args.prewake_us <= 1e6:
+        raise UsageError(f"--prewake-us must be in [0, 1e6], got {args.prewake_us}")
     calibration = calibration_for(args)
     speed = None if args.fast else (1.0 if args.speed is None else args.speed)
     result = stream_sigmf(
         args.sigmf, scene, calibration, args.method, speed=speed,
-        workers=args.workers, shared=args.shared, ema_alpha=args.ema_alpha, **params,
+        workers=args.workers, layout=args.layout, prewake_s=args.prewake_us * 1e-6, ema_alpha=args.ema_alpha, **params,
     )
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -750,9 +752,19 @@ def build_parser() -> argparse.ArgumentParser:
     pace = stream.add_mutually_exclusive_group()
     pace.add_argument("--speed", type=float, help="replay at this multiple of the recorded timing (default 1: live)")
     pace.add_argument("--fast", action="store_true", help="as fast as possible (throughput; latency then includes queueing)")
-    stream.add_argument("--workers", type=int, help="DSP worker threads per receive antenna (default 1)")
     stream.add_argument(
-        "--shared", action="store_true", help="one pool of --workers threads for all antennas (default: one per core)"
+        "--layout", choices=("team", "per-antenna", "shared"), default="team",
+        help="how antenna jobs meet threads: team (default; any thread takes any antenna, the one completing a reply "
+        "fuses and tracks it), per-antenna (the thesis's pools and a fusion thread), shared (one pool, a fusion thread)",
+    )
+    stream.add_argument(
+        "--workers", type=int,
+        help="threads: in all for team and shared (default one per core), per antenna for per-antenna (default 1)",
+    )
+    stream.add_argument(
+        "--prewake-us", type=float, default=500.0,
+        help="team at a paced speed: wake the idle workers this long before a reply is due to poll for it "
+        "(default 500; 0: they sleep until it arrives)",
     )
     stream.add_argument("--ema-alpha", type=float, help="EMA factor across each tag's channels (default: off)")
     stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")

@@ -454,14 +454,19 @@ impl Engine {
     /// due. `dsp` the helper design and options; `tx` and `rx` (R) antenna
     /// indices in this engine's scene; `timing_reference` (R) per-rx D_r;
     /// `correction` (R, F) complex128; `speed` None: as fast as possible,
-    /// else × the recording's timing; `workers` threads per antenna (None:
-    /// 1), or with `shared` that many in one pool for all antennas (None:
-    /// one per core). Returns the columns of `run` plus `latency_ns`,
+    /// else × the recording's timing; `layout` how antenna jobs meet
+    /// threads: "team" (the default: `workers` threads, None one per core,
+    /// that take any antenna's job and release the replies they complete),
+    /// "per-antenna" (`workers` threads per antenna, None 1, and a fusion
+    /// thread) or "shared" (one pool of `workers`, None one per core, and a
+    /// fusion thread); see `scattertrack_runtime::Workers`; `prewake_s`
+    /// (team, paced) how early the idle workers are woken to poll for a
+    /// reply, s (0: they sleep until it arrives). Returns the columns of `run` plus `latency_ns`,
     /// `receivers` (per reply), `stage_ns` (K, 5; `stages` names the
     /// columns), `wall_s`, `declined` {reason: count}, `no_channel` and
     /// `unreadable` (file windows that could not be read).
     #[pyo3(signature = (tag, time_s, tx_phase, dsp, tx, rx, windows=None, file=None, timing_reference=None,
-        correction=None, ema_alpha=None, workers=None, shared=false, queue_depth=64, speed=None))]
+        correction=None, ema_alpha=None, workers=None, layout="team", queue_depth=64, speed=None, prewake_s=5e-4))]
     #[allow(clippy::too_many_arguments)]
     fn run_stream<'py>(
         &mut self,
@@ -478,13 +483,25 @@ impl Engine {
         correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
         ema_alpha: Option<f64>,
         workers: Option<usize>,
-        shared: bool,
+        layout: &str,
         queue_depth: usize,
         speed: Option<f64>,
+        prewake_s: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
         use scattertrack_runtime::source::{IqFileReplies, SampleFormat, WindowSpec};
         use scattertrack_runtime::{InMemory, Reply};
-        let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, shared, queue_depth, speed };
+        use scattertrack_runtime::Workers;
+        let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
+        let workers = match layout {
+            "team" => Workers::Team(workers.unwrap_or(cores).max(1)),
+            "per-antenna" => Workers::PerAntenna(workers.unwrap_or(1).max(1)),
+            "shared" => Workers::Shared(workers.unwrap_or(cores).max(1)),
+            other => return Err(value_error(format!("layout '{other}' is not one of team, per-antenna, shared"))),
+        };
+        if !(prewake_s.is_finite() && (0.0..=1.0).contains(&prewake_s)) {
+            return Err(value_error(format!("prewake_s must be in [0, 1] s, got {prewake_s}")));
+        }
+        let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, queue_depth, speed, prewake_s };
         match (windows, file) {
             (Some(windows), None) => {
                 let array = windows.as_array();
@@ -665,10 +682,10 @@ struct StreamOptions<'py> {
     timing_reference: Option<Vec<usize>>,
     correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
     ema_alpha: Option<f64>,
-    workers: Option<usize>,
-    shared: bool,
+    workers: scattertrack_runtime::Workers,
     queue_depth: usize,
     speed: Option<f64>,
+    prewake_s: f64,
 }
 
 impl Engine {
@@ -687,7 +704,7 @@ impl Engine {
         S: scattertrack_runtime::ReplySource,
     {
         use scattertrack_runtime::dsp::DspSetup;
-        use scattertrack_runtime::{Pacing, RuntimeConfig, Workers};
+        use scattertrack_runtime::{Pacing, RuntimeConfig};
         if o.rx.len() != r {
             return Err(value_error(format!("{} rx antennas for windows of {r} rx", o.rx.len())));
         }
@@ -710,12 +727,7 @@ impl Engine {
         setup.validate(r).map_err(|e| value_error(e.to_string()))?;
         let pool = scattertrack_runtime::dsp::BufferPool::default();
         let mut fusion = setup.fusion(&pool).map_err(|e| value_error(e.to_string()))?;
-        let workers = match (o.workers, o.shared) {
-            (None, false) => Workers::PerAntenna(1),
-            (None, true) => Workers::Shared(std::thread::available_parallelism().map_or(2, |n| n.get())),
-            (Some(k), false) => Workers::PerAntenna(k.max(1)),
-            (Some(k), true) => Workers::Shared(k.max(1)),
-        };
+        let workers = o.workers;
         let config = RuntimeConfig {
             workers,
             queue_depth: o.queue_depth,
@@ -723,6 +735,7 @@ impl Engine {
             tx: o.tx,
             rx: o.rx,
             frequencies_hz: setup.config.subcarrier_frequencies(),
+            prewake: std::time::Duration::from_secs_f64(o.prewake_s),
         };
         let inner = &mut self.inner;
         let report = py.detach(move || {

@@ -124,12 +124,31 @@ impl AntennaWorker for DspWorker {
     fn process(&mut self, slot: usize, reply: &Reply) -> AntennaSymbols {
         // With the transmitter phase and a reference the symbol grid is
         // known: (D_r − tx_phase) mod N, no correlation timing.
+        let n = self.n;
+        let first_of = |phase: usize, d: usize| (d + n - phase % n) % n;
         let first = match (reply.tx_phase, self.reference.as_ref().and_then(|r| r.get(slot))) {
-            (Some(phase), Some(&d)) => Some((d + self.n - phase % self.n) % self.n),
+            (Some(phase), Some(&d)) => Some(first_of(phase, d)),
             _ => None,
         };
+        let mut window = reply.windows[slot].as_slice();
+        if let (Some(phase), Some(reference), Some(first)) = (reply.tx_phase, &self.reference, first) {
+            // Every antenna's grid is known, so cut this window to the whole
+            // symbols all antennas have: fusion then finds equal counts and
+            // uses the workers' features and search shares as they are
+            // (with one symbol fewer on some antenna it recomputed that
+            // antenna's feature and the whole search: 0.5 ms, 5 % of replies).
+            let common = reference
+                .iter()
+                .zip(&reply.windows)
+                .map(|(&d, w)| w.len().saturating_sub(first_of(phase, d)) / n)
+                .min()
+                .unwrap_or(0);
+            if common > 0 {
+                window = &window[..(first + common * n).min(window.len())];
+            }
+        }
         let mut out = self.pool.take();
-        self.front.process(&reply.windows[slot], first, &mut out);
+        self.front.process(window, first, &mut out);
         out
     }
 }

@@ -1,8 +1,9 @@
 //! The pipeline: threads, bounded queues, in-order fusion, latency.
 
-use std::collections::BTreeMap;
+use std::collections::{BTreeMap, VecDeque};
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
-use std::sync::{Arc, Mutex};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
 use num_complex::{Complex32, Complex64};
@@ -130,6 +131,15 @@ pub enum Workers {
     /// (p50 1.22 ms against 0.97–1.03 ms per antenna): the threads wake one
     /// after the other through the queue's lock.
     Shared(usize),
+    /// `k` threads in all (best: one per core), capture being one of them,
+    /// that take the antenna jobs of the oldest reply with jobs left;
+    /// whichever finishes a reply's last antenna runs fusion and the
+    /// tracker itself, in reply order (one thread at a time). No fusion
+    /// thread, so no hand-off wake-up on the critical path; capture starts
+    /// the first job of the reply it hands over without a wake-up; and no
+    /// more threads than cores, so a reply's jobs are not time-sliced
+    /// against each other.
+    Team(usize),
 }
 
 /// Pipeline shape and the helper's geometry.
@@ -146,6 +156,17 @@ pub struct RuntimeConfig {
     pub rx: Vec<usize>,
     /// Subcarrier frequencies of the estimated channels, Hz.
     pub frequencies_hz: Vec<f64>,
+    /// [`Workers::Team`] with [`Pacing::Recorded`]: how long before a
+    /// reply is due capture wakes the idle workers, which then poll for it
+    /// (at most twice this long) instead of sleeping, and capture polls
+    /// too. Why: a sleeping thread took up to 0.3–0.5 ms to wake on the
+    /// 2-core virtual machine, more than an antenna's job (measured: with
+    /// 0.3 ms the last job of a reply still started 0.49 ms after arrival
+    /// at p50, with 0.5 ms 0.19 ms). A live helper knows as early when a
+    /// reply is due: it opens the window on the reader's query. The price
+    /// is polling: up to 2 × this per reply in all threads. Zero: workers
+    /// sleep until a reply arrives. Default 0.5 ms.
+    pub prewake: Duration,
 }
 
 impl Default for RuntimeConfig {
@@ -157,6 +178,7 @@ impl Default for RuntimeConfig {
             tx: 0,
             rx: Vec::new(),
             frequencies_hz: Vec::new(),
+            prewake: Duration::from_micros(500),
         }
     }
 }
@@ -255,6 +277,15 @@ struct Pending<T> {
 }
 
 impl<T> Pending<T> {
+    /// Antenna `slot`'s output, processed from `started` to `finished`.
+    fn record(&mut self, slot: usize, output: T, started: Instant, finished: Instant) {
+        self.outputs[slot] = Some(output);
+        self.done += 1;
+        self.last_start = Some(self.last_start.map_or(started, |t| t.max(started)));
+        self.last_finish = Some(self.last_finish.map_or(finished, |t| t.max(finished)));
+        self.busy_ns = self.busy_ns.max(finished.duration_since(started).as_nanos() as u64);
+    }
+
     fn new(antennas: usize) -> Self {
         Self {
             header: None,
@@ -278,7 +309,7 @@ where
     I::IntoIter: Send,
     W: AntennaWorker,
     F: Fn(usize) -> W,
-    U: ReplyFusion<W::Output>,
+    U: ReplyFusion<W::Output> + Send,
 {
     run_source(InMemory::new(replies), make_worker, fusion, engine, config)
 }
@@ -289,12 +320,13 @@ where
     S: ReplySource,
     W: AntennaWorker,
     F: Fn(usize) -> W,
-    U: ReplyFusion<W::Output>,
+    U: ReplyFusion<W::Output> + Send,
 {
     let antennas = config.rx.len();
     let (queue_count, per_queue) = match config.workers {
         Workers::PerAntenna(k) => (antennas.max(1), k.max(1)),
         Workers::Shared(k) => (1, k.max(1)),
+        Workers::Team(k) => return run_team(replies, (0..k.max(1)).map(make_worker).collect(), fusion, engine, config),
     };
     let (events_tx, events_rx) = channel::<Event<W::Output>>();
     let mut queues: Vec<std::sync::mpsc::SyncSender<Job>> = Vec::with_capacity(queue_count);
@@ -375,6 +407,222 @@ fn capture<S: ReplySource, T>(
     }
 }
 
+/// A reply in flight in [`Workers::Team`]: its antenna jobs handed out so
+/// far and its outputs.
+struct InFlight<T> {
+    index: u64,
+    reply: Arc<Reply>,
+    claimed: usize,
+    pending: Pending<T>,
+}
+
+/// What the team's threads share under one lock: the replies in flight, in
+/// capture order (contiguous indices; the front is the next to release).
+struct Team<T> {
+    replies: VecDeque<InFlight<T>>,
+    /// Bumped by every reply handed over and every pre-wake.
+    generation: u64,
+    /// Capture has no more replies.
+    closed: bool,
+}
+
+impl<T> Team<T> {
+    fn head_complete(&self, antennas: usize) -> bool {
+        self.replies.front().is_some_and(|r| r.pending.done == antennas)
+    }
+}
+
+fn lock<T>(mutex: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
+    mutex.lock().expect("pipeline state poisoned")
+}
+
+/// What [`Workers::Team`]'s threads share.
+struct TeamShared<'a, T, U> {
+    antennas: usize,
+    state: Mutex<Team<T>>,
+    /// Workers wait here for jobs.
+    work: Condvar,
+    /// Capture waits here for room (at most `queue_depth` replies in flight).
+    space: Condvar,
+    release: Mutex<Release<'a, U>>,
+    /// Replies handed over so far (read without the lock while polling).
+    handed: AtomicU64,
+    /// Longest poll after a pre-wake.
+    poll: Duration,
+}
+
+impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
+    /// The next antenna job, oldest reply first; with `wait`, blocks until
+    /// there is one (None once capture closed and no job is left). A
+    /// pre-wake turns the wait into polling for the next hand-over.
+    fn claim(&self, wait: bool) -> Option<(u64, usize, Arc<Reply>)> {
+        let mut state = lock(&self.state);
+        loop {
+            if let Some(r) = state.replies.iter_mut().find(|r| r.claimed < self.antennas) {
+                r.claimed += 1;
+                return Some((r.index, r.claimed - 1, Arc::clone(&r.reply)));
+            }
+            if state.closed || !wait {
+                return None;
+            }
+            let generation = state.generation;
+            state = self.work.wait_while(state, |s| s.generation == generation && !s.closed).expect("pipeline state poisoned");
+            if state.replies.iter().all(|r| r.claimed >= self.antennas) && !state.closed {
+                // Pre-woken: poll, without the lock, for the reply.
+                let handed = self.handed.load(Ordering::Acquire);
+                drop(state);
+                let since = Instant::now();
+                while self.handed.load(Ordering::Acquire) == handed && since.elapsed() < self.poll {
+                    std::hint::spin_loop();
+                }
+                state = lock(&self.state);
+            }
+        }
+    }
+
+    /// Wakes the idle workers to poll for a reply about to arrive.
+    fn prewake(&self) {
+        lock(&self.state).generation += 1;
+        self.work.notify_all();
+    }
+
+    /// Runs one claimed job on `worker`, records it and, when it completed
+    /// the head reply, releases what is complete.
+    fn run<W: AntennaWorker<Output = T>>(&self, worker: &mut W, (index, slot, reply): (u64, usize, Arc<Reply>)) {
+        let started = Instant::now();
+        let output = worker.process(slot, &reply);
+        let finished = Instant::now();
+        drop(reply);
+        let complete = {
+            let mut state = lock(&self.state);
+            let front = state.replies.front().map_or(index, |r| r.index);
+            state.replies[(index - front) as usize].pending.record(slot, output, started, finished);
+            state.head_complete(self.antennas)
+        };
+        if complete {
+            self.drain();
+        }
+    }
+
+    /// Releases complete replies at the head, in order. Whoever holds
+    /// `release` drains; a thread finding it held leaves, and the holder
+    /// looks again after letting go, so a head completed meanwhile is not
+    /// stranded.
+    fn drain(&self) {
+        while let Ok(mut out) = self.release.try_lock() {
+            loop {
+                let head = {
+                    let mut state = lock(&self.state);
+                    if !state.head_complete(self.antennas) {
+                        break;
+                    }
+                    self.space.notify_one();
+                    state.replies.pop_front().expect("complete head")
+                };
+                out.release(head.pending);
+            }
+            drop(out);
+            if !lock(&self.state).head_complete(self.antennas) {
+                break;
+            }
+        }
+    }
+}
+
+/// [`Workers::Team`]: capture on the calling thread, which also takes jobs
+/// of the reply it just handed over (its first job starts without a
+/// wake-up), and `workers − 1` threads; every thread claims antenna jobs
+/// oldest reply first, and the one completing the head reply releases it
+/// (fusion, tracker) and any complete ones behind it.
+fn run_team<S, W, U>(mut replies: S, mut workers: Vec<W>, fusion: &mut U, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
+where
+    S: ReplySource,
+    W: AntennaWorker,
+    U: ReplyFusion<W::Output> + Send,
+{
+    let antennas = config.rx.len();
+    let depth = config.queue_depth.max(1);
+    let shared = TeamShared {
+        antennas,
+        state: Mutex::new(Team { replies: VecDeque::new(), generation: 0, closed: false }),
+        work: Condvar::new(),
+        space: Condvar::new(),
+        release: Mutex::new(Release::new(fusion, engine, config)),
+        handed: AtomicU64::new(0),
+        poll: 2 * config.prewake,
+    };
+    let mut own = workers.pop().expect("at least one worker");
+    std::thread::scope(|scope| {
+        for mut worker in workers {
+            let shared = &shared;
+            scope.spawn(move || {
+                while let Some(job) = shared.claim(true) {
+                    shared.run(&mut worker, job);
+                }
+            });
+        }
+        let start = Instant::now();
+        let mut first_time: Option<f64> = None;
+        let mut index = 0u64;
+        while let Some(time_s) = replies.next_time() {
+            if let Pacing::Recorded { speed } = config.pacing {
+                let t0 = *first_time.get_or_insert(time_s);
+                let due = Duration::from_secs_f64(((time_s - t0) / speed.max(1e-9)).max(0.0));
+                let elapsed = start.elapsed();
+                if config.prewake.is_zero() {
+                    if due > elapsed {
+                        std::thread::sleep(due - elapsed);
+                    }
+                } else {
+                    if due > elapsed + config.prewake {
+                        std::thread::sleep(due - elapsed - config.prewake);
+                    }
+                    shared.prewake();
+                    // Awake already: poll too (a second sleep could
+                    // overshoot the reply's time by as much as a wake-up).
+                    while start.elapsed() < due {
+                        std::hint::spin_loop();
+                    }
+                }
+            }
+            let mut state = lock(&shared.state);
+            while state.replies.len() >= depth {
+                state = shared.space.wait(state).expect("pipeline state poisoned");
+            }
+            drop(state);
+            let Some(reply) = replies.next_reply() else { break };
+            let arrival = Instant::now();
+            let mut pending = Pending::new(antennas);
+            pending.header = Some(ReplyHeader { index, tag: reply.tag, time_s: reply.time_s, tx_phase: reply.tx_phase });
+            pending.arrival = Some(arrival);
+            if antennas == 0 {
+                // Complete on arrival, and no worker would release it.
+                lock(&shared.release).release(pending);
+            } else {
+                {
+                    let mut state = lock(&shared.state);
+                    state.replies.push_back(InFlight { index, reply: Arc::new(reply), claimed: 0, pending });
+                    state.generation += 1;
+                }
+                shared.handed.fetch_add(1, Ordering::Release);
+                shared.work.notify_all();
+                // Help until this reply's jobs are all taken.
+                while let Some(job) = shared.claim(false) {
+                    shared.run(&mut own, job);
+                }
+            }
+            index += 1;
+        }
+        lock(&shared.state).closed = true;
+        shared.work.notify_all();
+        // Jobs left when capture closed (as fast as possible): help finish.
+        while let Some(job) = shared.claim(false) {
+            shared.run(&mut own, job);
+        }
+    });
+    shared.release.into_inner().expect("release poisoned").finish()
+}
+
 /// Collects every antenna's output of a reply, releases replies in
 /// capture order (the tracker is causal: frames must arrive in time order),
 /// fuses them, steps the engine and stamps the latency.
@@ -385,80 +633,102 @@ fn fuse_and_track<T, U: ReplyFusion<T>>(
     config: &RuntimeConfig,
 ) -> RunReport {
     let antennas = config.rx.len();
-    let f_count = config.frequencies_hz.len();
     let mut pending: BTreeMap<u64, Pending<T>> = BTreeMap::new();
-    let mut next: u64 = 0;
-    let mut report = RunReport::default();
-    let mut first_arrival: Option<Instant> = None;
+    let mut release = Release::new(fusion, engine, config);
     for event in events {
         match event {
             Event::Arrived { header, arrival } => {
-                first_arrival.get_or_insert(arrival);
+                release.first_arrival.get_or_insert(arrival);
                 let p = pending.entry(header.index).or_insert_with(|| Pending::new(antennas));
                 p.header = Some(header);
                 p.arrival = Some(arrival);
             }
             Event::Processed { index, slot, output, started, finished } => {
-                let p = pending.entry(index).or_insert_with(|| Pending::new(antennas));
-                p.outputs[slot] = Some(output);
-                p.done += 1;
-                p.last_start = Some(p.last_start.map_or(started, |t| t.max(started)));
-                p.last_finish = Some(p.last_finish.map_or(finished, |t| t.max(finished)));
-                p.busy_ns = p.busy_ns.max(finished.duration_since(started).as_nanos() as u64);
+                pending.entry(index).or_insert_with(|| Pending::new(antennas)).record(slot, output, started, finished);
             }
         }
         // Release every complete reply at the head, in order.
-        while pending.get(&next).is_some_and(|p| p.done == antennas && p.arrival.is_some()) {
-            let p = pending.remove(&next).expect("present");
-            let header = p.header.expect("arrived");
-            let outputs: Vec<T> = p.outputs.into_iter().map(|o| o.expect("every slot done")).collect();
-            let fusion_start = Instant::now();
-            let arrival = p.arrival.expect("checked");
-            let since = |later: Option<Instant>, earlier: Instant| {
-                later.map_or(0, |t| t.saturating_duration_since(earlier).as_nanos() as u64)
-            };
-            let dispatch_ns = since(p.last_start, arrival);
-            let handoff_ns = p.last_finish.map_or(0, |t| fusion_start.saturating_duration_since(t).as_nanos() as u64);
-            let fused = fusion.fuse(&header, outputs);
-            let fusion_ns = fusion_start.elapsed().as_nanos() as u64;
-            let mut rx = Vec::with_capacity(antennas);
-            let mut h = Vec::with_capacity(antennas * f_count);
-            match fused {
-                Ok(channels) => {
-                    for (slot, channel) in channels.into_iter().enumerate().take(antennas) {
-                        if let Some(c) = channel {
-                            if c.len() == f_count && c.iter().all(|v| v.is_finite()) {
-                                rx.push(config.rx[slot]);
-                                h.extend(c.into_iter().map(|v| nalgebra::Complex::new(v.re, v.im)));
-                            }
+        while pending.get(&release.next).is_some_and(|p| p.done == antennas && p.arrival.is_some()) {
+            let p = pending.remove(&release.next).expect("present");
+            release.release(p);
+        }
+    }
+    release.finish()
+}
+
+/// The in-order end of the pipeline: fusion, tracker, latency, counts.
+struct Release<'a, U> {
+    fusion: &'a mut U,
+    engine: &'a mut Engine,
+    config: &'a RuntimeConfig,
+    /// Capture index of the next reply to release.
+    next: u64,
+    first_arrival: Option<Instant>,
+    report: RunReport,
+}
+
+impl<'a, U> Release<'a, U> {
+    fn new(fusion: &'a mut U, engine: &'a mut Engine, config: &'a RuntimeConfig) -> Self {
+        Self { fusion, engine, config, next: 0, first_arrival: None, report: RunReport::default() }
+    }
+
+    /// Fuses reply `self.next` (complete: every antenna done, arrived),
+    /// steps the engine and records its output.
+    fn release<T>(&mut self, p: Pending<T>)
+    where
+        U: ReplyFusion<T>,
+    {
+        let config = self.config;
+        let antennas = config.rx.len();
+        let f_count = config.frequencies_hz.len();
+        let header = p.header.expect("arrived");
+        let outputs: Vec<T> = p.outputs.into_iter().map(|o| o.expect("every slot done")).collect();
+        let fusion_start = Instant::now();
+        let arrival = p.arrival.expect("checked");
+        self.first_arrival.get_or_insert(arrival);
+        let dispatch_ns = p.last_start.map_or(0, |t| t.saturating_duration_since(arrival).as_nanos() as u64);
+        let handoff_ns = p.last_finish.map_or(0, |t| fusion_start.saturating_duration_since(t).as_nanos() as u64);
+        let fused = self.fusion.fuse(&header, outputs);
+        let fusion_ns = fusion_start.elapsed().as_nanos() as u64;
+        let mut rx = Vec::with_capacity(antennas);
+        let mut h = Vec::with_capacity(antennas * f_count);
+        match fused {
+            Ok(channels) => {
+                for (slot, channel) in channels.into_iter().enumerate().take(antennas) {
+                    if let Some(c) = channel {
+                        if c.len() == f_count && c.iter().all(|v| v.is_finite()) {
+                            rx.push(config.rx[slot]);
+                            h.extend(c.into_iter().map(|v| nalgebra::Complex::new(v.re, v.im)));
                         }
                     }
                 }
-                Err(reason) => *report.declined.entry(reason).or_insert(0) += 1,
             }
-            let receivers = rx.len();
-            let track_start = Instant::now();
-            let estimate = if receivers == 0 {
-                report.no_channel += 1;
-                None
-            } else {
-                let frame =
-                    WidebandFrame { time_s: header.time_s, tx: config.tx, rx, frequencies_hz: config.frequencies_hz.clone(), h };
-                engine.step(header.tag, &Measurement::Wideband(frame))
-            };
-            let track_ns = track_start.elapsed().as_nanos() as u64;
-            report.outputs.push(Output {
-                index: next,
-                tag: header.tag,
-                time_s: header.time_s,
-                estimate,
-                receivers,
-                latency_ns: arrival.elapsed().as_nanos() as u64,
-            });
-            report.stage_ns.push([dispatch_ns, p.busy_ns, handoff_ns, fusion_ns, track_ns]);
-            next += 1;
+            Err(reason) => *self.report.declined.entry(reason).or_insert(0) += 1,
         }
+        let receivers = rx.len();
+        let track_start = Instant::now();
+        let estimate = if receivers == 0 {
+            self.report.no_channel += 1;
+            None
+        } else {
+            let frame = WidebandFrame { time_s: header.time_s, tx: config.tx, rx, frequencies_hz: config.frequencies_hz.clone(), h };
+            self.engine.step(header.tag, &Measurement::Wideband(frame))
+        };
+        let track_ns = track_start.elapsed().as_nanos() as u64;
+        self.report.outputs.push(Output {
+            index: self.next,
+            tag: header.tag,
+            time_s: header.time_s,
+            estimate,
+            receivers,
+            latency_ns: arrival.elapsed().as_nanos() as u64,
+        });
+        self.report.stage_ns.push([dispatch_ns, p.busy_ns, handoff_ns, fusion_ns, track_ns]);
+        self.next += 1;
     }
-    report.wall_s = first_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
-    report
+
+    fn finish(mut self) -> RunReport {
+        self.report.wall_s = self.first_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
+        self.report
+    }
 }

@@ -106,7 +106,7 @@ fn recorded_pacing_takes_the_recording_time() {
 fn shared_and_per_antenna_pools_give_the_same_track() {
     let (input, _) = replies(120);
     let mut outputs = Vec::new();
-    for workers in [Workers::Shared(1), Workers::Shared(3), Workers::PerAntenna(1), Workers::PerAntenna(2)] {
+    for workers in [Workers::Shared(1), Workers::Shared(3), Workers::PerAntenna(1), Workers::PerAntenna(2), Workers::Team(1), Workers::Team(2), Workers::Team(5)] {
         let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
         let cfg = RuntimeConfig { workers, ..config() };
         let report =
@@ -115,4 +115,60 @@ fn shared_and_per_antenna_pools_give_the_same_track() {
         outputs.push(report.outputs.iter().map(|o| o.estimate.as_ref().map(|e| e.position)).collect::<Vec<_>>());
     }
     assert!(outputs.windows(2).all(|w| w[0] == w[1]));
+}
+
+/// Slow on every third reply's first antenna, so later replies finish
+/// before earlier ones.
+struct Uneven;
+
+impl scattertrack_runtime::AntennaWorker for Uneven {
+    type Output = Option<Vec<Complex64>>;
+    fn process(&mut self, slot: usize, reply: &Reply) -> Self::Output {
+        if slot == 0 && (reply.time_s * 300.0).round() as u64 % 3 == 0 {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+        let window = &reply.windows[slot];
+        (!window.is_empty()).then(|| window.iter().map(|v| Complex64::new(v.re as f64, v.im as f64)).collect())
+    }
+}
+
+#[test]
+fn team_releases_in_capture_order_when_later_replies_finish_first() {
+    let (input, _) = replies(60);
+    let mut reference = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
+    let expected = run(input.clone(), |_| Uneven, &mut PassThroughFusion, &mut reference, &config());
+    for (workers, depth) in [(3, 64), (2, 1), (4, 2)] {
+        let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
+        let cfg = RuntimeConfig { workers: Workers::Team(workers), queue_depth: depth, ..config() };
+        let report = run(input.clone(), |_| Uneven, &mut PassThroughFusion, &mut engine, &cfg);
+        assert_eq!(report.outputs.len(), 60);
+        assert!(report.outputs.iter().enumerate().all(|(i, o)| o.index == i as u64 && o.time_s == input[i].time_s));
+        assert_eq!(report.no_channel, 6);
+        assert_eq!(engine.stats(0).measurements, 54);
+        let positions = |r: &scattertrack_runtime::RunReport| r.outputs.iter().map(|o| o.estimate.as_ref().map(|e| e.position)).collect::<Vec<_>>();
+        assert_eq!(positions(&report), positions(&expected), "team({workers}), depth {depth}");
+        assert_eq!(report.stage_ns.len(), 60);
+    }
+}
+
+#[test]
+fn team_with_prewake_keeps_the_recording_time() {
+    let (input, _) = replies(60);
+    for prewake in [Duration::ZERO, Duration::from_micros(500)] {
+        let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
+        let cfg = RuntimeConfig { pacing: Pacing::Recorded { speed: 1.0 }, workers: Workers::Team(2), prewake, ..config() };
+        let report = run(input.clone(), |_| PerAntenna(PassThrough { delay: Duration::ZERO }), &mut PassThroughFusion, &mut engine, &cfg);
+        assert_eq!(report.outputs.len(), 60);
+        assert!(report.wall_s >= 59.0 / 300.0 * 0.95, "{}", report.wall_s);
+    }
+}
+
+#[test]
+fn team_without_antennas_still_outputs_every_reply() {
+    let (input, _) = replies(5);
+    let mut engine = Engine::new(scene(), "turbotrack", Params::default()).unwrap();
+    let cfg = RuntimeConfig { workers: Workers::Team(2), rx: vec![], ..config() };
+    let report = run(input, |_| PerAntenna(PassThrough { delay: Duration::ZERO }), &mut PassThroughFusion, &mut engine, &cfg);
+    assert_eq!(report.outputs.len(), 5);
+    assert_eq!(report.no_channel, 5);
 }

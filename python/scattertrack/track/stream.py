@@ -79,7 +79,8 @@ def stream_sigmf(
     *,
     speed: float | None = None,
     workers: int | None = None,
-    shared: bool = False,
+    layout: str = "team",
+    prewake_s: float = 5e-4,
     queue_depth: int = 64,
     ema_alpha: float | None = None,
     dsp_options: dict | None = None,
@@ -95,9 +96,16 @@ def stream_sigmf(
     A recording read from disk is streamed from its data file (one reply's
     windows read at a time, so any length fits in memory); one in memory
     from its array.
-    ``workers``: DSP worker threads per receive antenna (None: 1, the
-    thesis's layout), or with ``shared`` that many in one pool for all
-    antennas (None: one per core; see ``crates/runtime``). ``params``: the tracker's parameters.
+    ``layout``: how antenna jobs meet threads (``crates/runtime``,
+    ``Workers``): "team" (default), ``workers`` threads (None: one per
+    core) taking any antenna's job, the one completing a reply fusing and
+    tracking it; "per-antenna", ``workers`` threads per receive antenna
+    (None: 1, the thesis's layout) and a fusion thread; "shared", one pool
+    of ``workers`` (None: one per core) and a fusion thread.
+    ``prewake_s``: with "team" at a paced speed, how long before a reply is
+    due the idle workers are woken to poll for it (0: they sleep until it
+    arrives; a wake-up costs 0.1–0.3 ms on a virtual machine).
+    ``params``: the tracker's parameters.
     Windows are cut to the shortest window's length (the helper records
     equal windows).
     """
@@ -132,7 +140,8 @@ def stream_sigmf(
         correction=np.ascontiguousarray(calibration.correction, dtype=np.complex128),
         ema_alpha=ema_alpha,
         workers=None if workers is None else int(workers),
-        shared=bool(shared),
+        layout=str(layout),
+        prewake_s=float(prewake_s),
         queue_depth=int(queue_depth),
         speed=speed,
     )

@@ -420,6 +420,19 @@ def test_stream_prints_throughput_and_latency(capsys, iq_session, tmp_path):
     assert len(read_track(tmp_path / "track.csv")) > 20
 
 
+def test_stream_takes_a_thread_layout_and_refuses_a_negative_prewake(capsys, iq_session, tmp_path):
+    common = (
+        "stream", "--scene", iq_session / "scene.toml", "--sigmf", iq_session / "recording.sigmf-meta",
+        "--calibration", iq_session / "calibration.sigmf-meta", "--out", tmp_path / "track.csv",
+    )
+    code, out, err = run(capsys, *common, "--layout", "per-antenna", "--workers", "1", "--fast")
+    assert code == 0 and "p99" in out, err
+    code, _, err = run(capsys, *common, "--prewake-us", "-5")
+    assert code == 2 and "--prewake-us" in err
+    code, _, err = run(capsys, *common, "--layout", "pools")
+    assert code == 2 and "pools" in err
+
+
 def test_stream_and_track_without_calibration_are_usage_errors(capsys, iq_session, tmp_path):
     lone = tmp_path / "lone"
     lone.mkdir()

@@ -63,6 +63,26 @@ def test_streaming_gives_what_the_offline_path_gives(session):
     assert np.median(gap) < 1e-3, np.median(gap)
 
 
+def test_every_thread_layout_gives_the_same_track(session):
+    """The team (default), the thesis's per-antenna pools and one shared
+    pool run the same DSP and tracker in reply order: same positions, paced
+    (with and without the pre-wake) or as fast as possible."""
+    _, out = session
+    scene = io.read_scene(out / "scene.toml")
+    calibration = calibrate_sigmf(out / "calibration.sigmf-meta", scene)
+    runs = [
+        stream_sigmf(out / "recording.sigmf-meta", scene, calibration, speed=speed, layout=layout, prewake_s=prewake)
+        for layout, speed, prewake in [
+            ("team", 1.0, 5e-4), ("team", 1.0, 0.0), ("team", None, 5e-4), ("per-antenna", None, 5e-4), ("shared", 1.0, 5e-4),
+        ]
+    ]
+    for other in runs[1:]:
+        np.testing.assert_array_equal(other.track.position, runs[0].track.position)
+        assert other.declined == runs[0].declined
+    # Paced: the run takes the recording's time.
+    assert runs[0].wall_s >= 0.9 * (runs[0].track.time_s[-1] - runs[0].track.time_s[0])
+
+
 def test_bad_input_is_refused(session, tmp_path):
     _, out = session
     scene = io.read_scene(out / "scene.toml")
@@ -74,6 +94,10 @@ def test_bad_input_is_refused(session, tmp_path):
     other.antennas = other.antennas[:3]
     with pytest.raises(io.FormatError, match="not an 'rx' antenna"):
         stream_sigmf(out / "recording.sigmf-meta", other, out / "calibration.sigmf-meta")
+    with pytest.raises(ValueError, match="layout 'pools' is not one of"):
+        stream_sigmf(out / "recording.sigmf-meta", scene, out / "calibration.sigmf-meta", layout="pools")
+    with pytest.raises(ValueError, match="prewake_s"):
+        stream_sigmf(out / "recording.sigmf-meta", scene, out / "calibration.sigmf-meta", prewake_s=-1.0)
 
 
 def test_an_all_nan_window_is_counted(session, tmp_path):

@@ -6,6 +6,16 @@ pub fn widen(v: Complex32) -> Complex64 {
     Complex64::new(v.re as f64, v.im as f64)
 }
 
+/// Complex samples as interleaved floats `[re₀, im₀, re₁, im₁, …]`, for
+/// loops that vectorise over real lanes.
+#[inline]
+pub fn as_floats(samples: &[Complex32]) -> &[f32] {
+    // SAFETY: `Complex<f32>` is `#[repr(C)]` { re, im } (num-complex
+    // documents this layout), so n complex values are 2n contiguous f32
+    // with at least f32's alignment; the borrow keeps the lifetime.
+    unsafe { std::slice::from_raw_parts(samples.as_ptr().cast::<f32>(), 2 * samples.len()) }
+}
+
 /// Per-symbol channel estimates `H(f, n)` of one rx antenna in one window.
 ///
 /// Row-major: `data[n · subcarriers + f]` is symbol `n`, active subcarrier
