@@ -71,7 +71,7 @@ class Engine:
         layout: str = "team",
         queue_depth: int = 64,
         speed: float | None = None,
-        prewake_s: float = 5e-4,
+        prewake_s: float = 1e-3,
     ) -> dict[str, Any]:
         """Helper IQ through the real-time runtime, from exactly one of
         ``windows`` (K, R, S) in memory or ``file`` = (path, "ci16_le" |

@@ -762,9 +762,9 @@ def build_parser() -> argparse.ArgumentParser:
         help="threads: in all for team and shared (default one per core), per antenna for per-antenna (default 1)",
     )
     stream.add_argument(
-        "--prewake-us", type=float, default=500.0,
+        "--prewake-us", type=float, default=1000.0,
         help="team at a paced speed: wake the idle workers this long before a reply is due to poll for it "
-        "(default 500; 0: they sleep until it arrives)",
+        "(default 1000; 0: they sleep until it arrives)",
     )
     stream.add_argument("--ema-alpha", type=float, help="EMA factor across each tag's channels (default: off)")
     stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")

@@ -466,7 +466,7 @@ impl Engine {
     /// columns), `wall_s`, `declined` {reason: count}, `no_channel` and
     /// `unreadable` (file windows that could not be read).
     #[pyo3(signature = (tag, time_s, tx_phase, dsp, tx, rx, windows=None, file=None, timing_reference=None,
-        correction=None, ema_alpha=None, workers=None, layout="team", queue_depth=64, speed=None, prewake_s=5e-4))]
+        correction=None, ema_alpha=None, workers=None, layout="team", queue_depth=64, speed=None, prewake_s=1e-3))]
     #[allow(clippy::too_many_arguments)]
     fn run_stream<'py>(
         &mut self,

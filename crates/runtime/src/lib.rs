@@ -1,17 +1,22 @@
 //! scattertrack-runtime: the real-time stream processor of the TurboTrack
-//! pipeline (thesis §6, "Real-time Processing"): a multi-threaded pipeline
-//! with worker pools, so the frame rate is decoupled from the latency.
+//! pipeline (thesis §6, "Real-time Processing"): a multi-threaded pipeline,
+//! so the frame rate is decoupled from the latency.
 //!
 //! ```text
-//!  capture ──► per-antenna queues ──► workers (k per antenna) ──► fusion ──► tracker ──► outputs
-//!  (paced:      one reply window        timing, FFT per symbol,    joint       engine.step
-//!   recorded    per rx antenna          detection feature          preamble    per tag
-//!   speed or                            (`AntennaWorker`)          search, tag
-//!   as fast as                                                    channel,
-//!   possible)                                                     calibration
-//!                                                                 (`ReplyFusion`),
-//!                                                                 in reply order
+//!  capture ──► antenna jobs ──► workers ──────────► fusion ──────► tracker ──► outputs
+//!  (paced:      one reply window   timing, symbol     joint          engine.step
+//!   recorded    per rx antenna     sums, detection    preamble       per tag
+//!   speed or                       feature            search, tag
+//!   as fast as                     (`AntennaWorker`)  channel,
+//!   possible)                                         calibration
+//!                                                     (`ReplyFusion`),
+//!                                                     in reply order
 //! ```
+//!
+//! [`Workers`] says how jobs meet threads: `Team` (threads = cores,
+//! capture among them; the thread completing a reply fuses and tracks it;
+//! idle workers pre-woken before a paced reply), or the thesis's pools per
+//! antenna / one shared pool with a fusion thread. All give the same output.
 //!
 //! Contract: [`run`] consumes [`Reply`]s (one tag reply: the IQ window of
 //! every receive antenna) in capture order and returns one [`Output`] per

@@ -80,7 +80,7 @@ def stream_sigmf(
     speed: float | None = None,
     workers: int | None = None,
     layout: str = "team",
-    prewake_s: float = 5e-4,
+    prewake_s: float = 1e-3,
     queue_depth: int = 64,
     ema_alpha: float | None = None,
     dsp_options: dict | None = None,

@@ -16,6 +16,20 @@ pub fn as_floats(samples: &[Complex32]) -> &[f32] {
     unsafe { std::slice::from_raw_parts(samples.as_ptr().cast::<f32>(), 2 * samples.len()) }
 }
 
+/// Double-precision complex values as interleaved floats (see [`as_floats`]).
+#[inline]
+pub fn as_doubles(values: &[Complex64]) -> &[f64] {
+    // SAFETY: as in `as_floats`: `Complex<f64>` is `#[repr(C)]` { re, im }.
+    unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<f64>(), 2 * values.len()) }
+}
+
+/// [`as_doubles`], mutable.
+#[inline]
+pub fn as_doubles_mut(values: &mut [Complex64]) -> &mut [f64] {
+    // SAFETY: as in `as_floats`; the exclusive borrow is handed on.
+    unsafe { std::slice::from_raw_parts_mut(values.as_mut_ptr().cast::<f64>(), 2 * values.len()) }
+}
+
 /// Per-symbol channel estimates `H(f, n)` of one rx antenna in one window.
 ///
 /// Row-major: `data[n · subcarriers + f]` is symbol `n`, active subcarrier

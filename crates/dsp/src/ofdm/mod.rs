@@ -27,7 +27,7 @@ mod symbol;
 mod timing;
 mod transform;
 
-pub use channel::{as_floats, widen, ChannelMatrix};
+pub use channel::{as_doubles, as_doubles_mut, as_floats, widen, ChannelMatrix};
 pub use config::OfdmConfig;
 pub use demodulate::Demodulator;
 pub use symbol::KnownSymbol;
