@@ -373,6 +373,29 @@ where
     })
 }
 
+/// When a paced capture hands each reply over: the recording's time since
+/// its first reply, divided by the speed, from the moment capture started.
+struct ReplayClock {
+    start: Instant,
+    /// Recording time of the first reply, s.
+    first: Option<f64>,
+    pacing: Pacing,
+}
+
+impl ReplayClock {
+    fn new(pacing: Pacing) -> Self {
+        Self { start: Instant::now(), first: None, pacing }
+    }
+
+    /// Reply at recording time `time_s` (s) is due this long after `start`
+    /// (None: as fast as possible).
+    fn due(&mut self, time_s: f64) -> Option<Duration> {
+        let Pacing::Recorded { speed } = self.pacing else { return None };
+        let t0 = *self.first.get_or_insert(time_s);
+        Some(Duration::from_secs_f64(((time_s - t0) / speed.max(1e-9)).max(0.0)))
+    }
+}
+
 fn capture<S: ReplySource, T>(
     mut replies: S,
     antennas: usize,
@@ -380,14 +403,11 @@ fn capture<S: ReplySource, T>(
     events: Sender<Event<T>>,
     pacing: Pacing,
 ) {
-    let start = Instant::now();
-    let mut first_time: Option<f64> = None;
+    let mut clock = ReplayClock::new(pacing);
     let mut index = 0u64;
     while let Some(time_s) = replies.next_time() {
-        if let Pacing::Recorded { speed } = pacing {
-            let t0 = *first_time.get_or_insert(time_s);
-            let due = Duration::from_secs_f64(((time_s - t0) / speed.max(1e-9)).max(0.0));
-            let elapsed = start.elapsed();
+        if let Some(due) = clock.due(time_s) {
+            let elapsed = clock.start.elapsed();
             if due > elapsed {
                 std::thread::sleep(due - elapsed);
             }
@@ -424,6 +444,8 @@ struct Team<T> {
     replies: VecDeque<InFlight<T>>,
     /// Bumped by every reply handed over and every pre-wake.
     generation: u64,
+    /// Bumped by every pre-wake.
+    prewakes: u64,
     /// Capture has no more replies.
     closed: bool,
 }
@@ -467,9 +489,9 @@ impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
             if state.closed || !wait {
                 return None;
             }
-            let generation = state.generation;
+            let (generation, prewakes) = (state.generation, state.prewakes);
             state = self.work.wait_while(state, |s| s.generation == generation && !s.closed).expect("pipeline state poisoned");
-            if state.replies.iter().all(|r| r.claimed >= self.antennas) && !state.closed {
+            if state.prewakes != prewakes && state.replies.iter().all(|r| r.claimed >= self.antennas) && !state.closed {
                 // Pre-woken: poll, without the lock, for the reply.
                 let handed = self.handed.load(Ordering::Acquire);
                 drop(state);
@@ -484,7 +506,10 @@ impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
 
     /// Wakes the idle workers to poll for a reply about to arrive.
     fn prewake(&self) {
-        lock(&self.state).generation += 1;
+        let mut state = lock(&self.state);
+        state.generation += 1;
+        state.prewakes += 1;
+        drop(state);
         self.work.notify_all();
     }
 
@@ -546,7 +571,7 @@ where
     let depth = config.queue_depth.max(1);
     let shared = TeamShared {
         antennas,
-        state: Mutex::new(Team { replies: VecDeque::new(), generation: 0, closed: false }),
+        state: Mutex::new(Team { replies: VecDeque::new(), generation: 0, prewakes: 0, closed: false }),
         work: Condvar::new(),
         space: Condvar::new(),
         release: Mutex::new(Release::new(fusion, engine, config)),
@@ -563,13 +588,11 @@ where
                 }
             });
         }
-        let start = Instant::now();
-        let mut first_time: Option<f64> = None;
+        let mut clock = ReplayClock::new(config.pacing);
+        let start = clock.start;
         let mut index = 0u64;
         while let Some(time_s) = replies.next_time() {
-            if let Pacing::Recorded { speed } = config.pacing {
-                let t0 = *first_time.get_or_insert(time_s);
-                let due = Duration::from_secs_f64(((time_s - t0) / speed.max(1e-9)).max(0.0));
+            if let Some(due) = clock.due(time_s) {
                 let elapsed = start.elapsed();
                 if config.prewake.is_zero() {
                     if due > elapsed {
