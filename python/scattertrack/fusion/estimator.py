@@ -52,7 +52,13 @@ DECLINE_REASONS = {
     "direction_gate": "direction outside the innovation gate (declined)",
     "yaw_gate": "yaw outside the innovation gate (declined)",
     "solver_failure": "feature row on which the smoother's linear system failed (declined; smoother restarted)",
+    "diverged": "feature row whose solve left the physical bounds, max_speed_m_s or max_controller_range_m (declined; smoother restarted)",
 }
+
+class Diverged(RuntimeError):
+    """A solve whose state left the physical bounds (``MarvelParams.max_speed_m_s``,
+    ``max_controller_range_m``): handled like a failed solve."""
+
 
 # IMU samples the estimator ignores, counted in ``MarvelEstimator.imu_declined``.
 IMU_DECLINE_REASONS = {
@@ -190,6 +196,16 @@ class MarvelParams:
     """None, or "huber": a Huber kernel on the feature factors."""
     huber_k: float = 1.345
 
+    max_speed_m_s: float = 30.0
+    """A solve with the drone faster than this has diverged, m/s (ten times
+    the paper's fastest flight). Why a bound: behind reflecting walls at IQ
+    level the closed loop of features and fusion ran away (a controller at
+    1e108 m); the row is declined and the smoother restarts from the IMU's
+    prediction, like a failed solve."""
+    max_controller_range_m: float = 1000.0
+    """A solve with the controller farther than this from the drone has
+    diverged, m (LoRa backscatter reaches tens of metres; paper: 50 m)."""
+
     compute_sigma: bool = True
     """1-sigma position and controller in the output, from iSAM2's marginal
     covariances of the newest pose, velocity and controller (about 0.4 ms of
@@ -222,6 +238,8 @@ class MarvelParams:
             raise ValueError(f"multipath: 'states' or 'inflation', not {self.multipath!r}")
         if not 0.0 < self.multipath_white_fraction < 1.0:
             raise ValueError("multipath_white_fraction must be in (0, 1)")
+        if not (self.max_speed_m_s > 0.0 and self.max_controller_range_m > 0.0):
+            raise ValueError("max_speed_m_s and max_controller_range_m must be positive")
 
 
 @dataclass
@@ -622,17 +640,17 @@ class MarvelEstimator:
             for _ in range(p.extra_iterations):
                 self._smoother.update()
             estimate = self._read_estimate(time_s, used)
-        except RuntimeError:
+        except RuntimeError as failure:
             # GTSAM reports an ill-conditioned system (IndeterminateLinearSystem)
-            # by throwing; the smoother's state is then unusable. The row is
-            # declined and the smoother restarts from the predicted state,
-            # with priors as wide as the last covariances, so a bad row never
-            # ends the run.
+            # by throwing; the smoother's state is then unusable, and so is
+            # one that left the physical bounds. The row is declined and the
+            # smoother restarts from the predicted state, with priors as wide
+            # as the last covariances, so a bad row never ends the run.
             self._restart(k, time_s, predicted)
             self._last_epoch_time = time_s
             self._preintegrated.resetIntegrationAndSetBias(self._bias)
             self.restarts += 1
-            return self._decline("solver_failure")
+            return self._decline("diverged" if isinstance(failure, Diverged) else "solver_failure")
         self._last_epoch_time = time_s
         # The next interval integrates against the newest bias estimate.
         self._preintegrated.resetIntegrationAndSetBias(self._bias)
@@ -929,6 +947,10 @@ class MarvelEstimator:
             # level: a position of inf) is a solver failure like a thrown
             # one: the caller declines the row and restarts the smoother.
             raise RuntimeError("non-finite estimate")
+        speed = float(np.linalg.norm(velocity))
+        reach = float(np.linalg.norm(controller - np.asarray(pose.translation(), dtype=float)))
+        if speed > self.params.max_speed_m_s or reach > self.params.max_controller_range_m:
+            raise Diverged(f"drone at {speed:.3g} m/s, controller {reach:.3g} m away")
         self._bias = smoother.calculateEstimateConstantBias(B(k))
         self._controller = controller
         if self._baro_chain:

@@ -386,6 +386,31 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     assert np.linalg.norm(results[-1].position - truth) < 1.0
 
 
+def test_a_solve_out_of_physical_bounds_is_declined_as_diverged(circle_flight):
+    """A finite but absurd solve (the runaway seen behind reflecting walls at IQ
+    level): declined as "diverged", the smoother restarts, the track stays sane."""
+    estimator = MarvelEstimator(MarvelParams(**WHITE))
+
+    class RunningAway:
+        def __init__(self, real):
+            self._real = real
+
+        def __getattr__(self, name):
+            return getattr(self._real, name)
+
+        def calculateEstimatePoint3(self, key):
+            return np.array([1e108, 0.0, 0.0])
+
+    results, running_away = _run_with_smoother_swapped(circle_flight, estimator, 40, 30, RunningAway)
+    assert estimator._smoother is not running_away
+    assert results[30] is None
+    assert estimator.declined["diverged"] == 1 and estimator.declined["solver_failure"] == 0
+    assert estimator.restarts == 1
+    assert all(r is not None and np.linalg.norm(r.controller) < 1e3 for r in results[31:])
+    with pytest.raises(ValueError, match="max_speed_m_s"):
+        MarvelParams(max_speed_m_s=0.0)
+
+
 def test_a_non_finite_solve_is_a_solver_failure(circle_flight):
     """A smoother that returns a non-finite state (an overflowed solve) is treated like one
     that throws: the row is declined, the smoother restarts, and no inf reaches the track."""
