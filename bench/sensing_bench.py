@@ -310,7 +310,9 @@ def _progress(show: bool, run: dict, started: float) -> None:
     if not show:
         return
     parts = [f"{method} {_mean([m['snapshot_m']]):.2f} m" for method, m in run["methods"].items()]
-    print(f"  sensing {run['kind']} {run['value']:g} seed {run['seed']}: {', '.join(parts)} "
+    # A flight's value is its scenario's name; the other kinds' are numbers.
+    value = run["value"] if isinstance(run["value"], str) else f"{run['value']:g}"
+    print(f"  sensing {run['kind']} {value} seed {run['seed']}: {', '.join(parts)} "
           f"({time.perf_counter() - started:.0f} s)", file=sys.stderr, flush=True)
 
 

@@ -49,3 +49,14 @@ def test_sensing_scores_one_iq_point_for_both_methods(sensing_bench):
     assert np.all(np.isfinite(marvel["snapshot_m"]))
     # The Doppler-blind baseline is measurably worse at 3 m/s (paper Fig. 9).
     assert np.mean(ulocate["snapshot_m"]) > 5.0 * np.mean(marvel["snapshot_m"])
+
+
+def test_sensing_progress_names_numeric_points_and_flights(sensing_bench, capsys):
+    """The progress line of every kind of point (a flight's value is a scenario
+    name: formatting it as a number crashed `make bench` after 200 s of runs)."""
+    methods = {"marvel": {"snapshot_m": np.array([0.04, 0.06])}}
+    sensing_bench._progress(True, {"kind": "speed", "value": 1.5, "seed": 0, "methods": methods}, 0.0)
+    sensing_bench._progress(True, {"kind": "flight", "value": "marvel-circle-20m", "seed": 2, "methods": methods}, 0.0)
+    err = capsys.readouterr().err
+    assert "sensing speed 1.5 seed 0: marvel 0.05 m" in err
+    assert "sensing flight marvel-circle-20m seed 2: marvel 0.05 m" in err
