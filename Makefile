@@ -9,9 +9,9 @@ export CARGO_TERM_COLOR ?= never
 # antenna's job 191 -> 153 us, the fusion's 124 -> 74 us, the runtime's p99
 # latency about 0.95 -> 0.85 ms). Same results: Rust never fuses or
 # reorders floating-point operations on its own. For a build that runs on
-# any CPU of the architecture: make setup RUST_TARGET_CPU=generic (after
-# make clean). Every cargo call below shares the flags, so nothing is
-# built twice.
+# any CPU of the architecture: make setup RUST_TARGET_CPU=generic (cargo
+# rebuilds when the flags change). Every cargo call below shares the flags,
+# so nothing is built twice.
 RUST_TARGET_CPU ?= native
 export RUSTFLAGS ?= -C target-cpu=$(RUST_TARGET_CPU)
 
