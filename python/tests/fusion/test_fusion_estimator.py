@@ -386,18 +386,23 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     assert np.linalg.norm(results[-1].position - truth) < 1.0
 
 
+class _Delegating:
+    """A stand-in smoother that passes everything to the real one; a test
+    overrides the one read-back it corrupts."""
+
+    def __init__(self, real):
+        self._real = real
+
+    def __getattr__(self, name):
+        return getattr(self._real, name)
+
+
 def test_a_solve_out_of_physical_bounds_is_declined_as_diverged(circle_flight):
     """A finite but absurd solve (the runaway seen behind reflecting walls at IQ
     level): declined as "diverged", the smoother restarts, the track stays sane."""
     estimator = MarvelEstimator(MarvelParams(**WHITE))
 
-    class RunningAway:
-        def __init__(self, real):
-            self._real = real
-
-        def __getattr__(self, name):
-            return getattr(self._real, name)
-
+    class RunningAway(_Delegating):
         def calculateEstimatePoint3(self, key):
             return np.array([1e108, 0.0, 0.0])
 
@@ -416,13 +421,7 @@ def test_a_non_finite_solve_is_a_solver_failure(circle_flight):
     that throws: the row is declined, the smoother restarts, and no inf reaches the track."""
     estimator = MarvelEstimator(MarvelParams(**WHITE))
 
-    class Overflowing:
-        def __init__(self, real):
-            self._real = real
-
-        def __getattr__(self, name):
-            return getattr(self._real, name)
-
+    class Overflowing(_Delegating):
         def calculateEstimateVector(self, key):
             return np.full(3, np.inf)
 
