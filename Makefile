@@ -45,6 +45,7 @@ bench: setup
 	cargo bench -p scattertrack-core --bench glac --bench turbotrack -- --quick
 	cargo bench -p scattertrack-dsp --bench dsp -- --quick
 	$(PY) bench/run.py
+	$(PY) bench/glac_ambiguity.py --seeds 100
 	$(PY) bench/turbotrack.py
 	$(PY) bench/marvel.py
 
