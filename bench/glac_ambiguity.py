@@ -35,10 +35,12 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scattertrack import track as st_track
-from scattertrack.sim import load_scenario, simulate
 from scipy.interpolate import BSpline, make_lsq_spline
 from scipy.optimize import least_squares
+
+from scattertrack import track as st_track
+from scattertrack.io.types import SPEED_OF_LIGHT
+from scattertrack.sim import load_scenario, simulate
 
 
 def _bench_run():
@@ -47,8 +49,6 @@ def _bench_run():
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)
     return module
-
-SPEED_OF_LIGHT = 299_792_458.0
 
 
 @dataclass
@@ -179,13 +179,12 @@ def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,)) -> d
     for after_s in sorted({*(s for s in proposal_s if s < within_s), within_s}):
         proposed_at = start + after_s
         there = truth_at(sim.truth, [proposed_at])[0]
-        ends = list(np.arange(proposed_at, deadline, 0.25)[1:]) + [deadline]
+        ends = sorted({*np.arange(proposed_at, deadline, 0.25), deadline})
         for p in live_candidates(sim, proposed_at):
             proposed += 1
             # Start from the truth shifted onto the candidate, then follow it.
             shift = p - there
-            fit = follow(sim.scene, sim.reads, t0, [proposed_at, *ends] if ends[0] != proposed_at else ends,
-                         lambda t, s=shift: truth_at(sim.truth, t) + s, q)
+            fit = follow(sim.scene, sim.reads, t0, ends, lambda t, s=shift: truth_at(sim.truth, t) + s, q)
             if best is None or fit.cost < best.cost:
                 best = fit
     if best is None:

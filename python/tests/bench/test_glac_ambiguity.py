@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+
 from scattertrack.sim import load_scenario, simulate
 
 BENCH = Path(__file__).resolve().parents[3] / "bench"
