@@ -46,6 +46,7 @@ bench: setup
 	cargo bench -p scattertrack-dsp --bench dsp -- --quick
 	$(PY) bench/run.py
 	$(PY) bench/glac_ambiguity.py --seeds 100
+	$(PY) bench/glac_ambiguity.py --scenario glac-2d-40cms-modpi --seeds 100 --q 2
 	$(PY) bench/turbotrack.py
 	$(PY) bench/marvel.py
 

@@ -82,3 +82,33 @@ def test_main_prints_the_summary(ambiguity, capsys):
     out = capsys.readouterr().out
     assert "glac-3d-arm with 2,0.3,0.0,0.0, seeds 0-1" in out
     assert "the correct candidate wins within 1 s of motion in" in out
+
+
+def test_an_excursion_is_judged_on_the_reads_up_to_it(ambiguity):
+    # Mod-π reader, 40 cm/s lemniscate, seed 2: GLAC leaves the truth for two
+    # rows at 7.72 s, at a tip of the figure, after a 58 ms read gap.
+    sim = _sim("glac-2d-40cms-modpi", seed=2, duration_s=9.0)
+    wavelength = 299_792_458.0 / 915.25e6
+    quarter = wavelength / 4  # candidate spacing of a mod-π reader
+
+    def slipped(sim, t, wrong_m):
+        # The branch a cycle slip on antenna 1 makes: a quarter wavelength
+        # further along that antenna's line of sight.
+        here = ambiguity.truth_at(sim.truth, [t])[0]
+        u = here - sim.scene.antennas[0].position
+        return [here + quarter * u / np.linalg.norm(u)]
+
+    glac = ambiguity.st_track.run("glac", sim.scene, sim.reads)
+    seen = ambiguity.excursion_verdicts(sim, glac, after_s=1.5, q=2.0)
+    assert [round(v["time_s"], 1) for v in seen] == [7.7]
+    assert seen[0]["rows"] == 2 and 0.05 < seen[0]["max_error_m"] < 0.15
+    assert seen[0]["delta"] < 3.0  # the reads so far favour neither branch
+
+    # The same slip made up at an ordinary moment: the reads reject it.
+    fake = glac
+    t_fake = 5.06
+    i = int(np.searchsorted(fake.time_s, t_fake))
+    fake.position[i] = slipped(sim, fake.time_s[i], 0.05)[0]
+    fake_verdicts = ambiguity.excursion_verdicts(sim, fake, after_s=4.0, q=2.0, propose=slipped)
+    at = [v for v in fake_verdicts if abs(v["time_s"] - fake.time_s[i]) < 1e-9]
+    assert at and at[0]["delta"] > 3.0
