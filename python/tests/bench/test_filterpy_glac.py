@@ -88,4 +88,8 @@ def test_bench_helpers_smoke(tmp_path):
     assert bench.main(["--out", str(out), "--skip", "speed,accuracy,variants,budget", "--no-progress"]) == 0
     result = json.loads((out / "latest.json").read_text())
     assert result["settings"]["seeds"] == [0, 1, 2, 3, 4]
+    # The prior block runs each phase-noise prior on the same realistic runs.
+    assert [r["method"] for r in result["priors"]] == [label for label, _, _ in bench.PRIORS]
+    assert len({r["median_3d_mm"] for r in result["priors"]}) == len(bench.PRIORS)
+    assert "The phase-noise prior on realistic reads" in (out / "latest.md").read_text()
     assert (out / "latest.md").read_text().startswith("# scattertrack benchmark")
