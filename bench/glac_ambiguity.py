@@ -272,6 +272,9 @@ def main(argv=None) -> int:
     excursions = unavoidable = 0
     bench_run = _bench_run()
     scenario = load_scenario(args.scenario)
+    if len(scenario.get("tags", [])) > 1:
+        # The fits compare one tag's reads with one truth trajectory.
+        raise SystemExit(f"{args.scenario}: {len(scenario['tags'])} tags; this check takes one-tag scenarios")
     for spec in args.antenna:
         ident, *xyz = spec.split(",")
         for antenna in scenario["scene"]["antennas"]:

@@ -112,3 +112,8 @@ def test_an_excursion_is_judged_on_the_reads_up_to_it(ambiguity):
     fake_verdicts = ambiguity.excursion_verdicts(sim, fake, after_s=4.0, q=2.0, propose=slipped)
     at = [v for v in fake_verdicts if abs(v["time_s"] - fake.time_s[i]) < 1e-9]
     assert at and at[0]["delta"] > 3.0
+
+
+def test_main_refuses_a_scenario_with_several_tags(ambiguity):
+    with pytest.raises(SystemExit, match="5 tags"):
+        ambiguity.main(["--scenario", "glac-3d-arm-5tags", "--seeds", "1"])
