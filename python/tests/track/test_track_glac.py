@@ -153,3 +153,17 @@ def test_paper_likelihood_needs_the_single_model():
     track = run("glac", sim.scene, sim.reads, likelihood="paper", manoeuvre_q=None)
     errors, _ = _errors_after(sim, track, 1.0)
     assert np.median(errors) < 0.01
+
+
+def test_correlated_phase_error_is_a_parameter():
+    params = default_params()
+    assert params["phase_wander_rad"] == 0.0 and params["phase_wander_s"] == 0.5
+    sim = _sim("realistic-3d-arm", 7012, duration=6.0)
+    plain = run("glac", sim.scene, sim.reads)
+    told = run("glac", sim.scene, sim.reads, phase_noise_rad=0.015, phase_wander_rad=0.12)
+    # Same reads, same rows; the correlated share changes R and so the track.
+    assert len(told.time_s) > 0 and not np.allclose(plain.position[: len(told.position)], told.position[: len(plain.position)])
+    with pytest.raises(ValueError, match="phase_wander_rad"):
+        run("glac", sim.scene, sim.reads, phase_wander_rad=-0.1)
+    with pytest.raises(ValueError, match="phase_wander_s"):
+        run("glac", sim.scene, sim.reads, phase_wander_s=0.0)

@@ -76,6 +76,12 @@ pub struct GlacParams {
     pub motion: MotionModel,
     /// 1-sigma phase noise, radians; `None` takes the scene's prior.
     pub phase_noise_rad: Option<f64>,
+    /// 1-sigma of the phase error that is correlated in time on each
+    /// antenna (wander, calibration error, multipath), radians; 0 treats
+    /// all error as white. See [`correlated_variance_factor`].
+    pub phase_wander_rad: f64,
+    /// Correlation time τ of that error, seconds.
+    pub phase_wander_s: f64,
     /// Collect at least this long before initialising, seconds.
     pub init_window_s: f64,
     /// Give up waiting for every antenna after this long, seconds.
@@ -120,6 +126,8 @@ impl Default for GlacParams {
             likelihood: Likelihood::Innovation,
             motion: MotionModel::ConstantVelocity { q: 0.02 },
             phase_noise_rad: None,
+            phase_wander_rad: 0.0,
+            phase_wander_s: 0.5,
             init_window_s: 0.3,
             init_max_window_s: 1.0,
             initial: InitialState::default(),
@@ -158,11 +166,15 @@ impl GlacParams {
             ("init_velocity_sigma_m_s", self.init_velocity_sigma_m_s),
             ("gate_sigmas", self.gate_sigmas),
             ("reinit_gap_s", self.reinit_gap_s),
+            ("phase_wander_s", self.phase_wander_s),
         ];
         for (name, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(Error::Parameter { name: name.into(), reason: format!("must be positive, got {v}") });
             }
+        }
+        if !(self.phase_wander_rad >= 0.0 && self.phase_wander_rad.is_finite()) {
+            return Err(Error::Parameter { name: "phase_wander_rad".into(), reason: "must be zero or positive".into() });
         }
         if !(0.0..1.0).contains(&self.quick_stop) {
             return Err(Error::Parameter { name: "quick_stop".into(), reason: "must be in [0, 1)".into() });
@@ -311,6 +323,10 @@ pub struct Glac {
     group: Vec<PhaseRead>,
     /// Antennas a synchronous group must cover (those that read during init).
     group_antennas: Vec<bool>,
+    /// Per antenna: time of its latest read and the interval before it,
+    /// seconds (∞ before its second read): how correlated its next error is.
+    antenna_read_s: Vec<f64>,
+    antenna_interval_s: Vec<f64>,
     stats: TrackerStats,
 }
 
@@ -318,6 +334,7 @@ impl Glac {
     pub fn new(scene: Scene, params: GlacParams) -> Result<Self> {
         params.validate()?;
         let axes = scene.dimensions;
+        let n_antennas = scene.antennas.len();
         Ok(Self {
             scene,
             params,
@@ -330,6 +347,8 @@ impl Glac {
             last_time_s: f64::NEG_INFINITY,
             group: Vec::new(),
             group_antennas: Vec::new(),
+            antenna_read_s: vec![f64::NEG_INFINITY; n_antennas],
+            antenna_interval_s: vec![f64::INFINITY; n_antennas],
             stats: TrackerStats::default(),
         })
     }
@@ -347,12 +366,27 @@ impl Glac {
         self.params.phase_noise_rad.unwrap_or(self.scene.phase_noise_rad)
     }
 
-    /// Range noise variance R (m²) for a carrier: σ_d = σ_φ λ / 4π
-    /// (round trip: the phase turns 4π per wavelength of range).
+    /// Range noise variance R (m²) of a read on a carrier whose antenna
+    /// was last read `interval_s` before: σ_d = σ_φ λ / 4π (round trip:
+    /// the phase turns 4π per wavelength of range), with
+    /// σ_φ² = σ_white² + σ_wander² · f(ρ) (see [`correlated_variance_factor`]).
     #[inline]
+    fn range_variance_after(&self, frequency_hz: f64, interval_s: f64) -> f64 {
+        let white = self.phase_noise();
+        let wander = self.params.phase_wander_rad;
+        let rho = (-interval_s / self.params.phase_wander_s).exp();
+        let phase_variance = white * white + wander * wander * correlated_variance_factor(rho);
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * frequency_hz);
+        phase_variance * to_range * to_range
+    }
+
+    /// R (m²) at the antennas' typical read interval (the mean of those
+    /// known; white alone before any antenna was read twice): for
+    /// initialisation and the variants that fuse several antennas at once.
     fn range_variance(&self, frequency_hz: f64) -> f64 {
-        let sigma = self.phase_noise() * SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * frequency_hz);
-        sigma * sigma
+        let known: Vec<f64> = self.antenna_interval_s.iter().copied().filter(|t| t.is_finite()).collect();
+        let typical = if known.is_empty() { f64::INFINITY } else { known.iter().sum::<f64>() / known.len() as f64 };
+        self.range_variance_after(frequency_hz, typical)
     }
 
     fn restart(&mut self) {
@@ -455,7 +489,7 @@ impl Glac {
             antenna: self.scene.antennas[m.antenna].position,
             residue: self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
             spacing: self.scene.candidate_spacing(m.frequency_hz),
-            r: self.range_variance(m.frequency_hz),
+            r: self.range_variance_after(m.frequency_hz, self.antenna_interval_s[m.antenna]),
             gate2: self.params.gate_sigmas * self.params.gate_sigmas,
             likelihood: self.params.likelihood,
             axes: self.axes,
@@ -496,7 +530,7 @@ impl Glac {
         let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
         let spacing = self.scene.candidate_spacing(m.frequency_hz);
         let (lo, hi) = self.scene.distance_bounds(m.antenna);
-        let r = self.range_variance(m.frequency_hz);
+        let r = self.range_variance_after(m.frequency_hz, self.antenna_interval_s[m.antenna]);
         let n_lo = ((lo - residue) / spacing).floor().max(0.0) as i64;
         let n_hi = ((hi - residue) / spacing).ceil() as i64;
         self.scratch.clear();
@@ -857,6 +891,8 @@ impl Glac {
             self.restart();
         }
         self.last_time_s = m.time_s;
+        self.antenna_interval_s[m.antenna] = m.time_s - self.antenna_read_s[m.antenna];
+        self.antenna_read_s[m.antenna] = m.time_s;
         if self.phase == Phase::Initialising {
             self.stats.initialising += 1;
             self.buffer.push(*m);
@@ -911,7 +947,23 @@ impl Tracker for Glac {
         self.group.clear();
         self.time_s = f64::NEG_INFINITY;
         self.last_time_s = f64::NEG_INFINITY;
+        self.antenna_read_s.fill(f64::NEG_INFINITY);
+        self.antenna_interval_s.fill(f64::INFINITY);
     }
+}
+
+/// How much more an error with AR(1) correlation ρ between successive reads
+/// of one antenna weighs than white noise of the same variance: the
+/// long-run variance of a sum of such errors is n σ² (1 + ρ)/(1 − ρ) where
+/// white errors give n σ². A filter that takes each read as independent
+/// must count the correlated share at that inflated variance, or it
+/// believes n reads average it down √n times when they hardly do. ρ =
+/// exp(−Δt/τ) with Δt the antenna's read interval and τ the correlation
+/// time: at 30 reads/s over 4 antennas (Δt ≈ 0.13 s) and τ = 0.5 s the
+/// factor is 7.6. Capped at 1e4 (ρ → 1).
+pub fn correlated_variance_factor(rho: f64) -> f64 {
+    let rho = rho.clamp(0.0, 1.0);
+    ((1.0 + rho) / (1.0 - rho)).min(1e4)
 }
 
 #[cfg(test)]
@@ -988,5 +1040,62 @@ mod tests {
         assert!(Glac::new(scene(), bad).is_err());
         let bad = GlacParams { motion: MotionModel::ConstantVelocity { q: -1.0 }, ..GlacParams::default() };
         assert!(Glac::new(scene(), bad).is_err());
+        let bad = GlacParams { phase_wander_rad: -0.1, ..GlacParams::default() };
+        assert!(Glac::new(scene(), bad).is_err());
+        let bad = GlacParams { phase_wander_s: 0.0, ..GlacParams::default() };
+        assert!(Glac::new(scene(), bad).is_err());
+    }
+
+    #[test]
+    fn correlated_error_weighs_by_its_long_run_variance() {
+        assert_eq!(correlated_variance_factor(0.0), 1.0);
+        assert!((correlated_variance_factor(0.5) - 3.0).abs() < 1e-12);
+        assert_eq!(correlated_variance_factor(1.0), 1e4);
+        // The factor is exactly the variance of a sum of AR(1) errors over
+        // white errors, n → ∞: check it by simulating a long AR(1) chain.
+        let (rho, n, blocks) = (0.7_f64, 200usize, 400usize);
+        let mut state = 12345u64;
+        let mut gaussian = || {
+            // Box–Muller from a 64-bit LCG: deterministic, no dependency.
+            let mut uniform = || {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
+            };
+            let (u1, u2) = (uniform(), uniform());
+            (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
+        };
+        let mut e = gaussian();
+        let mut sums = Vec::with_capacity(blocks);
+        for _ in 0..blocks {
+            let mut sum = 0.0;
+            for _ in 0..n {
+                e = rho * e + (1.0 - rho * rho).sqrt() * gaussian();
+                sum += e;
+            }
+            sums.push(sum);
+        }
+        let variance = sums.iter().map(|s| s * s).sum::<f64>() / blocks as f64 / n as f64;
+        let expected = correlated_variance_factor(rho);
+        assert!((variance / expected - 1.0).abs() < 0.2, "simulated {variance}, factor {expected}");
+    }
+
+    #[test]
+    fn range_noise_grows_as_an_antenna_is_read_again_sooner() {
+        let white = Glac::new(scene(), GlacParams::default()).unwrap();
+        let params = GlacParams { phase_noise_rad: Some(0.015), phase_wander_rad: 0.12, ..GlacParams::default() };
+        let wander = Glac::new(scene(), params).unwrap();
+        let f = 915.25e6;
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
+        // No wander: the scene's white noise, whatever the interval.
+        for dt in [0.01, 0.13, f64::INFINITY] {
+            assert!((white.range_variance_after(f, dt) - (0.1 * to_range).powi(2)).abs() < 1e-15);
+        }
+        // First read of an antenna: the stationary variance.
+        let stationary = (0.015f64.powi(2) + 0.12f64.powi(2)) * to_range * to_range;
+        assert!((wander.range_variance_after(f, f64::INFINITY) - stationary).abs() < 1e-15);
+        // 4 antennas at 30 reads/s (0.133 s apart), τ = 0.5 s: σ_φ ≈ 0.33 rad.
+        let sigma = wander.range_variance_after(f, 0.133).sqrt() / to_range;
+        assert!((0.30..0.36).contains(&sigma), "{sigma}");
+        assert!(wander.range_variance_after(f, 0.05) > wander.range_variance_after(f, 0.133));
     }
 }
