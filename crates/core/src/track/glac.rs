@@ -374,8 +374,12 @@ impl Glac {
     fn range_variance_after(&self, frequency_hz: f64, interval_s: f64) -> f64 {
         let white = self.phase_noise();
         let wander = self.params.phase_wander_rad;
-        let rho = (-interval_s / self.params.phase_wander_s).exp();
-        let phase_variance = white * white + wander * wander * correlated_variance_factor(rho);
+        let mut phase_variance = white * white;
+        if wander > 0.0 {
+            // Only then: the exp is a tenth of a converged step.
+            let rho = (-interval_s / self.params.phase_wander_s).exp();
+            phase_variance += wander * wander * correlated_variance_factor(rho);
+        }
         let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * frequency_hz);
         phase_variance * to_range * to_range
     }
@@ -384,8 +388,9 @@ impl Glac {
     /// known; white alone before any antenna was read twice): for
     /// initialisation and the variants that fuse several antennas at once.
     fn range_variance(&self, frequency_hz: f64) -> f64 {
-        let known: Vec<f64> = self.antenna_interval_s.iter().copied().filter(|t| t.is_finite()).collect();
-        let typical = if known.is_empty() { f64::INFINITY } else { known.iter().sum::<f64>() / known.len() as f64 };
+        let (sum, count) =
+            self.antenna_interval_s.iter().filter(|t| t.is_finite()).fold((0.0, 0usize), |(s, n), t| (s + t, n + 1));
+        let typical = if count == 0 { f64::INFINITY } else { sum / count as f64 };
         self.range_variance_after(frequency_hz, typical)
     }
 
