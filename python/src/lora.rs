@@ -282,6 +282,9 @@ impl LoraEpochProcessor {
         d.set_item("tag_azimuth", tags(&|e| e.azimuth))?;
         d.set_item("tag_elevation", tags(&|e| e.elevation))?;
         d.set_item("tag_spectrum_db", tags(&|e| e.spectrum_db))?;
+        d.set_item("tag_used", f.tag_used.clone())?;
+        d.set_item("angle_spread_rad", f.angle_spread_rad)?;
+        d.set_item("range_spread_m", f.range_spread_m)?;
         d.set_item("azimuth", f.azimuth)?;
         d.set_item("elevation", f.elevation)?;
         d.set_item("direction", f.direction.to_vec().into_pyarray(py))?;

@@ -39,12 +39,12 @@
 
 use super::chirp::ChirpConfig;
 use super::doppler::{cfo_hz, delay_from_frequency_s, pair_half_difference, pair_mean, translational_doppler_hz};
-use super::geometry::{add, cross, mat_vec, normalize, split_yaw, Mat3, Vec3};
+use super::geometry::{add, cross, dot, mat_vec, normalize, split_yaw, Mat3, Vec3};
 use super::heading::{solve_yaw, HeadingConfig, HeadingEstimate, PairObservation, YawGeometry};
 use super::music::{combine_angles, music, AngleCombine, ArrayGeometry, MusicConfig, MusicEstimate};
 use super::peak::{Peak, PeakFinder, PeakOptions, Sample};
 use super::phase::{channel_phase, PhaseCorrection};
-use super::range::{estimate_range, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect};
+use super::range::{estimate_range, group_deviations_m, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect};
 use crate::error::{Error, Result};
 use crate::SPEED_OF_LIGHT;
 
@@ -117,14 +117,20 @@ pub struct EpochConfig {
     /// Doppler is removed (phases keep their ramp between the chirps, the
     /// timing range keeps the Doppler).
     pub ignore_doppler: bool,
-    /// A pair enters the chirp-timing range only when both its peaks are at
-    /// least this per-sample SNR, dB (the SX1276's SF12 decoding limit,
-    /// -20 dB: 16 dB after the 36 dB dechirp). A tag in a multipath fade on
-    /// one antenna reads noise there (about -27 dB: the largest of 4096
-    /// bins), and its peak frequency is anywhere in +-250 kHz; one such pair
-    /// in the mean put the timing range kilometres off. If no pair clears it,
-    /// every pair is used.
-    pub min_timing_snr_db: f64,
+    /// The decoding threshold of one peak, per-sample SNR, dB (the SX1276's
+    /// SF12 demodulation limit, -20 dB: 16 dB after the 36 dB dechirp). A
+    /// (channel, tag, antenna) in a multipath fade reads noise (about -27
+    /// dB: the largest of 4096 bins): its frequency is anywhere in +-250 kHz
+    /// and its phase is the reflections' sum, not the line of sight's. Such
+    /// a peak is masked through the whole chain: a pair enters the
+    /// chirp-timing range only when both its peaks clear it (one noise pair
+    /// in the mean put the timing range kilometres off); a tag's channel
+    /// enters MUSIC only when all its antennas clear it, and a tag without
+    /// such a channel is left out of the combined angle; a phase group of
+    /// the range profile keeps only its clear peaks. Where nothing clears it
+    /// (the epoch's SNR test declines such an epoch anyway) every peak is
+    /// used.
+    pub min_peak_snr_db: f64,
 }
 
 impl EpochConfig {
@@ -157,7 +163,7 @@ impl EpochConfig {
             angle_combine: AngleCombine::HarmonicMean,
             heading: HeadingConfig { min_omega_rad_s: 0.05, chirp_rate_hz_per_s: Some(chirp.chirp_rate_hz_per_s()) },
             ignore_doppler: false,
-            min_timing_snr_db: -20.0,
+            min_peak_snr_db: -20.0,
         }
     }
 
@@ -280,8 +286,32 @@ pub struct EpochFeatures {
     pub range: RangeEstimate,
     /// Per-antenna phase ranges, m (NaN where an antenna's profile failed).
     pub antenna_ranges_m: Vec<f64>,
-    /// MUSIC per tag.
+    /// MUSIC per tag (a tag without a clear channel: from all its channels,
+    /// reported but not combined).
     pub tag_angles: Vec<MusicEstimate>,
+    /// Which tags entered the combined angle (a channel whose peaks clear
+    /// `min_peak_snr_db` on every antenna).
+    pub tag_used: Vec<bool>,
+    /// Consistency of the combined angle, rad per tangent axis: the spread
+    /// of the two opposing pairs' mean directions (`sqrt(sum d_p^2 / (2 (n
+    /// - 1)))`, `d_p` the angle between pair p's mean direction and the
+    /// mean of the pairs'). The tags see the multipath through different
+    /// fades (they are 0.47-0.66 m, 1.4-2 wavelengths, apart), so their
+    /// disagreement measures the angle's multipath error, which the thermal
+    /// bound does not. Pair means, because an opposing pair's lever arms
+    /// from the centroid cancel whatever the attitude. `None` unless both
+    /// pairs have both tags in use.
+    pub angle_spread_rad: Option<f64>,
+    /// Consistency of the phase range, m: the sample standard deviation of
+    /// the phase groups' own ranges (each group's profile peak nearest the
+    /// combined range, within one resolution) about their mean, per
+    /// antenna and opposing pair (the pair's two per-tag groups averaged:
+    /// their lever arms cancel) by default, after each antenna's expected
+    /// offset (half its offset along the line of sight). Each group's
+    /// phases see their own fades, so the scatter measures the multipath
+    /// error; a common error (a wrong Doppler ramp, a wrong fringe) does
+    /// not show in it. `None` with fewer than two.
+    pub range_spread_m: Option<f64>,
     /// Combined angle, rad, and its direction.
     pub azimuth: f64,
     pub elevation: f64,
@@ -340,17 +370,36 @@ impl EpochProcessor {
         let centre_phase =
             |j: usize, k: usize, m: usize| peaks[idx(j, k, m)].amplitude_centre.arg() - c.calibration(m, j, k);
 
-        // 2. Angle per tag (snapshots: the two channels).
+        // Peaks above the decoding threshold (`min_peak_snr_db`); if none
+        // is, all of them (the epoch's SNR test declines it anyway).
+        let min_snr = 10f64.powf(c.min_peak_snr_db / 10.0);
+        let mut clear: Vec<bool> = peaks.iter().map(|p| p.snr >= min_snr).collect();
+        if !clear.iter().any(|&b| b) {
+            clear.iter_mut().for_each(|b| *b = true);
+        }
+
+        // 2. Angle per tag (snapshots: the tag's channels whose peaks clear
+        // the threshold on every antenna; a snapshot needs all antennas).
         let mut tag_angles = Vec::with_capacity(TAGS);
-        for k in 0..TAGS {
+        let mut tag_used = [false; TAGS];
+        for (k, used) in tag_used.iter_mut().enumerate() {
+            let clear_channels: Vec<usize> =
+                (0..CHANNELS).filter(|&j| (0..m_ant).all(|m| clear[idx(j, k, m)])).collect();
+            *used = !clear_channels.is_empty();
+            // A tag without a clear channel still gets its (reported, unused) angle from all channels.
+            let channels: Vec<usize> = if *used { clear_channels } else { (0..CHANNELS).collect() };
             let phases: Vec<f64> = (0..m_ant)
-                .flat_map(|m| (0..CHANNELS).map(move |j| (j, m)))
+                .flat_map(|m| channels.iter().map(move |&j| (j, m)))
                 .map(|(j, m)| centre_phase(j, k, m))
                 .collect();
-            let freqs: Vec<f64> = (0..CHANNELS).map(|j| c.carrier_hz(j, k)).collect();
+            let freqs: Vec<f64> = channels.iter().map(|&j| c.carrier_hz(j, k)).collect();
             tag_angles.push(music(&c.array, &c.music, &phases, &freqs)?);
         }
-        let angles: Vec<(f64, f64)> = tag_angles.iter().map(|e| (e.azimuth, e.elevation)).collect();
+        if !tag_used.iter().any(|&u| u) {
+            tag_used = [true; TAGS];
+        }
+        let angles: Vec<(f64, f64)> =
+            tag_angles.iter().zip(&tag_used).filter(|(_, &u)| u).map(|(e, _)| (e.azimuth, e.elevation)).collect();
         let (azimuth, elevation) = combine_angles(&angles, c.angle_combine)?;
         let direction = super::geometry::direction(azimuth, elevation);
         let u = match corrections.direction {
@@ -380,7 +429,6 @@ impl EpochProcessor {
         // Each pair's timing term and its variance; `clear`: both peaks
         // above the detection SNR.
         let mut timing_terms: Vec<(f64, f64, bool)> = Vec::with_capacity(CHANNELS * m_ant * 2);
-        let min_snr = 10f64.powf(c.min_timing_snr_db / 10.0);
         for j in 0..CHANNELS {
             for m in 0..m_ant {
                 for (p, &(a, b)) in c.pairs.iter().enumerate() {
@@ -392,7 +440,7 @@ impl EpochProcessor {
                         - 0.5 * (cfo[a] + cfo[b])
                         - 0.5 * (translational[j * TAGS + a] + translational[j * TAGS + b]);
                     let variance = 0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
-                    timing_terms.push((t, variance, pa.snr >= min_snr && pb.snr >= min_snr));
+                    timing_terms.push((t, variance, clear[idx(j, a, m)] && clear[idx(j, b, m)]));
                 }
             }
         }
@@ -402,12 +450,23 @@ impl EpochProcessor {
         let timing_range_sigma_m = SPEED_OF_LIGHT / 2.0 * timing_sigma_hz / c.chirp.chirp_rate_hz_per_s();
 
         // Per-tag Doppler for the phase ramp: translation + the tag's
-        // rotational shift (antenna average; sign + for a pair's first tag).
+        // rotational shift (sign + for a pair's first tag), averaged over
+        // the antennas where both of the pair's peaks are clear: one noise
+        // peak's half difference is up to 125 kHz, and its ramp scrambles
+        // the pair's phases on every antenna. No clear antenna: no
+        // rotational shift is removed.
         let mut doppler = [0.0; CHANNELS * TAGS];
         if !c.ignore_doppler {
             for j in 0..CHANNELS {
                 for (p, &(a, b)) in c.pairs.iter().enumerate() {
-                    let rot = (0..m_ant).map(|m| rotational_hz[(j * m_ant + m) * 2 + p]).sum::<f64>() / m_ant as f64;
+                    let clear_antennas: Vec<usize> =
+                        (0..m_ant).filter(|&m| clear[idx(j, a, m)] && clear[idx(j, b, m)]).collect();
+                    let rot = if clear_antennas.is_empty() {
+                        0.0
+                    } else {
+                        clear_antennas.iter().map(|&m| rotational_hz[(j * m_ant + m) * 2 + p]).sum::<f64>()
+                            / clear_antennas.len() as f64
+                    };
                     doppler[j * TAGS + a] = translational[j * TAGS + a] + rot;
                     doppler[j * TAGS + b] = translational[j * TAGS + b] - rot;
                 }
@@ -434,49 +493,77 @@ impl EpochProcessor {
 
         // 5. Phase range.
         let weight = |p: &Peak| if c.magnitude_weights { p.amplitude_centre.norm() } else { 1.0 };
-        let groups_of = |m: usize| -> Result<Vec<PhaseGroup>> {
+        // One antenna's phase groups from the peaks `mask` allows, each with
+        // its tag when it has one (per-tag groups); a group needs two peaks
+        // (one frequency carries no range).
+        let groups_of = |m: usize, mask: &[bool]| -> Result<Vec<(PhaseGroup, Option<usize>)>> {
             let mut groups = Vec::new();
+            let mut push = |sel: Vec<(usize, usize)>, tag: Option<usize>| -> Result<()> {
+                if sel.len() >= 2 {
+                    groups.push((
+                        PhaseGroup::new(
+                            sel.iter().map(|&(j, k)| c.carrier_hz(j, k)).collect(),
+                            sel.iter().map(|&(j, k)| phases_rad[idx(j, k, m)]).collect(),
+                            sel.iter().map(|&(j, k)| weight(&peaks[idx(j, k, m)])).collect(),
+                            sel.iter().map(|&(j, k)| peaks[idx(j, k, m)].phase_sigma_rad).collect(),
+                        )?,
+                        tag,
+                    ));
+                }
+                Ok(())
+            };
             match c.range_coherence {
                 RangeCoherence::AcrossTags => {
-                    let sel: Vec<(usize, usize)> = (0..CHANNELS).flat_map(|j| (0..TAGS).map(move |k| (j, k))).collect();
-                    groups.push(PhaseGroup::new(
-                        sel.iter().map(|&(j, k)| c.carrier_hz(j, k)).collect(),
-                        sel.iter().map(|&(j, k)| phases_rad[idx(j, k, m)]).collect(),
-                        sel.iter().map(|&(j, k)| weight(&peaks[idx(j, k, m)])).collect(),
-                        sel.iter().map(|&(j, k)| peaks[idx(j, k, m)].phase_sigma_rad).collect(),
-                    )?);
+                    push(
+                        (0..CHANNELS)
+                            .flat_map(|j| (0..TAGS).map(move |k| (j, k)))
+                            .filter(|&(j, k)| mask[idx(j, k, m)])
+                            .collect(),
+                        None,
+                    )?;
                 }
                 RangeCoherence::PerTag => {
                     for k in 0..TAGS {
-                        groups.push(PhaseGroup::new(
-                            (0..CHANNELS).map(|j| c.carrier_hz(j, k)).collect(),
-                            (0..CHANNELS).map(|j| phases_rad[idx(j, k, m)]).collect(),
-                            (0..CHANNELS).map(|j| weight(&peaks[idx(j, k, m)])).collect(),
-                            (0..CHANNELS).map(|j| peaks[idx(j, k, m)].phase_sigma_rad).collect(),
-                        )?);
+                        push((0..CHANNELS).map(|j| (j, k)).filter(|&(j, k)| mask[idx(j, k, m)]).collect(), Some(k))?;
                     }
                 }
                 RangeCoherence::PairSums => {
-                    let sel: Vec<(usize, (usize, usize))> =
-                        (0..CHANNELS).flat_map(|j| c.pairs.iter().map(move |&p| (j, p))).collect();
-                    groups.push(PhaseGroup::new(
-                        sel.iter().map(|&(j, (a, b))| c.carrier_hz(j, a) + c.carrier_hz(j, b)).collect(),
-                        sel.iter()
-                            .map(|&(j, (a, b))| super::wrap_angle(phases_rad[idx(j, a, m)] + phases_rad[idx(j, b, m)]))
-                            .collect(),
-                        sel.iter()
-                            .map(|&(j, (a, b))| weight(&peaks[idx(j, a, m)]) * weight(&peaks[idx(j, b, m)]))
-                            .collect(),
-                        sel.iter()
-                            .map(|&(j, (a, b))| {
-                                peaks[idx(j, a, m)].phase_sigma_rad.hypot(peaks[idx(j, b, m)].phase_sigma_rad)
-                            })
-                            .collect(),
-                    )?);
+                    let sel: Vec<(usize, (usize, usize))> = (0..CHANNELS)
+                        .flat_map(|j| c.pairs.iter().map(move |&p| (j, p)))
+                        .filter(|&(j, (a, b))| mask[idx(j, a, m)] && mask[idx(j, b, m)])
+                        .collect();
+                    if sel.len() >= 2 {
+                        groups.push((
+                            PhaseGroup::new(
+                                sel.iter().map(|&(j, (a, b))| c.carrier_hz(j, a) + c.carrier_hz(j, b)).collect(),
+                                sel.iter()
+                                    .map(|&(j, (a, b))| {
+                                        super::wrap_angle(phases_rad[idx(j, a, m)] + phases_rad[idx(j, b, m)])
+                                    })
+                                    .collect(),
+                                sel.iter()
+                                    .map(|&(j, (a, b))| weight(&peaks[idx(j, a, m)]) * weight(&peaks[idx(j, b, m)]))
+                                    .collect(),
+                                sel.iter()
+                                    .map(|&(j, (a, b))| {
+                                        peaks[idx(j, a, m)].phase_sigma_rad.hypot(peaks[idx(j, b, m)].phase_sigma_rad)
+                                    })
+                                    .collect(),
+                            )?,
+                            None,
+                        ));
+                    }
                 }
             }
             Ok(groups)
         };
+        // The clear peaks' groups; where no group is left, every peak's.
+        let mut per_antenna: Vec<Vec<(PhaseGroup, Option<usize>)>> =
+            (0..m_ant).map(|m| groups_of(m, &clear)).collect::<Result<_>>()?;
+        if per_antenna.iter().all(|g| g.is_empty()) {
+            let all = vec![true; peaks.len()];
+            per_antenna = (0..m_ant).map(|m| groups_of(m, &all)).collect::<Result<_>>()?;
+        }
         let mut range_config = c.range.clone();
         if let RangeWindow::AroundTiming { half_width_m } = c.range_window {
             let centre = timing_range_m.clamp(c.range.min_m, c.range.max_m);
@@ -488,13 +575,53 @@ impl EpochProcessor {
             range_config.select = RangeSelect::NearestTo(timing_range_m);
         }
         let mut all_groups = Vec::new();
+        // Each group's (antenna, tag) for its expected offset below.
+        let mut group_of = Vec::new();
         let mut antenna_ranges_m = Vec::with_capacity(m_ant);
-        for m in 0..m_ant {
-            let groups = groups_of(m)?;
+        for (m, groups) in per_antenna.into_iter().enumerate() {
+            let (groups, tags): (Vec<PhaseGroup>, Vec<Option<usize>>) = groups.into_iter().unzip();
             antenna_ranges_m.push(estimate_range(&groups, &range_config).map_or(f64::NAN, |e| e.range_m));
             all_groups.extend(groups);
+            group_of.extend(tags.into_iter().map(|k| (m, k)));
         }
         let range = estimate_range(&all_groups, &range_config)?;
+
+        // Consistency spreads. A tag's direction and range differ from the
+        // centroid's by its lever arm `R (t_k - c)` (0.33 m: 3 degrees of
+        // direction at 6 m), which depends on the yaw — unobservable on a
+        // straight flight, and a yaw error left in the lever arm reads as
+        // scatter. An opposing pair's lever arms are opposite, so the pair's
+        // mean direction and mean range are the centroid's to first order
+        // whatever the attitude: the spreads are taken over pair means. An
+        // antenna's range differs by half its offset along the line of
+        // sight (the receive leg alone changes), which is removed.
+        let pair_directions: Vec<Vec3> = c
+            .pairs
+            .iter()
+            .filter(|&&(a, b)| tag_used[a] && tag_used[b])
+            .filter_map(|&(a, b)| normalize(&add(&tag_angles[a].direction, &tag_angles[b].direction)))
+            .collect();
+        let pair_mean = normalize(&pair_directions.iter().fold([0.0; 3], |s, d| add(&s, d))).unwrap_or(direction);
+        let angle_spread_rad = direction_spread(&pair_directions, &pair_mean);
+        let group_deviation = group_deviations_m(&all_groups, range.range_m);
+        let antenna_offset = |m: usize| -0.5 * dot(&c.array.elements()[m], &direction);
+        let of_tag = |m: usize, k: usize| {
+            group_of.iter().zip(&group_deviation).find(|(&(gm, gk), _)| gm == m && gk == Some(k)).and_then(|(_, &d)| d)
+        };
+        let mut deviations: Vec<f64> = group_of
+            .iter()
+            .zip(&group_deviation)
+            .filter(|(&(_, k), _)| k.is_none())
+            .filter_map(|(&(m, _), &d)| Some(d? - antenna_offset(m)))
+            .collect();
+        for m in 0..m_ant {
+            for &(a, b) in &c.pairs {
+                if let (Some(da), Some(db)) = (of_tag(m, a), of_tag(m, b)) {
+                    deviations.push(0.5 * (da + db) - antenna_offset(m));
+                }
+            }
+        }
+        let range_spread_m = rms_spread(&deviations);
 
         // 6. Heading.
         let heading = match (corrections.attitude, corrections.omega_body) {
@@ -504,6 +631,11 @@ impl EpochProcessor {
                 for j in 0..CHANNELS {
                     for m in 0..m_ant {
                         for &(a, b) in &c.pairs {
+                            // Only pairs whose peaks are both clear (a noise
+                            // peak's frequency is no rotational shift).
+                            if !(clear[idx(j, a, m)] && clear[idx(j, b, m)]) {
+                                continue;
+                            }
                             let (pa, pb) = (&peaks[idx(j, a, m)], &peaks[idx(j, b, m)]);
                             observations.push(PairObservation {
                                 tag_a: c.tag_positions[a],
@@ -545,6 +677,9 @@ impl EpochProcessor {
             range,
             antenna_ranges_m,
             tag_angles,
+            tag_used: tag_used.to_vec(),
+            angle_spread_rad,
+            range_spread_m,
             azimuth,
             elevation,
             direction,
@@ -553,6 +688,27 @@ impl EpochProcessor {
             min_snr_db,
         })
     }
+}
+
+/// Per-axis RMS deviation (rad) of unit directions from their combined
+/// direction `mean` (see [`EpochFeatures::angle_spread_rad`]); `None` for
+/// fewer than two.
+fn direction_spread(directions: &[Vec3], mean: &Vec3) -> Option<f64> {
+    let n = directions.len();
+    (n >= 2).then(|| {
+        let sum: f64 = directions.iter().map(|d| super::geometry::dot(d, mean).clamp(-1.0, 1.0).acos().powi(2)).sum();
+        (sum / (2.0 * (n - 1) as f64)).sqrt()
+    })
+}
+
+/// Sample standard deviation (over `n - 1`, same unit as the values);
+/// `None` for fewer than two.
+fn rms_spread(deviations: &[f64]) -> Option<f64> {
+    let n = deviations.len();
+    (n >= 2).then(|| {
+        let mean = deviations.iter().sum::<f64>() / n as f64;
+        (deviations.iter().map(|d| (d - mean).powi(2)).sum::<f64>() / (n - 1) as f64).sqrt()
+    })
 }
 
 /// The chirp-timing term (Hz) and its 1-sigma from the pairs' terms
@@ -735,6 +891,83 @@ mod tests {
         // None clear: the plain mean of all (as before the test existed).
         let (mean, sigma) = timing_mean(&[(1.0, 1.0, false), (3.0, 1.0, false)]);
         assert!((mean - 2.0).abs() < 1e-12 && (sigma - 2f64.sqrt() / 2.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn spreads_of_directions_and_deviations() {
+        let mean = [0.0, 1.0, 0.0];
+        let tilt = |a: f64| [a.sin(), a.cos(), 0.0];
+        // Two tags 0.1 rad either side: sum of squares 0.02 over 2 (n - 1) = 2.
+        let s = direction_spread(&[tilt(0.1), tilt(-0.1)], &mean).unwrap();
+        assert!((s - 0.1).abs() < 1e-9, "{s}");
+        assert!(direction_spread(&[tilt(0.1)], &mean).is_none());
+        assert!((rms_spread(&[0.3, -0.3, 0.0]).unwrap() - 0.3).abs() < 1e-12);
+        assert!((rms_spread(&[1.3, 0.7, 1.0]).unwrap() - 0.3).abs() < 1e-12);
+        assert!(rms_spread(&[1.0]).is_none());
+    }
+
+    /// One (channel, tag, antenna) in a deep fade: its chirp is noise only
+    /// (as the floor's image leaves it in a reflecting room). Masked, the
+    /// angle and the range stay exact and their spreads small; without the
+    /// mask (threshold -inf, the chain before the mask) the faded tag's
+    /// random phase pulls the angle and widens both spreads.
+    #[test]
+    fn a_faded_peak_is_masked_out_of_the_angle_and_the_range() {
+        let config = EpochConfig::marvel();
+        let mut rng = StdRng::seed_from_u64(31);
+        let mut scene = Scene::hover([-3.0, 12.0, 2.0], 10.0);
+        scene.clock_error = 0.5e-6;
+        let mut y = simulate(&config, &scene, &mut rng);
+        // Chirp (j = 0, k = 1, m = 2) replaced by the noise alone.
+        let (n, m_ant) = (config.chirp.samples(), config.antennas());
+        let faded_index = m_ant + 2; // (j 0, tag 1, antenna 2): (j * 4 + k) * M + m
+        let start = faded_index * n;
+        let sigma = (10f64.powf(-scene.snr_db / 10.0) / 2.0).sqrt();
+        let normal = rand_distr::Normal::new(0.0, sigma).unwrap();
+        for v in &mut y[start..start + n] {
+            use rand_distr::Distribution;
+            *v = num_complex::Complex32::new(normal.sample(&mut rng) as f32, normal.sample(&mut rng) as f32);
+        }
+        let corrections =
+            Corrections { clock_error: scene.clock_error, attitude: Some(scene.attitude), ..Default::default() };
+        let (r, az, el) = truth(&config, &scene);
+        let masked = EpochProcessor::new(config.clone()).unwrap().process(&y, &corrections).unwrap();
+        let unmasked = EpochProcessor::new(EpochConfig { min_peak_snr_db: f64::NEG_INFINITY, ..config.clone() })
+            .unwrap()
+            .process(&y, &corrections)
+            .unwrap();
+        let faded = &masked.peaks[faded_index];
+        println!(
+            "faded peak {:.1} dB; angle error masked {:.3} deg (spread {:.3} deg, tags {:?}), unmasked {:.3} deg \
+             (spread {:.3} deg); range error masked {:+.4} m (spread {:.4} m), unmasked {:+.4} m (spread {:.4} m)",
+            10.0 * faded.snr.log10(),
+            angle_error(&masked, az, el).to_degrees(),
+            masked.angle_spread_rad.unwrap().to_degrees(),
+            masked.tag_used,
+            angle_error(&unmasked, az, el).to_degrees(),
+            unmasked.angle_spread_rad.unwrap().to_degrees(),
+            masked.range.range_m - r,
+            masked.range_spread_m.unwrap(),
+            unmasked.range.range_m - r,
+            unmasked.range_spread_m.unwrap(),
+        );
+        assert!(faded.snr < 10f64.powf(config.min_peak_snr_db / 10.0));
+        // The pair means need no attitude: the same spreads without it.
+        let blind = EpochProcessor::new(config.clone())
+            .unwrap()
+            .process(&y, &Corrections { attitude: None, ..corrections })
+            .unwrap();
+        assert_eq!(blind.angle_spread_rad, masked.angle_spread_rad);
+        assert_eq!(blind.range_spread_m, masked.range_spread_m);
+        // Tag 1 keeps its clear channel 1.
+        assert_eq!(masked.tag_used, vec![true; TAGS]);
+        assert!(angle_error(&masked, az, el) < 0.3f64.to_radians());
+        assert!(angle_error(&unmasked, az, el) > 3.0 * angle_error(&masked, az, el));
+        assert!(masked.angle_spread_rad.unwrap() < 0.3f64.to_radians());
+        assert!(unmasked.angle_spread_rad.unwrap() > 3.0 * masked.angle_spread_rad.unwrap());
+        assert!((masked.range.range_m - r).abs() < 0.03);
+        assert!(masked.range_spread_m.unwrap() < 0.05);
+        assert!(unmasked.range_spread_m.unwrap() > 3.0 * masked.range_spread_m.unwrap());
     }
 
     #[test]

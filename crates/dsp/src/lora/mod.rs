@@ -57,4 +57,4 @@ pub use heading::{
 pub use music::{combine_angles, music, AngleCombine, ArrayGeometry, ArrayKind, MusicConfig, MusicEstimate};
 pub use peak::{tone_crlb, Peak, PeakFinder, PeakOptions, Sample};
 pub use phase::{channel_phase, refer_phase, wrap_angle, PhaseCorrection};
-pub use range::{delay_profile, estimate_range, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect};
+pub use range::{delay_profile, estimate_range, group_deviations_m, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect};

@@ -248,6 +248,32 @@ pub fn estimate_range(groups: &[PhaseGroup], config: &RangeConfig) -> Result<Ran
     Ok(RangeEstimate { range_m, peak_range_m, power: first_power, peak_power, ambiguity, sigma_m, resolution_m })
 }
 
+/// Each group's own range minus `range_m` (m): the peak of the group's
+/// profile nearest to `range_m` within one resolution `c0 / (2 span)` of it
+/// (a two-frequency group's profile repeats with that period, so the
+/// nearest peak is within half of it); `None` for a group spanning no
+/// frequency. One entry per group, in order. The scatter of these deviations is a consistency measure of
+/// the combined range (multipath reaches each group through its own fades).
+pub fn group_deviations_m(groups: &[PhaseGroup], range_m: f64) -> Vec<Option<f64>> {
+    groups
+        .iter()
+        .map(|g| {
+            let span = g.span_hz();
+            if !(span > 0.0 && range_m.is_finite()) {
+                return None;
+            }
+            let resolution = SPEED_OF_LIGHT / (2.0 * span);
+            let config = RangeConfig {
+                min_m: range_m - resolution,
+                max_m: range_m + resolution,
+                select: RangeSelect::NearestTo(range_m),
+                ..RangeConfig::default()
+            };
+            estimate_range(std::slice::from_ref(g), &config).ok().map(|e| e.range_m - range_m)
+        })
+        .collect()
+}
+
 /// Golden-section maximum of `P^2` on `[a, b]`: `(r, P^2(r))`.
 fn golden_max(groups: &[PhaseGroup], mut a: f64, mut b: f64, tolerance: f64) -> (f64, f64) {
     let ratio = (5f64.sqrt() - 1.0) / 2.0;
@@ -312,6 +338,27 @@ mod tests {
     /// c0 / (2 x 2.16 MHz) = 69 m, resolution c0 / (2 x 25.9 MHz) = 5.8 m.
     fn all_channels() -> Vec<f64> {
         (0..13).map(|i| 902.1e6 + 2.16e6 * i as f64 + 0.5e6).collect()
+    }
+
+    #[test]
+    fn group_deviations_are_each_groups_own_range_within_its_fringe() {
+        // Two-frequency groups at 902.6 / 928.5 MHz (fringe 5.79 m): one at
+        // 10.00 m, one at 10.40 m, one at 10.00 m + 2 fringes - 0.2 m.
+        let freqs = vec![902.6e6, 928.52e6];
+        let fringe = SPEED_OF_LIGHT / (2.0 * (freqs[1] - freqs[0]));
+        let group = |r: f64| {
+            let th: Vec<f64> = freqs.iter().map(|f| (-4.0 * PI * f * r / SPEED_OF_LIGHT) % (2.0 * PI) + 0.7).collect();
+            PhaseGroup::uniform(freqs.clone(), th).unwrap()
+        };
+        let groups = [group(10.0), group(10.4), group(10.0 + 2.0 * fringe - 0.2)];
+        let d = group_deviations_m(&groups, 10.0);
+        assert_eq!(d.len(), 3);
+        for (got, want) in d.iter().zip([0.0, 0.4, -0.2]) {
+            assert!((got.unwrap() - want).abs() < 1e-3, "{d:?}");
+        }
+        // A single frequency carries no range.
+        let single = PhaseGroup::uniform(vec![902.6e6], vec![0.1]).unwrap();
+        assert_eq!(group_deviations_m(&[single], 10.0), vec![None]);
     }
 
     #[test]
