@@ -139,6 +139,14 @@ SENSING_DEFAULTS = {
     # and hurt behind a ground reflection at 20 m, where the timing range is
     # the one that is fringes off (one seed 5.6 -> 19.6 m snapshots).
     "fringe_consistency_sigmas": math.inf,
+    # Add the DSP's consistency spreads to the row's sigmas (module docstring,
+    # step 6): the scatter of the four tags' MUSIC directions to the angle's,
+    # the scatter of the (antenna, tag) phase ranges to the range's. The
+    # thermal bounds and the floors say nothing about multipath; in a
+    # reflecting room (docs/marvel.md section 11) the angle is 7-10 degrees
+    # off where its thermal sigma is a tenth of a degree, and the fusion's
+    # gate then declined nearly every direction.
+    "consistency_sigmas": True,
 }
 """Parameters of the pose sensing from a recording (SI units; module docstring)."""
 
@@ -365,6 +373,8 @@ def _resolve_sensing(params: dict) -> dict:
     if isinstance(sigmas, bool) or not isinstance(sigmas, (int, float)) or not sigmas > 0:
         raise ValueError(f"parameter fringe_consistency_sigmas must be > 0 (inf: off), got {sigmas!r}")
     out["fringe_consistency_sigmas"] = float(sigmas)
+    if not isinstance(out["consistency_sigmas"], bool):
+        raise ValueError(f"parameter consistency_sigmas must be True or False, got {out['consistency_sigmas']!r}")
     count = out["clock_flight_epochs"]
     if isinstance(count, bool) or not isinstance(count, int) or count < 1:
         raise ValueError(f"parameter clock_flight_epochs must be a positive integer, got {count!r}")
@@ -406,6 +416,11 @@ def _predicted_range(estimator, predicted, centroid: np.ndarray) -> tuple[float,
     if not (math.isfinite(variance) and variance > 0.0):
         return None
     return distance, math.sqrt(variance)
+
+
+def _spread(value) -> float:
+    """A DSP consistency spread (m or rad) as a sigma share: 0 when the DSP had none (fewer than two tags or groups)."""
+    return float(value) if value is not None and math.isfinite(value) and value > 0.0 else 0.0
 
 
 def _rest_rows(frequency_hz: np.ndarray, snr_db: np.ndarray | None = None, min_snr_db: float = -math.inf) -> np.ndarray:
@@ -677,12 +692,15 @@ def sense_epochs(
         dsp_range_sigma = result["range_sigma_m"]
         dsp_range_sigma = float(dsp_range_sigma) if dsp_range_sigma is not None and math.isfinite(dsp_range_sigma) else 0.0
         sensed.range_sigma_m = math.hypot(dsp_range_sigma, options["range_sigma_floor_m"])
-        if 3.0 * fringe_sigma > sensor.half_fringe_m:
-            sensed.range_sigma_m = max(sensed.range_sigma_m, fringe_sigma)
         sensed.angle_sigma_rad = math.hypot(
             sensor.angle_sigma(np.asarray(result["phase_sigma_rad"], dtype=float), u_centroid),
             options["angle_sigma_floor_rad"],
         )
+        if options["consistency_sigmas"]:
+            sensed.range_sigma_m = math.hypot(sensed.range_sigma_m, _spread(result.get("range_spread_m")))
+            sensed.angle_sigma_rad = math.hypot(sensed.angle_sigma_rad, _spread(result.get("angle_spread_rad")))
+        if 3.0 * fringe_sigma > sensor.half_fringe_m:
+            sensed.range_sigma_m = max(sensed.range_sigma_m, fringe_sigma)
         if marvel and result["yaw"] is not None and math.isfinite(result["yaw"]):
             sensed.yaw_rad = float(result["yaw"])
             yaw_sigma = result["yaw_sigma_rad"]

@@ -333,3 +333,54 @@ def test_rest_rows_leave_out_faded_peaks():
     assert rows.shape == (5, 4)
     assert np.array_equal(marvel._rest_rows(frequency), np.transpose(frequency, (0, 2, 1)).reshape(6, 4))
     assert not any(np.array_equal(row, frequency[1, :, 0]) for row in rows)
+
+
+
+def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
+    """The DSP's scatter of the tags' directions and of the (antenna, tag) phase
+    ranges enters each row's angle and range sigma in quadrature
+    (``consistency_sigmas``, default on): rows whose tags disagree are not
+    fused as if their thermal bound held (the reflecting room, docs/marvel.md
+    section 11). Off, the sigmas are the thermal bounds and floors alone. The
+    DSP's spreads are replaced by known ones (0.2 rad, 1.5 m) to see them pass."""
+    from scattertrack.fusion import MarvelEstimator, MarvelParams
+
+    imu = read_imu(recorded / "imu.csv")
+    meta = recorded / "recording.sigmf-meta"
+
+    # The real spreads on the open rail: present, small, every tag used.
+    estimator = MarvelEstimator(MarvelParams.from_kwargs(multipath="inflation"))
+    real = [e for e in marvel.sense_epochs("marvel", meta, imu, estimator, keep_dsp=True) if e.sensed]
+    assert len(real) > 20
+    assert all(all(e.dsp["tag_used"]) for e in real)
+    # The first rows have no attitude yet (no spreads: the tags' lever arms are unknown).
+    angle = [e.dsp["angle_spread_rad"] for e in real if e.dsp["angle_spread_rad"] is not None]
+    distance = [e.dsp["range_spread_m"] for e in real if e.dsp["range_spread_m"] is not None]
+    assert len(angle) > 0.8 * len(real) and len(distance) > 0.8 * len(real)
+    assert np.median(angle) < 0.01 and np.median(distance) < 0.05
+
+    original = marvel._Sensor.processor
+
+    class Injected:
+        def __init__(self, inner):
+            self.inner = inner
+            self.reference_time_s = inner.reference_time_s
+
+        def process(self, samples, **kwargs):
+            result = self.inner.process(samples, **kwargs)
+            return result | {"angle_spread_rad": 0.2, "range_spread_m": 1.5}
+
+    monkeypatch.setattr(marvel._Sensor, "processor", lambda self, offsets: Injected(original(self, offsets)))
+    for flag in (True, False):
+        estimator = MarvelEstimator(MarvelParams.from_kwargs(multipath="inflation"))
+        rows = [e for e in marvel.sense_epochs("marvel", meta, imu, estimator, consistency_sigmas=flag) if e.sensed]
+        assert len(rows) > 20
+        angle = np.array([e.angle_sigma_rad for e in rows])
+        distance = np.array([e.range_sigma_m for e in rows])
+        if flag:
+            assert np.all(angle >= 0.2) and np.all(distance >= 1.5)
+        else:
+            assert np.median(angle) < 0.05 and np.median(distance) < 0.5
+    assert marvel._spread(None) == 0.0 and marvel._spread(float("nan")) == 0.0 and marvel._spread(0.2) == 0.2
+    with pytest.raises(ValueError, match="consistency_sigmas"):
+        marvel._resolve_sensing({"consistency_sigmas": "yes"})
