@@ -293,9 +293,9 @@ pub struct EpochFeatures {
     /// `min_peak_snr_db` on every antenna).
     pub tag_used: Vec<bool>,
     /// Consistency of the combined angle, rad per tangent axis: the spread
-    /// of the two opposing pairs' mean directions (`sqrt(sum d_p^2 / (2 (n
-    /// - 1)))`, `d_p` the angle between pair p's mean direction and the
-    /// mean of the pairs'). The tags see the multipath through different
+    /// of the two opposing pairs' mean directions,
+    /// `sqrt(sum d_p^2 / (2 (n - 1)))` with `d_p` the angle between pair
+    /// p's mean direction and the mean of the pairs'. The tags see the multipath through different
     /// fades (they are 0.47-0.66 m, 1.4-2 wavelengths, apart), so their
     /// disagreement measures the angle's multipath error, which the thermal
     /// bound does not. Pair means, because an opposing pair's lever arms
