@@ -335,7 +335,6 @@ def test_rest_rows_leave_out_faded_peaks():
     assert not any(np.array_equal(row, frequency[1, :, 0]) for row in rows)
 
 
-
 def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
     """The DSP's scatter of the tags' directions and of the (antenna, tag) phase
     ranges enters each row's angle and range sigma in quadrature
@@ -353,7 +352,7 @@ def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
     real = [e for e in marvel.sense_epochs("marvel", meta, imu, estimator, keep_dsp=True) if e.sensed]
     assert len(real) > 20
     assert all(all(e.dsp["tag_used"]) for e in real)
-    # The first rows have no attitude yet (no spreads: the tags' lever arms are unknown).
+    # A spread needs two opposing pairs (angle) or two phase groups (range).
     angle = [e.dsp["angle_spread_rad"] for e in real if e.dsp["angle_spread_rad"] is not None]
     distance = [e.dsp["range_spread_m"] for e in real if e.dsp["range_spread_m"] is not None]
     assert len(angle) > 0.8 * len(real) and len(distance) > 0.8 * len(real)
