@@ -11,6 +11,7 @@ This module has two layers.
 
 Physics (pure, vectorised numpy; what the IQ simulator and the tests share)
     :func:`bistatic_path_lengths`, :func:`subcarrier_frequencies`,
+    :func:`calibration_path_errors_m`, :func:`calibration_shift_m`,
     :func:`tag_channel` (the paths that touch the tag) and
     :func:`static_channel` (direct tx -> rx leakage and static clutter, which
     the reflective-minus-non-reflective subtraction removes).
@@ -89,6 +90,50 @@ def bistatic_path_lengths(tx, rx, tag) -> np.ndarray:
     outgoing = np.linalg.norm(tag - tx, axis=1)  # (T,)
     returning = np.linalg.norm(tag[:, None, :] - rx[None, :, :], axis=2)  # (T, R)
     return outgoing[:, None] + returning
+
+
+def calibration_path_errors_m(frequencies_hz, phase_rad, delay_s) -> np.ndarray:
+    """The path error, metres, that each rx's calibration residual puts on a tag's distance, shape (R,).
+
+    The residual turns the channel ``exp(-j 2 pi f L / c)`` into
+    ``exp(-j (2 pi f L / c + phi_r + 2 pi f tau_r))`` (see
+    :func:`channel_estimates`). A distance that fits the phase over every
+    subcarrier (least squares through the origin: no free phase constant,
+    the calibration removed it) sees
+    ``dL_r = c tau_r + c phi_r sum(f) / (2 pi sum(f^2))``:
+    the delay adds ``c tau_r`` of path at every frequency, the phase about
+    ``phi_r lambda / (2 pi)`` at the centre frequency.
+    ``frequencies_hz`` (F,); ``phase_rad``, ``delay_s`` (R,).
+    """
+    f = np.asarray(frequencies_hz, dtype=np.float64).reshape(-1)
+    phase = np.asarray(phase_rad, dtype=np.float64).reshape(-1)
+    delay = np.asarray(delay_s, dtype=np.float64).reshape(-1)
+    return SPEED_OF_LIGHT * (delay + phase * f.sum() / (2.0 * np.pi * np.sum(f * f)))
+
+
+def calibration_shift_m(tx, rx, tag, path_errors_m, iterations: int = 5) -> np.ndarray:
+    """Where a calibration residual alone moves a static tag: the position error, metres, (3,).
+
+    The position ``p`` whose bistatic path lengths best match the true ones
+    plus ``path_errors_m`` (R,), by unweighted least squares (Gauss-Newton
+    from the true position ``tag`` (3,); ``tx`` (3,), ``rx`` (R, 3) m),
+    minus the true position. A tracker given noiseless frames with this
+    residual cannot do better: the residual is a constant bias that no
+    number of frames averages away, and with R = 4 receivers in 3D only one
+    path is redundant. It is the floor under a static tag's error in the
+    frame-level simulator (docs/turbotrack.md, "Measured").
+    """
+    tx = np.asarray(tx, dtype=np.float64).reshape(3)
+    rx = np.asarray(rx, dtype=np.float64).reshape(-1, 3)
+    truth = np.asarray(tag, dtype=np.float64).reshape(3)
+    target = bistatic_path_lengths(tx, rx, truth)[0] + np.asarray(path_errors_m, dtype=np.float64).reshape(-1)
+    p = truth.copy()
+    for _ in range(int(iterations)):
+        # d L_r / d p = unit(p - tx) + unit(p - rx_r)
+        jacobian = (p - tx) / np.linalg.norm(p - tx) + (p - rx) / np.linalg.norm(p - rx, axis=1)[:, None]
+        residual = target - bistatic_path_lengths(tx, rx, p)[0]
+        p = p + np.linalg.lstsq(jacobian, residual, rcond=None)[0]
+    return p - truth
 
 
 def subcarrier_frequencies(centre_frequency_hz: float, bandwidth_hz: float, n_subcarriers: int) -> np.ndarray:

@@ -88,6 +88,10 @@ def test_static_speed_and_decomposition_tables(smoke):
     for r in result["static"]:
         if r["method"] != "rfind":  # rfind waits for a full pooling window before its first estimate
             assert _finite(r["median_cm"], r["p90_cm"]) and r["median_cm"] > 0
+            # The calibration floor: a few mm, and every method near it (a tag at rest).
+            assert _finite(r["floor_median_cm"], r["floor_p90_cm"], r["above_floor_mm"])
+            assert 0 < r["floor_median_cm"] <= r["floor_p90_cm"] < 5
+            assert abs(r["above_floor_mm"]) < 3
     speeds = [r["speed_cm_s"] for r in result["speed"]]
     assert len(speeds) == 6 and speeds == sorted(speeds)
     for r in result["speed"]:

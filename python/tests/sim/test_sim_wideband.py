@@ -24,6 +24,7 @@ from scattertrack.sim import (
     write_simulation,
 )
 from scattertrack.sim.trajectory import positions_velocities
+from scattertrack.sim import wideband
 from scattertrack.sim.wideband import bent_leg_lengths, frames_from_truth, helper_streams
 
 C = 299792458.0
@@ -363,3 +364,35 @@ def test_turbotrack_scenario_errors(tmp_path):
     with pytest.raises(FormatError) as caught:
         simulate(base | {"helper_model": {"blf_hz": 5e6}})
     assert caught.value.column == "helper_model.n_subcarriers"
+
+
+def test_calibration_path_errors_are_the_least_squares_distance_of_the_residual():
+    """A pure delay adds c tau of path; a pure phase about phi lambda / 2 pi;
+    both together what fitting 2 pi f dL / c to the residual phase over the
+    subcarriers gives (least squares through the origin)."""
+    f = subcarrier_frequencies(915e6, 100e6, 20)
+    assert wideband.calibration_path_errors_m(f, [0.0], [1e-11])[0] == pytest.approx(C * 1e-11, rel=1e-12)
+    wavelength = C / 915e6
+    assert wideband.calibration_path_errors_m(f, [0.05], [0.0])[0] == pytest.approx(0.05 * wavelength / (2 * math.pi), rel=0.01)
+    phase, delay = np.array([0.05, -0.03, 0.0]), np.array([-4e-12, 7e-12, 1e-11])
+    errors = wideband.calibration_path_errors_m(f, phase, delay)
+    for r in range(3):
+        design = (2 * math.pi * f / C)[:, None]
+        fitted = np.linalg.lstsq(design, phase[r] + 2 * math.pi * f * delay[r], rcond=None)[0][0]
+        assert errors[r] == pytest.approx(fitted, rel=1e-9)
+
+
+def test_calibration_shift_matches_the_biased_path_lengths():
+    tx, rx = np.array(TX), np.array(RX)
+    tag = np.array(TAGS[0])
+    assert np.allclose(wideband.calibration_shift_m(tx, rx, tag, np.zeros(4)), 0.0)
+    # Three receivers in 3D: the shifted position has exactly the biased lengths.
+    errors = np.array([0.004, -0.003, 0.002])
+    shift = wideband.calibration_shift_m(tx, rx[:3], tag, errors)
+    lengths = bistatic_path_lengths(tx, rx[:3], tag + shift)[0]
+    assert np.allclose(lengths, bistatic_path_lengths(tx, rx[:3], tag)[0] + errors, atol=1e-12)
+    assert 1e-3 < np.linalg.norm(shift) < 0.1
+    # Four receivers, errors that a position change explains: that change comes back.
+    move = np.array([0.002, -0.001, 0.003])
+    consistent = bistatic_path_lengths(tx, rx, tag + move)[0] - bistatic_path_lengths(tx, rx, tag)[0]
+    assert np.allclose(wideband.calibration_shift_m(tx, rx, tag, consistent), move, atol=1e-10)

@@ -50,6 +50,39 @@ def test_variants_are_selectable_and_worse():
         assert median(method) > full, method
 
 
+def _calibration_floor_m(data) -> float:
+    """How far the simulator's drawn calibration residual alone moves the static tag, metres."""
+    _, tx, rx_ids, rx = sim.helper_geometry(data.scene)
+    d = data.details
+    errors = sim.wideband.calibration_path_errors_m(
+        d["subcarriers_hz"],
+        [d["true_calibration_phase_error_rad"][int(i)] for i in rx_ids],
+        [d["true_calibration_delay_error_s"][int(i)] for i in rx_ids],
+    )
+    return float(np.linalg.norm(sim.wideband.calibration_shift_m(tx, rx, data.truth.position[0], errors)))
+
+
+@pytest.mark.parametrize("seed", [1003, 1006])
+def test_a_static_tag_sits_on_the_calibration_floor(seed):
+    """A static tag's error is the bias of the calibration residual (a few
+    mm, which no number of frames averages away) plus under a millimetre
+    from the tracker; without the residual it is about a millimetre."""
+    scenario = sim.load_scenario("turbotrack-static") | {"duration_s": 3.0}
+    data = sim.simulate(scenario, seed=seed)
+    floor = _calibration_floor_m(data)
+    result = track.run("turbotrack", data.scene, data.frames, seed=seed)
+    median = evaluation.compare(data.truth, result, skip_first_s=0.5).overall.median_3d_m
+    assert floor > 0.004
+    assert abs(median - floor) < 0.001
+    exact = sim.simulate(
+        scenario | {"helper_model": scenario["helper_model"] | {"calibration_phase_error_rad": 0.0, "calibration_delay_error_s": 0.0}},
+        seed=seed,
+    )
+    assert _calibration_floor_m(exact) == 0.0
+    result = track.run("turbotrack", exact.scene, exact.frames, seed=seed)
+    assert evaluation.compare(exact.truth, result, skip_first_s=0.5).overall.median_3d_m < 0.002
+
+
 def test_step_frame_streams_one_frame_at_a_time(arm):
     tracker = track.make("turbotrack", arm.scene)
     frames = arm.frames
