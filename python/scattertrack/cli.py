@@ -393,6 +393,8 @@ def command_track(args) -> int:
         return track_marvel(args, scene, params)
     if args.features or args.imu:
         raise UsageError(f"--features and --imu are inputs of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
+    if args.revised_out:
+        raise UsageError(f"--revised-out is an output of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
     # Before reading the input: a typo should not wait for a large file to load.
     check_parameters(args.method, scene, params)
     wideband = args.method in tracking.WIDEBAND_METHODS
@@ -451,6 +453,15 @@ def track_marvel(args, scene, params: dict) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     io.write_track(out, result)
     say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} to {out} (from {source})")
+    if args.revised_out:
+        revised_out = Path(args.revised_out)
+        revised_out.parent.mkdir(parents=True, exist_ok=True)
+        io.write_track(revised_out, result.revised)
+        fallbacks = int(result.stats.get("drone", {}).get("revised_fallbacks", 0))
+        say(
+            f"  revised (fixed-lag smoothed) track: {plural(len(result.revised), 'row')} to {revised_out}"
+            + (f", {fallbacks} of them causal (the smoother restarted while they were in its window)" if fallbacks else "")
+        )
     say(f"  {result.skipped.summary() if result.skipped.total else 'nothing declined'}")
     stats = result.stats.get("drone", {})
     controller = stats.get("controller")
@@ -727,6 +738,11 @@ def build_parser() -> argparse.ArgumentParser:
     )
     track.add_argument("--method", default="glac", help="tracking method (see 'scattertrack methods'; default glac)")
     track.add_argument("--out", required=True, help="track.csv to write")
+    track.add_argument(
+        "--revised-out",
+        help="marvel, ulocate: also write the fixed-lag smoothed track.csv (each epoch as last revised, "
+        "smoother_lag_s later; docs/marvel.md section 8)",
+    )
     track.add_argument(
         "--param",
         action="append",

@@ -15,6 +15,14 @@ controller's time stamp is renewed every epoch so it is never marginalised.
 Causality: :meth:`MarvelEstimator.add_features` returns the smoother's
 estimate of the newest state right after the update with that row, using
 only IMU samples and rows given before (at or before its time).
+
+Revised (fixed-lag smoothed) estimates: every state stays in the window for
+``smoother_lag_s`` and is revised by each later row until it leaves.
+:attr:`MarvelEstimator.revised` collects each state as last revised, just
+before the update that marginalises it (and the rest at :meth:`finish`):
+a track delayed by the lag that uses the rows of the lag after each state.
+A state whose smoother failed before it left keeps its causal estimate
+(counted in ``revised_fallbacks``).
 """
 
 from __future__ import annotations
@@ -23,7 +31,7 @@ import math
 import statistics
 import time
 from collections import deque
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 
 import gtsam
 import numpy as np
@@ -371,6 +379,14 @@ class MarvelEstimator:
         self._range_declined_run = 0
         self.restarts = 0
         """Times the smoother was restarted after a solver failure."""
+        # The states in the smoother's window: key -> (time stamp s, causal Estimate).
+        self._window: dict[int, tuple[float, Estimate]] = {}
+        self.revised: list[Estimate] = []
+        """Each accepted epoch's state as last revised before it left the
+        window (fixed-lag smoothed, delayed by ``smoother_lag_s``), in time order."""
+        self.revised_fallbacks = 0
+        """Revised rows that are the causal estimate: the smoother failed (and
+        restarted) while the state was in its window."""
         self._left_ground = not p.use_ground  # True once any IMU sample showed motion
         self._rest_force_sum = np.zeros(3)  # specific force summed over the first tilt_window_s, m/s^2
         self._rest_force_count = 0
@@ -635,6 +651,9 @@ class MarvelEstimator:
                 graph.add(factors.yaw_factor(X(k), float(yaw_rad), self._noise(np.array([yaw_sigma]))))
         used["baro"] = self._add_baro(graph, initial, stamps, time_s, predicted)
 
+        # The update marginalises states stamped before time_s - lag: their
+        # last revision is the smoother's estimate now, before the update.
+        self._release(time_s - p.smoother_lag_s)
         try:
             self._smoother.update(graph, initial, stamps)
             for _ in range(p.extra_iterations):
@@ -646,11 +665,15 @@ class MarvelEstimator:
             # one that left the physical bounds. The row is declined and the
             # smoother restarts from the predicted state, with priors as wide
             # as the last covariances, so a bad row never ends the run.
+            # The failed smoother's values are unusable: the states in its
+            # window keep their causal estimates.
+            self._release(math.inf, revise=False)
             self._restart(k, time_s, predicted)
             self._last_epoch_time = time_s
             self._preintegrated.resetIntegrationAndSetBias(self._bias)
             self.restarts += 1
             return self._decline("diverged" if isinstance(failure, Diverged) else "solver_failure")
+        self._window[k] = (float(stamps[X(k)]), estimate)
         self._last_epoch_time = time_s
         # The next interval integrates against the newest bias estimate.
         self._preintegrated.resetIntegrationAndSetBias(self._bias)
@@ -658,6 +681,46 @@ class MarvelEstimator:
         estimate.wall_time_s = time.perf_counter() - started
         self.wall_times_s.append(estimate.wall_time_s)
         return estimate
+
+    def finish(self) -> None:
+        """End of the stream: the states still in the window join :attr:`revised`
+        as the smoother holds them now. Rows added later continue the track."""
+        self._release(math.inf)
+
+    def _release(self, before_s: float, revise: bool = True) -> None:
+        """Moves the window's states stamped before ``before_s`` (s) to
+        :attr:`revised`: read from the smoother when ``revise``, else (or
+        when the smoother no longer holds one) their causal estimate."""
+        for key in sorted(j for j, (stamp, _) in self._window.items() if stamp < before_s):
+            _, causal = self._window.pop(key)
+            row = self._revise(key, causal) if revise else None
+            if row is None:
+                self.revised_fallbacks += 1
+                row = causal
+            self.revised.append(row)
+
+    def _revise(self, k: int, causal: Estimate) -> Estimate | None:
+        """State ``k`` as the smoother holds it now: the causal row with its
+        position, velocity, orientation and (with ``compute_sigma``) 1-sigma
+        position replaced; None if the smoother cannot give it."""
+        smoother = self._smoother
+        try:
+            pose = smoother.calculateEstimatePose3(X(k))
+            velocity = np.asarray(smoother.calculateEstimateVector(V(k)), dtype=float)
+            sigma = causal.sigma
+            if self.params.compute_sigma:
+                rotation = pose.rotation().matrix()
+                # Pose3 covariance: tangent [rotation, translation] in the body frame.
+                cov = rotation @ np.asarray(smoother.marginalCovariance(X(k)))[3:, 3:] @ rotation.T
+                sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+        except (RuntimeError, IndexError):
+            return None
+        position = np.asarray(pose.translation(), dtype=float)
+        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
+            return None
+        quaternion = pose.rotation().toQuaternion()
+        q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
+        return replace(causal, position=position, velocity=velocity, orientation=-q if q[0] < 0.0 else q, sigma=sigma)
 
     def _add_multipath(self, graph, initial, stamps, time_s, sigma, previous_position, predicted) -> np.ndarray:
         """The epoch's multipath state ``M(k)`` (``multipath = "states"``) and

@@ -25,7 +25,9 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
     the inputs' own skip reports plus the rows and measurements the
     estimator declined; ``stats["drone"]`` the counters, the final controller
     estimate (m) and the per-row wall time quantiles (ns), also in
-    ``latency_quantiles_ns``.
+    ``latency_quantiles_ns``; ``revised`` the fixed-lag smoothed track (each
+    state as last revised, ``smoother_lag_s`` later; see
+    :attr:`MarvelEstimator.revised`) and ``smoothed["drone"]`` its positions.
     """
     del scene  # nothing in the scene is needed: the controller is a state
     estimator = MarvelEstimator(MarvelParams.from_kwargs(**params))
@@ -65,6 +67,7 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
             bar.update(1)
     if bar is not None:
         bar.close()
+    estimator.finish()
 
     skipped = SkipReport()
     for report in (features.skipped, imu.skipped):
@@ -78,6 +81,7 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
 
     latency = estimator.latency_ns()
     track = track_from_estimates(rows, skipped)
+    attach_revised(track, estimator)
     track.stats = {
         EPC: {
             "epochs": estimator.epochs,
@@ -87,6 +91,7 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
             "controller": estimator.controller,
             "controller_sigma": rows[-1].controller_sigma if rows else None,
             "range_bias_m": estimator.range_bias,
+            "revised_fallbacks": estimator.revised_fallbacks,
             "time_ns_p50": latency.get("p50", float("nan")),
             "time_ns_p99": latency.get("p99", float("nan")),
             "imu_time_ns_per_sample": estimator.imu_wall_time_s * 1e9 / max(estimator.imu_samples, 1),
@@ -95,6 +100,16 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
     track.latency_quantiles_ns = {k: latency[k] for k in ("p50", "p99")} if latency else {}
     track.latency = (n, latency["mean"], latency["max"]) if latency else None
     return track
+
+
+def attach_revised(track: Track, estimator: MarvelEstimator) -> None:
+    """Puts the estimator's revised rows (call :meth:`MarvelEstimator.finish`
+    first) on ``track``: the whole track in ``revised`` (nothing skipped of
+    its own: its rows are the accepted epochs) and its positions in
+    ``smoothed["drone"]``."""
+    revised = track_from_estimates(estimator.revised, SkipReport())
+    track.revised = revised
+    track.smoothed = {EPC: (revised.time_s.copy(), revised.position.copy())}
 
 
 def track_from_estimates(rows: list, skipped: SkipReport) -> Track:

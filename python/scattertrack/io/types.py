@@ -225,8 +225,12 @@ class Track:
     latency_quantiles_ns: dict = field(default_factory=dict)
     """Per-step cost quantiles of the Rust tracker, ns (``{"p50": .., "p99": ..}``), when tracked here."""
     smoothed: dict = field(default_factory=dict)
-    """Methods that revise the past (TurboTrack's backtracked MAP trajectory):
+    """Methods that revise the past (TurboTrack's backtracked MAP trajectory,
+    Marvel's fixed-lag smoothed states):
     ``epc -> (times s (n,), positions m (n, 3))``; empty otherwise."""
+    revised: Track | None = None
+    """Marvel: the whole revised track (every column, each state as last
+    revised before it left the smoother's window); None for other methods."""
 
     def __len__(self) -> int:
         return len(self.time_s)

@@ -774,7 +774,8 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     it), the DSP's and the fusion's wall time per epoch (``dsp_time_ns_p50``,
     ``dsp_time_ns_p99``, ``time_ns_p50``, ``time_ns_p99``) and their sum per
     fused epoch in ``epoch_times_ns``; ``latency_quantiles_ns`` is the
-    fusion's, as for features.
+    fusion's, as for features; ``revised`` and ``smoothed`` the fixed-lag
+    smoothed track, as for features.
     """
     _check_method(method)
     del scene  # the controller is a state of the estimator; nothing in the scene is needed
@@ -784,7 +785,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
         MarvelEstimator,
         MarvelParams,
     )
-    from scattertrack.fusion.run import track_from_estimates
+    from scattertrack.fusion.run import attach_revised, track_from_estimates
 
     fusion, sensing = _split_params(params)
     # The DSP's sigmas are thermal plus floors: they say nothing about the
@@ -807,6 +808,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
             bar.update(1)
     if bar is not None:
         bar.close()
+    estimator.finish()
     rows = [e.estimate for e in epochs if e.estimate is not None]
 
     skipped = SkipReport()
@@ -833,9 +835,11 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     rest = [e for e in epochs if e.on_ground and math.isfinite(e.clock_error)]
     after = next((e for e in epochs if not e.on_ground and math.isfinite(e.clock_error)), None)
     track = track_from_estimates(rows, skipped)
+    attach_revised(track, estimator)
     track.stats = {
         EPC: {
             "method": method,
+            "revised_fallbacks": estimator.revised_fallbacks,
             "epochs": len(epochs),
             "rows": sum(e.sensed for e in epochs),
             "fused": n,

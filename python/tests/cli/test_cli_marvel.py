@@ -40,6 +40,26 @@ def test_marvel_tracks_features_and_imu(capsys, flight, tmp_path):
     assert "rot mean" in stdout  # orientation columns appear when both sides have them
 
 
+def test_marvel_writes_the_revised_track_on_request(capsys, flight, tmp_path):
+    out, revised = tmp_path / "track.csv", tmp_path / "sub" / "revised.csv"
+    code, stdout, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--imu", flight / "imu.csv", "--out", out, "--revised-out", revised,
+    )
+    assert code == 0, err
+    assert "revised (fixed-lag smoothed) track" in stdout
+    causal, smoothed = read_track(out), read_track(revised)
+    assert np.array_equal(causal.time_s, smoothed.time_s)
+    assert smoothed.orientation is not None and smoothed.sigma is not None
+    assert not np.allclose(causal.position, smoothed.position)
+    # Only the drone pipeline revises its past.
+    code, _, err = run(
+        capsys, "track", "--method", "glac", "--scene", flight / "scene.toml", "--reads", flight / "features.csv",
+        "--out", tmp_path / "g.csv", "--revised-out", tmp_path / "r.csv",
+    )
+    assert code == 2 and "--revised-out is an output of marvel" in err
+
+
 def test_marvel_method_is_listed(capsys):
     code, stdout, _ = run(capsys, "methods")
     assert code == 0 and "marvel" in stdout and "ulocate" in stdout

@@ -180,6 +180,47 @@ def test_estimates_do_not_change_when_later_data_is_appended(flight_factory, tru
     assert np.array_equal(part.sigma, full.sigma[:n])
 
 
+# --- the revised (fixed-lag smoothed) track ------------------------------------------------
+
+
+def test_revised_track_has_every_row_and_is_closer_than_the_causal_one(circle_flight, circle_track):
+    revised = circle_track.revised
+    assert revised is not None and circle_track.stats["drone"]["revised_fallbacks"] == 0
+    assert np.array_equal(revised.time_s, circle_track.time_s)
+    assert set(revised.epc) == {"drone"}
+    times, positions = circle_track.smoothed["drone"]
+    assert np.array_equal(times, revised.time_s) and np.array_equal(positions, revised.position)
+    # The newest state's revision is its causal estimate: no row came after it.
+    assert np.array_equal(revised.position[-1], circle_track.position[-1])
+    causal = _position_errors(circle_track, circle_flight)
+    smoothed = _position_errors(revised, circle_flight)
+    assert smoothed.mean() < 0.9 * causal.mean()
+    # Later rows only add information: the 1-sigma shrinks.
+    assert np.median(revised.sigma / circle_track.sigma) < 0.9
+    assert np.allclose(np.linalg.norm(revised.orientation, axis=1), 1.0)
+    assert np.all(revised.orientation[:, 0] >= 0.0)
+
+
+def test_revised_rows_use_the_rows_of_one_lag_after_them_and_no_more(flight_factory, truncate_flight):
+    """A state's revision is fixed once it leaves the window: data appended
+    more than ``smoother_lag_s`` after it cannot change it."""
+    data = flight_factory(duration_s=10.0, seed=7)
+    lag = MarvelParams().smoother_lag_s
+    full = run_marvel(data.imu, data.features, **WHITE).revised
+    imu, features = truncate_flight(data, 6.0)
+    part = run_marvel(imu, features, **WHITE).revised
+    # Marginalised before the truncation's last row: final in both runs.
+    settled = part.time_s < features.time_s[-1] - lag
+    n = int(settled.sum())
+    assert n > 20 and np.all(settled[:n])
+    assert np.array_equal(part.time_s[:n], full.time_s[:n])
+    assert np.array_equal(part.position[:n], full.position[:n])
+    assert np.array_equal(part.orientation[:n], full.orientation[:n])
+    # The rows still in the window at the truncation's end differ: the full
+    # run revised them with the rows after 6 s.
+    assert not np.allclose(part.position[n:], full.position[n : len(part)])
+
+
 # --- interface ----------------------------------------------------------------------------
 
 
@@ -370,8 +411,13 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     failed_at = 30
 
     class Failing:
+        """The real smoother's values (read before the update), but the update fails."""
+
         def __init__(self, real):
             self.real = real
+
+        def __getattr__(self, name):
+            return getattr(self.real, name)
 
         def update(self, *args):
             raise RuntimeError("Indeterminate linear system detected")
@@ -384,6 +430,17 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     assert all(r is not None for r in results[failed_at + 1 :])
     truth = np.array([np.interp(results[-1].time_s, data.truth_time, data.truth_position[:, a]) for a in range(3)])
     assert np.linalg.norm(results[-1].position - truth) < 1.0
+    # The revised track: the states in the failed smoother's window keep
+    # their causal estimates (counted); every accepted row is there once.
+    estimator.finish()
+    accepted = [r for r in results if r is not None]
+    assert [r.time_s for r in estimator.revised] == [r.time_s for r in accepted]
+    # Stamped at or after the failed row's time minus the lag (3 s): not yet marginalised.
+    cutoff = data.features.time_s[failed_at] - estimator.params.smoother_lag_s
+    in_window = [r for r in results[:failed_at] if r is not None and r.time_s >= cutoff]
+    assert estimator.revised_fallbacks == len(in_window) > 10
+    for row in in_window:
+        assert any(r is row for r in estimator.revised)
 
 
 class _Delegating:
