@@ -38,8 +38,10 @@ def test_fusion_scores_a_short_flight(marvel_bench):
     sim = simulate(load_scenario("marvel-circle-20m") | {"duration_s": 8.0}, seed=1000)
     run = marvel_bench.fuse_and_score(sim)
     assert run["rows"] > 50
-    for key in ("mean_3d_m", "mean_aligned_m", "mean_orientation_deg", "controller_error_m", "epoch_p50_ns"):
+    for key in ("mean_3d_m", "mean_aligned_m", "mean_orientation_deg", "controller_error_m", "epoch_p50_ns",
+                "revised_mean_3d_m", "revised_mean_orientation_deg"):
         assert math.isfinite(run[key]) and run[key] >= 0.0, key
+    assert run["revised_fallbacks"] == 0
 
 
 def test_sensing_scores_one_iq_point_for_both_methods(sensing_bench):
