@@ -62,10 +62,11 @@ def progress(enabled: bool, text: str) -> None:
 # block 1: fusion on feature-level flights
 
 
-def fuse_and_score(sim) -> dict:
-    """``marvel`` on one simulated flight: errors (m, deg) and time per epoch (ns)."""
+def fuse_and_score(sim, **params) -> dict:
+    """``marvel`` on one simulated flight (``params``: estimator parameters,
+    defaults where not given): errors (m, deg) and time per epoch (ns)."""
     start = time.perf_counter()
-    track = marvel.run_features("marvel", sim.scene, sim.imu, sim.features)
+    track = marvel.run_features("marvel", sim.scene, sim.imu, sim.features, **params)
     wall = time.perf_counter() - start
     report = compare(sim.truth, track).overall
     # Relative to the controller: the same errors after removing the run's
@@ -105,13 +106,13 @@ def fuse_and_score(sim) -> dict:
     }
 
 
-def fusion_block(seeds, show=True) -> list[dict]:
+def fusion_block(seeds, show=True, params=None) -> list[dict]:
     rows = []
     for name, figure, paper_m, paper_deg in FLIGHTS:
         runs = []
         for seed in seeds:
             sim = simulate(load_scenario(name), seed=seed)
-            runs.append(fuse_and_score(sim))
+            runs.append(fuse_and_score(sim, **(params or {})))
             progress(show, f"  fusion {name} seed {seed}: {runs[-1]['mean_3d_m']:.3f} m, {runs[-1]['mean_orientation_deg']:.2f} deg")
         p50 = np.array([r["epoch_p50_ns"] for r in runs])
         p99 = np.array([r["epoch_p99_ns"] for r in runs])
@@ -209,6 +210,10 @@ def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=10, help="scoring seeds 0..N-1 (default 10)")
     parser.add_argument("--skip", default="", help="comma-separated blocks to skip: " + ", ".join(BLOCKS))
+    parser.add_argument(
+        "--smoother-lag-s", type=float, default=None,
+        help="the fusion block's smoother_lag_s (default: the estimator's, 3 s); a longer lag improves the revised track",
+    )
     parser.add_argument("--out", type=Path, default=REPO / "out" / "bench-marvel", help="output folder")
     parser.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
     return parser.parse_args(argv)
@@ -227,7 +232,9 @@ def main(argv=None) -> int:
     result = {"version": __version__, "commit": git_commit(), "seeds": seeds, "command": command}
     print(f"# Marvel benchmark (scattertrack {__version__}, commit {result['commit']}, seeds 0..{args.seeds - 1})")
     if "fusion" not in skip:
-        result["fusion"] = fusion_block(seeds, show)
+        params = {} if args.smoother_lag_s is None else {"smoother_lag_s": args.smoother_lag_s}
+        result["fusion_params"] = params
+        result["fusion"] = fusion_block(seeds, show, params)
         print_fusion(result["fusion"], command)
     if "sensing" not in skip:
         from sensing_bench import sensing_block, print_sensing  # noqa: PLC0415 (bench/ sibling)

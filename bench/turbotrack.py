@@ -232,15 +232,9 @@ def accuracy_block(seeds, duration_s=None, progress=True) -> list[dict]:
 
 def calibration_floor_m(sim) -> float:
     """How far the frame-level simulator's calibration residual alone moves
-    the static tag of ``sim``, metres: ``wideband.calibration_shift_m`` of
-    the residuals it drew (``sim.details``), at the tag's true position."""
-    tx_id, tx, rx_ids, rx = wideband.helper_geometry(sim.scene)
-    details = sim.details
-    phase = [details["true_calibration_phase_error_rad"][int(i)] for i in rx_ids]
-    delay = [details["true_calibration_delay_error_s"][int(i)] for i in rx_ids]
-    errors = wideband.calibration_path_errors_m(details["subcarriers_hz"], phase, delay)
-    position = np.asarray(sim.truth.position[0], dtype=float)
-    return float(np.linalg.norm(wideband.calibration_shift_m(tx, rx, position, errors)))
+    the static tag of ``sim``, metres (``wideband.drawn_calibration_shift_m``
+    at the tag's true position)."""
+    return float(np.linalg.norm(wideband.drawn_calibration_shift_m(sim.scene, sim.details, sim.truth.position[0])))
 
 
 def static_block(seeds, duration_s=None, progress=True) -> list[dict]:

@@ -300,6 +300,20 @@ def tilt_from_specific_force(specific_force) -> tuple[float, float]:
     return math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2]))
 
 
+def _quaternion(pose) -> np.ndarray:
+    """A Pose3's rotation as ``(qw, qx, qy, qz)`` with ``qw >= 0`` (one of the two equal quaternions)."""
+    quaternion = pose.rotation().toQuaternion()
+    q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
+    return -q if q[0] < 0.0 else q
+
+
+def _world_position_covariance(pose, pose_covariance) -> np.ndarray:
+    """The world-frame position covariance (3, 3) m^2 of a Pose3 marginal:
+    GTSAM's Pose3 tangent is [rotation, translation] in the body frame."""
+    rotation = pose.rotation().matrix()
+    return rotation @ np.asarray(pose_covariance)[3:, 3:] @ rotation.T
+
+
 def _finite_or(value: float, default: float) -> float:
     return float(value) if value is not None and math.isfinite(value) and value > 0.0 else default
 
@@ -709,18 +723,14 @@ class MarvelEstimator:
             velocity = np.asarray(smoother.calculateEstimateVector(V(k)), dtype=float)
             sigma = causal.sigma
             if self.params.compute_sigma:
-                rotation = pose.rotation().matrix()
-                # Pose3 covariance: tangent [rotation, translation] in the body frame.
-                cov = rotation @ np.asarray(smoother.marginalCovariance(X(k)))[3:, 3:] @ rotation.T
+                cov = _world_position_covariance(pose, smoother.marginalCovariance(X(k)))
                 sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         except (RuntimeError, IndexError):
             return None
         position = np.asarray(pose.translation(), dtype=float)
         if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
             return None
-        quaternion = pose.rotation().toQuaternion()
-        q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
-        return replace(causal, position=position, velocity=velocity, orientation=-q if q[0] < 0.0 else q, sigma=sigma)
+        return replace(causal, position=position, velocity=velocity, orientation=_quaternion(pose), sigma=sigma)
 
     def _add_multipath(self, graph, initial, stamps, time_s, sigma, previous_position, predicted) -> np.ndarray:
         """The epoch's multipath state ``M(k)`` (``multipath = "states"``) and
@@ -1023,11 +1033,9 @@ class MarvelEstimator:
         if self._has_range_bias():
             self._range_bias = float(smoother.calculateEstimateDouble(RANGE_BIAS))
         self._nav = gtsam.NavState(pose, velocity)
-        rotation = pose.rotation().matrix()
         if self.params.compute_sigma or self._gate is not None:
             pose_cov = np.asarray(smoother.marginalCovariance(X(k)))
-            # Pose3 covariance: tangent [rotation, translation] in the body frame.
-            self._cov_position = rotation @ pose_cov[3:, 3:] @ rotation.T
+            self._cov_position = _world_position_covariance(pose, pose_cov)
             self._cov_yaw = float(pose_cov[2, 2])
             self._cov_velocity = np.asarray(smoother.marginalCovariance(V(k)))
             self._cov_controller = np.asarray(smoother.marginalCovariance(CONTROLLER))
@@ -1037,15 +1045,11 @@ class MarvelEstimator:
         else:
             sigma = np.full(3, np.nan)
             controller_sigma = np.full(3, np.nan)
-        quaternion = pose.rotation().toQuaternion()
-        q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
-        if q[0] < 0.0:
-            q = -q
         return Estimate(
             time_s=time_s,
             position=np.asarray(pose.translation(), dtype=float),
             velocity=velocity,
-            orientation=q,
+            orientation=_quaternion(pose),
             sigma=sigma,
             controller=self._controller.copy(),
             controller_sigma=controller_sigma,

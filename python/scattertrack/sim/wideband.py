@@ -12,6 +12,7 @@ This module has two layers.
 Physics (pure, vectorised numpy; what the IQ simulator and the tests share)
     :func:`bistatic_path_lengths`, :func:`subcarrier_frequencies`,
     :func:`calibration_path_errors_m`, :func:`calibration_shift_m`,
+    :func:`drawn_calibration_shift_m`,
     :func:`tag_channel` (the paths that touch the tag) and
     :func:`static_channel` (direct tx -> rx leakage and static clutter, which
     the reflective-minus-non-reflective subtraction removes).
@@ -134,6 +135,20 @@ def calibration_shift_m(tx, rx, tag, path_errors_m, iterations: int = 5) -> np.n
         residual = target - bistatic_path_lengths(tx, rx, p)[0]
         p = p + np.linalg.lstsq(jacobian, residual, rcond=None)[0]
     return p - truth
+
+
+def drawn_calibration_shift_m(scene, details: dict, tag) -> np.ndarray:
+    """:func:`calibration_shift_m` of the residuals a frame-level simulation
+    drew: ``details`` as :func:`frames_from_trajectories` returns it (its
+    subcarriers and ``true_calibration_*`` per rx id), the scene's helper
+    antennas, a tag at ``tag`` (3,) m. The position error, metres, (3,)."""
+    _, tx, rx_ids, rx = helper_geometry(scene)
+    errors = calibration_path_errors_m(
+        details["subcarriers_hz"],
+        [details["true_calibration_phase_error_rad"][int(i)] for i in rx_ids],
+        [details["true_calibration_delay_error_s"][int(i)] for i in rx_ids],
+    )
+    return calibration_shift_m(tx, rx, tag, errors)
 
 
 def subcarrier_frequencies(centre_frequency_hz: float, bandwidth_hz: float, n_subcarriers: int) -> np.ndarray:

@@ -52,14 +52,7 @@ def test_variants_are_selectable_and_worse():
 
 def _calibration_floor_m(data) -> float:
     """How far the simulator's drawn calibration residual alone moves the static tag, metres."""
-    _, tx, rx_ids, rx = sim.helper_geometry(data.scene)
-    d = data.details
-    errors = sim.wideband.calibration_path_errors_m(
-        d["subcarriers_hz"],
-        [d["true_calibration_phase_error_rad"][int(i)] for i in rx_ids],
-        [d["true_calibration_delay_error_s"][int(i)] for i in rx_ids],
-    )
-    return float(np.linalg.norm(sim.wideband.calibration_shift_m(tx, rx, data.truth.position[0], errors)))
+    return float(np.linalg.norm(sim.wideband.drawn_calibration_shift_m(data.scene, data.details, data.truth.position[0])))
 
 
 @pytest.mark.parametrize("seed", [1003, 1006])
