@@ -132,6 +132,11 @@ def test_marvel_senses_range_and_angle_and_fuses(recorded, sensed):
     assert np.linalg.norm(np.asarray(stats["controller"]) - truth_of(recorded)[1]) < 0.5
     assert track.orientation is not None and track.sigma is not None
     assert stats["dsp_time_ns_p50"] > 0 and stats["time_ns_p50"] > 0 and len(stats["epoch_times_ns"]) == len(track)
+    # From a recording too, the revised track: every fused row, as last revised.
+    assert stats["revised_fallbacks"] == 0
+    assert np.array_equal(track.revised.time_s, track.time_s)
+    revised_error = np.linalg.norm(track.revised.position - position, axis=1)
+    assert np.mean(revised_error) < 0.2 and np.max(revised_error) < 0.6
 
 
 def test_doppler_blind_ulocate_is_worse_in_range_at_speed(recorded, sensed):
