@@ -43,6 +43,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 from scattertrack import __version__  # noqa: E402
 from scattertrack.eval import compare  # noqa: E402
+from scattertrack.fusion import MarvelParams  # noqa: E402
 from scattertrack.sim import load_scenario, simulate  # noqa: E402
 from scattertrack.track import marvel  # noqa: E402
 
@@ -152,7 +153,7 @@ def text_table(headers: list[str], cells: list[list[str]]) -> str:
     return "\n".join([line(headers), line(["-" * w for w in widths]), *(line(row) for row in cells)])
 
 
-def print_fusion(rows: list[dict], command: str) -> None:
+def print_fusion(rows: list[dict], command: str, lag_s: float) -> None:
     print(f"\n## 1. fusion (feature-level flights)\n$ {command}")
     headers = ["scenario", "seeds", "mean 3D m", "worst seed m", "rel. ctrl m", "rot deg", "yaw deg",
                "revised m", "revised worst m", "revised rot deg",
@@ -181,7 +182,7 @@ def print_fusion(rows: list[dict], command: str) -> None:
     print(text_table(headers, cells))
     print("mean 3D: in the take-off frame (truth's); rel. ctrl: after removing each run's mean offset "
           "(the trajectory relative to the controller); revised: the fixed-lag smoothed track, each state "
-          "as last revised 3 s after its time (the causal columns are each row at its own time); "
+          f"as last revised {lag_s:g} s after its time (the causal columns are each row at its own time); "
           "x real time: simulated s per wall s")
 
 
@@ -235,7 +236,7 @@ def main(argv=None) -> int:
         params = {} if args.smoother_lag_s is None else {"smoother_lag_s": args.smoother_lag_s}
         result["fusion_params"] = params
         result["fusion"] = fusion_block(seeds, show, params)
-        print_fusion(result["fusion"], command)
+        print_fusion(result["fusion"], command, params.get("smoother_lag_s", MarvelParams().smoother_lag_s))
     if "sensing" not in skip:
         from sensing_bench import sensing_block, print_sensing  # noqa: PLC0415 (bench/ sibling)
 
