@@ -62,3 +62,15 @@ def test_sensing_progress_names_numeric_points_and_flights(sensing_bench, capsys
     err = capsys.readouterr().err
     assert "sensing speed 1.5 seed 0: marvel 0.05 m" in err
     assert "sensing flight marvel-circle-20m seed 2: marvel 0.05 m" in err
+
+
+def test_the_fusion_block_takes_another_lag(marvel_bench):
+    assert marvel_bench.parse_args([]).smoother_lag_s is None
+    assert marvel_bench.parse_args(["--smoother-lag-s", "6"]).smoother_lag_s == 6.0
+    from scattertrack.sim import load_scenario, simulate
+
+    sim = simulate(load_scenario("marvel-circle-20m") | {"duration_s": 6.0}, seed=1000)
+    default, longer = marvel_bench.fuse_and_score(sim), marvel_bench.fuse_and_score(sim, smoother_lag_s=6.0)
+    # The same rows; the revised ones see 6 s after each state instead of 3.
+    assert default["rows"] == longer["rows"]
+    assert longer["revised_mean_3d_m"] != default["revised_mean_3d_m"]
