@@ -741,7 +741,7 @@ def build_parser() -> argparse.ArgumentParser:
     track.add_argument(
         "--revised-out",
         help="marvel, ulocate: also write the fixed-lag smoothed track.csv (each epoch as last revised, "
-        "smoother_lag_s later; docs/marvel.md section 8)",
+        "about smoother_lag_s (6 s) later; docs/marvel.md section 8)",
     )
     track.add_argument(
         "--param",

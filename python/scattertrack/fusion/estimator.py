@@ -17,12 +17,13 @@ estimate of the newest state right after the update with that row, using
 only IMU samples and rows given before (at or before its time).
 
 Revised (fixed-lag smoothed) estimates: every state stays in the window for
-``smoother_lag_s`` and is revised by each later row until it leaves.
-:attr:`MarvelEstimator.revised` collects each state as last revised, just
-before the update that marginalises it (and the rest at :meth:`finish`):
-a track delayed by the lag that uses the rows of the lag after each state.
-A state whose smoother failed before it left keeps its causal estimate
-(counted in ``revised_fallbacks``).
+``smoother_lag_s`` to ``smoother_lag_s + marginalize_every_s`` (states leave
+in groups, once per ``marginalize_every_s``) and is revised by each later
+row until it leaves. :attr:`MarvelEstimator.revised` collects each state as
+last revised, just before the update that marginalises it (and the rest at
+:meth:`finish`): a track delayed by the lag that uses the rows of at least
+the lag after each state. A state whose smoother failed before it left
+keeps its causal estimate (counted in ``revised_fallbacks``).
 """
 
 from __future__ import annotations
@@ -79,8 +80,24 @@ IMU_DECLINE_REASONS = {
 class MarvelParams:
     """Tuning of :class:`MarvelEstimator`; SI units. IMU defaults: docs/marvel.md section 3."""
 
-    smoother_lag_s: float = 3.0
-    """States older than this behind the newest epoch are marginalised, s."""
+    smoother_lag_s: float = 6.0
+    """States older than this behind the newest epoch are marginalised, s.
+    The causal rows barely depend on it; the revised track does (docs/marvel.md
+    section 11: square through walls 0.470 m at 3 s, 0.411 m at 6 and 10 s,
+    dev seeds), and the time per epoch grows with it."""
+    marginalize_every_s: float = 1.0
+    """States leave the window in groups spanning this long, s: each state's
+    time stamp in the smoother is the end of its bucket ``[n T, (n + 1) T)``,
+    so the states of one bucket are marginalised together, once per bucket,
+    and each stays ``smoother_lag_s`` to ``smoother_lag_s + T`` in the window.
+    Why: marginalising re-eliminates iSAM2's Bayes tree from the oldest
+    clique to the root, which is the whole window (the controller is in every
+    clique), and when most variables are affected iSAM2 relinearises every
+    factor (its batch step); done each epoch, that was most of the time per
+    epoch. The revised rows of a group are read together just before it
+    leaves: the first marginal covariance walks the tree (about 10 ms at a 6 s
+    lag), the next ones reuse its cached separator marginals (about 0.1 ms).
+    0: each state stamped with its own time, marginalised alone."""
     gravity_m_s2: float = GRAVITY_M_S2
     accel_noise_density: float = 1.0e-3
     """Accelerometer white noise, m/s^2/sqrt(Hz)."""
@@ -217,10 +234,22 @@ class MarvelParams:
     compute_sigma: bool = True
     """1-sigma position and controller in the output, from iSAM2's marginal
     covariances of the newest pose, velocity and controller (about 0.4 ms of
-    the ~8 ms per epoch). The gate needs them too, so they are computed
+    the 2-3 ms per epoch, p50). The gate needs them too, so they are computed
     whenever the gate is on; off with the gate off, the output sigmas are nan."""
     relinearize_threshold: float = 0.01
-    """iSAM2 relinearises a variable whose update exceeds this (tangent units)."""
+    """iSAM2 relinearises a variable whose update exceeds this (tangent units:
+    rad, m, m/s)."""
+    relinearize_skip: int = 10
+    """iSAM2 checks for relinearisation every this many updates: once per
+    ``marginalize_every_s`` at 10 epochs/s. The controller is in every
+    range and direction factor, so relinearising it (or any state deep in
+    the window) re-eliminates the whole window; checked on every update
+    with the 0.01 threshold, that happened on nearly every one (p50 32 ms
+    per epoch against 2-3 ms). Measured on dev seeds 1000-1004 (square
+    through walls) and 1000-1002 (circle), mean causal / revised error:
+    threshold 0.01, skip 10: 0.681 / 0.413 m and 0.386 / 0.283 m; 0.01, 5:
+    0.684 / 0.420 and 0.385 / 0.280; 0.05, 1: 0.680 / 0.415 and 0.385 /
+    0.279 m (p50 17-23 ms); 0.1, 5: 0.685 / 0.418 and 0.384 / 0.279 m."""
     factorization: str = "QR"
     """iSAM2 factorization, "QR" or "CHOLESKY" (see the note in the constructor)."""
     extra_iterations: int = 0
@@ -242,6 +271,10 @@ class MarvelParams:
             raise ValueError(f"factorization: 'QR' or 'CHOLESKY', not {self.factorization!r}")
         if not self.smoother_lag_s > 0.0:
             raise ValueError("smoother_lag_s must be positive (seconds)")
+        if not 0.0 <= self.marginalize_every_s <= self.smoother_lag_s:
+            raise ValueError("marginalize_every_s must be in [0, smoother_lag_s] (seconds)")
+        if self.relinearize_skip < 1:
+            raise ValueError("relinearize_skip must be 1 or more (updates)")
         if self.multipath not in ("states", "inflation"):
             raise ValueError(f"multipath: 'states' or 'inflation', not {self.multipath!r}")
         if not 0.0 < self.multipath_white_fraction < 1.0:
@@ -665,9 +698,11 @@ class MarvelEstimator:
                 graph.add(factors.yaw_factor(X(k), float(yaw_rad), self._noise(np.array([yaw_sigma]))))
         used["baro"] = self._add_baro(graph, initial, stamps, time_s, predicted)
 
-        # The update marginalises states stamped before time_s - lag: their
-        # last revision is the smoother's estimate now, before the update.
-        self._release(time_s - p.smoother_lag_s)
+        # The update marginalises the states stamped before now - lag (a
+        # whole bucket at once: see marginalize_every_s): their last
+        # revision is the smoother's estimate now, before the update.
+        stamps = {key: self._stamp(t) for key, t in stamps.items()}
+        self._release(self._stamp(time_s) - p.smoother_lag_s)
         try:
             self._smoother.update(graph, initial, stamps)
             for _ in range(p.extra_iterations):
@@ -700,6 +735,14 @@ class MarvelEstimator:
         """End of the stream: the states still in the window join :attr:`revised`
         as the smoother holds them now. Rows added later continue the track."""
         self._release(math.inf)
+
+    def _stamp(self, time_s: float) -> float:
+        """The smoother's time stamp of a state at ``time_s`` (s): the end of
+        its ``marginalize_every_s`` bucket (its own time with 0)."""
+        every = self.params.marginalize_every_s
+        if every <= 0.0:
+            return time_s
+        return (math.floor(time_s / every) + 1.0) * every
 
     def _release(self, before_s: float, revise: bool = True) -> None:
         """Moves the window's states stamped before ``before_s`` (s) to
@@ -841,7 +884,7 @@ class MarvelEstimator:
         p = self.params
         isam_params = gtsam.ISAM2Params()
         isam_params.setRelinearizeThreshold(p.relinearize_threshold)
-        isam_params.relinearizeSkip = 1
+        isam_params.relinearizeSkip = p.relinearize_skip
         # QR on the Jacobian instead of Cholesky on J^T J: the bias random
         # walk between 0.1 s epochs (1/sigma ~ 2e5 for the gyroscope) next to
         # metre-level feature noise gives cond(J) ~ 1e6, cond(J^T J) ~ 1e12,
@@ -882,7 +925,7 @@ class MarvelEstimator:
             stamps[RANGE_BIAS] = time_s
         self._baro_chain = False  # a new barometer offset chain starts with the next epoch
         self._multipath_chain = False  # and a new multipath chain
-        self._smoother.update(graph, initial, stamps)
+        self._smoother.update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
         self._nav = predicted
 
     def _add_ground(self, graph, k: int) -> None:

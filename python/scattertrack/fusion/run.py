@@ -26,7 +26,7 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
     estimator declined; ``stats["drone"]`` the counters, the final controller
     estimate (m) and the per-row wall time quantiles (ns), also in
     ``latency_quantiles_ns``; ``revised`` the fixed-lag smoothed track (each
-    state as last revised, ``smoother_lag_s`` later; see
+    state as last revised, about ``smoother_lag_s`` later; see
     :attr:`MarvelEstimator.revised`) and ``smoothed["drone"]`` its positions.
     """
     del scene  # nothing in the scene is needed: the controller is a state

@@ -205,20 +205,72 @@ def test_revised_rows_use_the_rows_of_one_lag_after_them_and_no_more(flight_fact
     """A state's revision is fixed once it leaves the window: data appended
     more than ``smoother_lag_s`` after it cannot change it."""
     data = flight_factory(duration_s=10.0, seed=7)
-    lag = MarvelParams().smoother_lag_s
-    full = run_marvel(data.imu, data.features, **WHITE).revised
+    lag = 3.0
+    params = WHITE | {"smoother_lag_s": lag}
+    full = run_marvel(data.imu, data.features, **params).revised
     imu, features = truncate_flight(data, 6.0)
-    part = run_marvel(imu, features, **WHITE).revised
-    # Marginalised before the truncation's last row: final in both runs.
-    settled = part.time_s < features.time_s[-1] - lag
+    part = run_marvel(imu, features, **params).revised
+    # Marginalised before the truncation's last row (whole 1 s buckets, each
+    # stamped with its end: see marginalize_every_s): final in both runs.
+    stamp = MarvelEstimator(MarvelParams.from_kwargs(**params))._stamp
+    settled = np.array([stamp(t) for t in part.time_s]) < stamp(features.time_s[-1]) - lag
     n = int(settled.sum())
-    assert n > 20 and np.all(settled[:n])
+    assert n >= 20 and np.all(settled[:n])
     assert np.array_equal(part.time_s[:n], full.time_s[:n])
     assert np.array_equal(part.position[:n], full.position[:n])
     assert np.array_equal(part.orientation[:n], full.orientation[:n])
     # The rows still in the window at the truncation's end differ: the full
     # run revised them with the rows after 6 s.
     assert not np.allclose(part.position[n:], full.position[n : len(part)])
+
+
+def test_states_leave_the_window_in_groups_and_are_read_as_they_leave(flight_factory):
+    """With ``marginalize_every_s`` = 1 s the states of one 1 s bucket leave
+    the window together (ten at 10 Hz), each after ``smoother_lag_s`` to
+    ``smoother_lag_s`` + 1 s, and their revised rows are read at that update
+    (none is lost: no fallback); with 0 each leaves alone after exactly the lag."""
+    data = flight_factory(duration_s=10.0, seed=7)
+    lag = 3.0
+    for every in (1.0, 0.0):
+        estimator = MarvelEstimator(MarvelParams(**WHITE, smoother_lag_s=lag, marginalize_every_s=every))
+        reads: list[tuple[float, float]] = []  # (update time, state time)
+        clock = {"now": math.nan}
+        revise = estimator._revise
+
+        def recording(k, causal, revise=revise, reads=reads, clock=clock):
+            reads.append((clock["now"], causal.time_s))
+            return revise(k, causal)
+
+        estimator._revise = recording
+        f, imu = data.features, data.imu
+        j = 0
+        for i in range(len(f)):
+            while j < len(imu) and imu.time_s[j] <= f.time_s[i]:
+                estimator.add_imu(imu.time_s[j], imu.accel[j], imu.gyro[j], imu.baro_z[j])
+                j += 1
+            clock["now"] = f.time_s[i]
+            estimate = estimator.add_features(
+                f.time_s[i], f.range_m[i], f.azimuth_rad[i], f.elevation_rad[i], f.yaw_rad[i],
+                f.range_sigma_m[i], f.angle_sigma_rad[i], f.yaw_sigma_rad[i],
+            )
+            assert estimate is not None
+        assert estimator.revised_fallbacks == 0
+        update_times, state_times = np.array(reads).T
+        age = update_times - state_times
+        # Read at the update that marginalises it: older than the lag, and
+        # younger than lag + bucket + one epoch (it was still there before).
+        assert np.all(age > lag - 1e-9) and np.all(age < lag + every + 0.1 + 1e-9)
+        _, group_sizes = np.unique(update_times, return_counts=True)
+        if every == 0.0:
+            # One, or two where the rows' stamps straddle the horizon unevenly.
+            assert np.max(group_sizes) <= 2
+        else:
+            assert np.median(group_sizes) >= 9
+            # A bucket leaves whole: its states share their second.
+            for t in np.unique(update_times):
+                assert len(set(np.floor(state_times[update_times == t]))) == 1
+        estimator.finish()
+        assert [r.time_s for r in estimator.revised] == list(f.time_s)
 
 
 # --- interface ----------------------------------------------------------------------------
@@ -407,7 +459,9 @@ def _run_with_smoother_swapped(data, estimator, rows: int, at: int, replacement)
 
 def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flight):
     data = circle_flight
-    estimator = MarvelEstimator(MarvelParams(correlation_distance_m=0.0))
+    # A 2 s lag, each state read alone: by the failure (3 s) the first
+    # states have left the window with their revisions, the rest have not.
+    estimator = MarvelEstimator(MarvelParams(correlation_distance_m=0.0, smoother_lag_s=2.0, marginalize_every_s=0.0))
     failed_at = 30
 
     class Failing:
@@ -435,10 +489,11 @@ def test_a_solver_failure_declines_the_row_and_restarts_the_smoother(circle_flig
     estimator.finish()
     accepted = [r for r in results if r is not None]
     assert [r.time_s for r in estimator.revised] == [r.time_s for r in accepted]
-    # Stamped at or after the failed row's time minus the lag (3 s): not yet marginalised.
+    # Stamped at or after the failed row's time minus the lag: not yet marginalised.
     cutoff = data.features.time_s[failed_at] - estimator.params.smoother_lag_s
     in_window = [r for r in results[:failed_at] if r is not None and r.time_s >= cutoff]
     assert estimator.revised_fallbacks == len(in_window) > 10
+    assert len(in_window) < failed_at - 5  # the oldest had left with their revisions
     for row in in_window:
         assert any(r is row for r in estimator.revised)
 
