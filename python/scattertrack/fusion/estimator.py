@@ -236,6 +236,18 @@ class MarvelParams:
     covariances of the newest pose, velocity and controller (about 0.4 ms of
     the 2-3 ms per epoch, p50). The gate needs them too, so they are computed
     whenever the gate is on; off with the gate off, the output sigmas are nan."""
+    heading_hold_sigma_rad: float = 0.2
+    """While the newest heading's marginal 1-sigma exceeds this (rad), no
+    state leaves the window (up to ``heading_hold_max_s`` after the first
+    epoch). Before the drone turns or accelerates sideways nothing observes
+    its heading (no magnetometer): the take-off heading is a guess. A state
+    marginalised then leaves a prior on the window linearised at that guess,
+    which can be tens of degrees off, and the error stays in the window's
+    prior after the heading has been found. Held, the first states are
+    revised with the heading once the first turn or leg reveals it. 0: no hold."""
+    heading_hold_max_s: float = 20.0
+    """Longest hold of ``heading_hold_sigma_rad`` after the first epoch, s: the
+    window, and the time per update with it, stays bounded."""
     relinearize_threshold: float = 0.01
     """iSAM2 relinearises a variable whose update exceeds this (tangent units:
     rad, m, m/s)."""
@@ -273,6 +285,8 @@ class MarvelParams:
             raise ValueError("smoother_lag_s must be positive (seconds)")
         if not 0.0 <= self.marginalize_every_s <= self.smoother_lag_s:
             raise ValueError("marginalize_every_s must be in [0, smoother_lag_s] (seconds)")
+        if not (self.heading_hold_sigma_rad >= 0.0 and self.heading_hold_max_s >= 0.0):
+            raise ValueError("heading_hold_sigma_rad and heading_hold_max_s must be 0 or more")
         if self.relinearize_skip < 1:
             raise ValueError("relinearize_skip must be 1 or more (updates)")
         if self.multipath not in ("states", "inflation"):
@@ -428,6 +442,12 @@ class MarvelEstimator:
         """Times the smoother was restarted after a solver failure."""
         # The states in the smoother's window: key -> (time stamp s, causal Estimate).
         self._window: dict[int, tuple[float, Estimate]] = {}
+        self._lag = p.smoother_lag_s  # the smoother's lag now (longer while the heading is held)
+        self._heading_held = p.heading_hold_sigma_rad > 0.0
+        self._first_epoch_time: float | None = None
+        self.heading_hold_end_s = float("nan")
+        """Time (s) of the first update after the heading hold
+        (``heading_hold_sigma_rad``) ended; nan while held or without a hold."""
         self.revised: list[Estimate] = []
         """Each accepted epoch's state as last revised before it left the
         window (fixed-lag smoothed, delayed by ``smoother_lag_s``), in time order."""
@@ -702,7 +722,11 @@ class MarvelEstimator:
         # whole bucket at once: see marginalize_every_s): their last
         # revision is the smoother's estimate now, before the update.
         stamps = {key: self._stamp(t) for key, t in stamps.items()}
-        self._release(self._stamp(time_s) - p.smoother_lag_s)
+        lag = self._lag_for(time_s)
+        if lag != self._lag:
+            self._smoother.setSmootherLag(lag)
+            self._lag = lag
+        self._release(self._stamp(time_s) - lag)
         try:
             self._smoother.update(graph, initial, stamps)
             for _ in range(p.extra_iterations):
@@ -735,6 +759,22 @@ class MarvelEstimator:
         """End of the stream: the states still in the window join :attr:`revised`
         as the smoother holds them now. Rows added later continue the track."""
         self._release(math.inf)
+
+    def _lag_for(self, time_s: float) -> float:
+        """The smoother's lag for the update at ``time_s`` (s): ``smoother_lag_s``,
+        or longer than the flight so far while the heading is held
+        (``heading_hold_sigma_rad``). Once released, the hold does not return."""
+        p = self.params
+        if self._heading_held:
+            if self._first_epoch_time is None:
+                self._first_epoch_time = time_s
+            since = time_s - self._first_epoch_time
+            unknown = not (math.isfinite(self._cov_yaw) and math.sqrt(max(self._cov_yaw, 0.0)) <= p.heading_hold_sigma_rad)
+            if unknown and since <= p.heading_hold_max_s:
+                return max(p.smoother_lag_s, since + p.marginalize_every_s + 1.0)
+            self._heading_held = False
+            self.heading_hold_end_s = time_s
+        return p.smoother_lag_s
 
     def _stamp(self, time_s: float) -> float:
         """The smoother's time stamp of a state at ``time_s`` (s): the end of
@@ -902,6 +942,7 @@ class MarvelEstimator:
             return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
 
         self._smoother = self._new_smoother()
+        self._lag = self.params.smoother_lag_s
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
         pose = predicted.pose()

@@ -92,6 +92,7 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
             "controller_sigma": rows[-1].controller_sigma if rows else None,
             "range_bias_m": estimator.range_bias,
             "revised_fallbacks": estimator.revised_fallbacks,
+            "heading_hold_end_s": estimator.heading_hold_end_s,
             "time_ns_p50": latency.get("p50", float("nan")),
             "time_ns_p99": latency.get("p99", float("nan")),
             "imu_time_ns_per_sample": estimator.imu_wall_time_s * 1e9 / max(estimator.imu_samples, 1),

@@ -273,6 +273,29 @@ def test_states_leave_the_window_in_groups_and_are_read_as_they_leave(flight_fac
         assert [r.time_s for r in estimator.revised] == list(f.time_s)
 
 
+def test_holding_the_window_until_the_heading_is_known_fixes_the_take_off_heading():
+    """The drone takes off facing 115 deg, the estimator guesses 0 and nothing
+    observes the heading until the drone turns. Held in the window until the
+    heading is found (``heading_hold_sigma_rad``), the take-off states are
+    revised with it; marginalised at the guess (hold off), their error stays."""
+    from scattertrack.eval import compare
+    from scattertrack.sim import load_scenario, simulate
+
+    scenario = load_scenario("marvel-circle-20m") | {"seed": 1000, "duration_s": 20.0}
+    scenario["flight"] = dict(scenario["flight"]) | {"yaw_rad": 2.0}
+    sim = simulate(scenario)
+    held = run_marvel(sim.imu, sim.features)
+    free = run_marvel(sim.imu, sim.features, heading_hold_sigma_rad=0.0)
+    end = held.stats["drone"]["heading_hold_end_s"]
+    lag, longest = MarvelParams().smoother_lag_s, MarvelParams().heading_hold_max_s
+    assert lag < end < longest and math.isnan(free.stats["drone"]["heading_hold_end_s"])
+    for track in (held, free):
+        assert track.stats["drone"]["revised_fallbacks"] == 0 and len(track.revised) == len(track)
+    held_revised, free_revised = compare(sim.truth, held.revised).overall, compare(sim.truth, free.revised).overall
+    assert held_revised.mean_orientation_deg < 0.6 * free_revised.mean_orientation_deg
+    assert held_revised.mean_3d_m < free_revised.mean_3d_m
+
+
 # --- interface ----------------------------------------------------------------------------
 
 
@@ -327,6 +350,12 @@ def test_params_are_checked():
         MarvelParams(robust="cauchy")
     with pytest.raises(ValueError, match="smoother_lag_s"):
         MarvelParams(smoother_lag_s=0.0)
+    with pytest.raises(ValueError, match="marginalize_every_s"):
+        MarvelParams(marginalize_every_s=7.0)
+    with pytest.raises(ValueError, match="relinearize_skip"):
+        MarvelParams(relinearize_skip=0)
+    with pytest.raises(ValueError, match="heading_hold"):
+        MarvelParams(heading_hold_sigma_rad=-0.1)
     with pytest.raises(ValueError, match="multipath"):
         MarvelParams(multipath="white")
     with pytest.raises(ValueError, match="multipath_white_fraction"):
