@@ -771,7 +771,9 @@ class MarvelEstimator:
             since = time_s - self._first_epoch_time
             unknown = not (math.isfinite(self._cov_yaw) and math.sqrt(max(self._cov_yaw, 0.0)) <= p.heading_hold_sigma_rad)
             if unknown and since <= p.heading_hold_max_s:
-                return max(p.smoother_lag_s, since + p.marginalize_every_s + 1.0)
+                # The newest stamp is at most one bucket past now, so this
+                # horizon stays before the first state's stamp.
+                return max(p.smoother_lag_s, since + p.marginalize_every_s)
             self._heading_held = False
             self.heading_hold_end_s = time_s
         return p.smoother_lag_s
