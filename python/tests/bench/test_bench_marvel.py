@@ -49,6 +49,7 @@ def test_sensing_scores_one_iq_point_for_both_methods(sensing_bench):
     marvel, ulocate = run["methods"]["marvel"], run["methods"]["ulocate"]
     assert marvel["scored"] > 0 and ulocate["scored"] > 0
     assert np.all(np.isfinite(marvel["snapshot_m"]))
+    assert math.isfinite(marvel["revised_mean_3d_m"]) and marvel["revised_mean_3d_m"] >= 0.0
     # The Doppler-blind baseline is measurably worse at 3 m/s (paper Fig. 9).
     assert np.mean(ulocate["snapshot_m"]) > 5.0 * np.mean(marvel["snapshot_m"])
 
