@@ -840,6 +840,7 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
         EPC: {
             "method": method,
             "revised_fallbacks": estimator.revised_fallbacks,
+            "heading_hold_end_s": estimator.heading_hold_end_s,
             "epochs": len(epochs),
             "rows": sum(e.sensed for e in epochs),
             "fused": n,

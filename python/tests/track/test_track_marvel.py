@@ -134,6 +134,7 @@ def test_marvel_senses_range_and_angle_and_fuses(recorded, sensed):
     assert stats["dsp_time_ns_p50"] > 0 and stats["time_ns_p50"] > 0 and len(stats["epoch_times_ns"]) == len(track)
     # From a recording too, the revised track: every fused row, as last revised.
     assert stats["revised_fallbacks"] == 0
+    assert "heading_hold_end_s" in stats  # as from features
     assert np.array_equal(track.revised.time_s, track.time_s)
     revised_error = np.linalg.norm(track.revised.position - position, axis=1)
     assert np.mean(revised_error) < 0.2 and np.max(revised_error) < 0.6
