@@ -720,10 +720,18 @@ impl Glac {
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(h.len() as u64);
     }
 
+    /// The likeliest hypothesis' state, with the covariance of everything
+    /// the tracker still considers possible: the second moment of the
+    /// hypothesis mixture about the reported state,
+    /// `Σ = Σᵢ wᵢ (Pᵢ + (xᵢ − x̂)(xᵢ − x̂)ᵀ)` with wᵢ the normalised
+    /// likelihoods ([`mixture_covariance`]). While candidates compete this
+    /// is as wide as their spread; once one carries all the weight it is
+    /// that hypothesis' own P.
     fn best_estimate(&self, time_s: f64) -> Option<Estimate> {
         let h = &self.hypotheses;
         let best = h.best()?;
-        let (x, p) = h.state(best);
+        let (x, own) = h.state(best);
+        let p = if h.len() == 1 { own } else { mixture_covariance(h, &x) };
         let velocity =
             if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
         Some(Estimate {
@@ -741,6 +749,26 @@ impl Glac {
         let h = &self.hypotheses;
         h.best().is_some_and(|b| h.outliers[b] > 0)
     }
+}
+
+/// Second moment of the hypothesis mixture about `centre`:
+/// `Σᵢ wᵢ (Pᵢ + (xᵢ − c)(xᵢ − c)ᵀ)`, wᵢ = exp(log-likelihood) (normalised).
+/// About the reported state rather than the mixture mean because that is
+/// what a user's error is measured from: the truth lies in some hypothesis,
+/// and its distance from the reported one must show in the sigma.
+/// Hypotheses whose weight is below 1e-12 change nothing and are skipped.
+fn mixture_covariance(h: &Hypotheses, centre: &StateVector) -> StateMatrix {
+    let mut sum = StateMatrix::zeros();
+    for i in 0..h.len() {
+        let w = h.log_likelihood[i].exp();
+        if w < 1e-12 {
+            continue;
+        }
+        let (x, p) = h.state(i);
+        let d = x - centre;
+        sum += (p + d * d.transpose()) * w;
+    }
+    sum
 }
 
 /// Everything one reading means for every hypothesis (fast inference).
@@ -1013,6 +1041,27 @@ mod tests {
             }
         }
         assert!(seen_estimate);
+    }
+
+    /// The reported covariance is the mixture's second moment about the
+    /// reported state: two equally likely hypotheses 0.2 m apart in x give
+    /// σx² = P + ½ · 0.2², and the reported one alone gives its own P.
+    #[test]
+    fn covariance_covers_competing_hypotheses() {
+        let mut h = Hypotheses::default();
+        let p = StateMatrix::identity() * 1e-6;
+        let a = StateVector::from_iterator([0.5, 0.5, 0.5, 0.0, 0.0, 0.0]);
+        let b = StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]);
+        h.push(a, p, 0.5f64.ln());
+        h.push(b, p, 0.5f64.ln());
+        let sigma = mixture_covariance(&h, &a);
+        assert!((sigma[(0, 0)] - (1e-6 + 0.5 * 0.04)).abs() < 1e-12);
+        assert!((sigma[(1, 1)] - 1e-6).abs() < 1e-15);
+        // The truth at either hypothesis lies within 3 sigma of the report.
+        assert!(0.2 < 3.0 * sigma[(0, 0)].sqrt());
+        // One hypothesis with all the weight: its own covariance.
+        h.log_likelihood = vec![0.0, -1e3];
+        assert!((mixture_covariance(&h, &a) - p).norm() < 1e-15);
     }
 
     #[test]
