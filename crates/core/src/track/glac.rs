@@ -82,6 +82,15 @@ pub struct GlacParams {
     pub phase_wander_rad: f64,
     /// Correlation time τ of that error, seconds.
     pub phase_wander_s: f64,
+    /// 1-sigma of a slowly varying phase bias per antenna that the filter
+    /// does not model (wander, residual calibration, multipath; real
+    /// readers show 0.05–0.1 rad over ~0.5 s beyond their read-to-read
+    /// noise), radians. It changes no estimate: its effect on the
+    /// position, σ_b² (λ/4π)² (Jᵀ J)⁻¹ with J the unit vectors from the
+    /// antennas to the tag, is added to the reported covariance (a
+    /// "consider" covariance), so that a scene stating only the white
+    /// noise still gets sigmas that cover the truth. 0 disables it.
+    pub bias_sigma_rad: f64,
     /// Collect at least this long before initialising, seconds.
     pub init_window_s: f64,
     /// Give up waiting for every antenna after this long, seconds.
@@ -128,6 +137,7 @@ impl Default for GlacParams {
             phase_noise_rad: None,
             phase_wander_rad: 0.0,
             phase_wander_s: 0.5,
+            bias_sigma_rad: 0.07,
             init_window_s: 0.3,
             init_max_window_s: 1.0,
             initial: InitialState::default(),
@@ -172,6 +182,9 @@ impl GlacParams {
             if !(v > 0.0 && v.is_finite()) {
                 return Err(Error::Parameter { name: name.into(), reason: format!("must be positive, got {v}") });
             }
+        }
+        if !(self.bias_sigma_rad >= 0.0 && self.bias_sigma_rad.is_finite()) {
+            return Err(Error::Parameter { name: "bias_sigma_rad".into(), reason: "must be zero or positive".into() });
         }
         if !(self.phase_wander_rad >= 0.0 && self.phase_wander_rad.is_finite()) {
             return Err(Error::Parameter { name: "phase_wander_rad".into(), reason: "must be zero or positive".into() });
@@ -327,6 +340,8 @@ pub struct Glac {
     /// seconds (∞ before its second read): how correlated its next error is.
     antenna_read_s: Vec<f64>,
     antenna_interval_s: Vec<f64>,
+    /// Carrier of the latest read, Hz (NaN before any).
+    last_frequency_hz: f64,
     stats: TrackerStats,
 }
 
@@ -349,6 +364,7 @@ impl Glac {
             group_antennas: Vec::new(),
             antenna_read_s: vec![f64::NEG_INFINITY; n_antennas],
             antenna_interval_s: vec![f64::INFINITY; n_antennas],
+            last_frequency_hz: f64::NAN,
             stats: TrackerStats::default(),
         })
     }
@@ -731,7 +747,8 @@ impl Glac {
         let h = &self.hypotheses;
         let best = h.best()?;
         let (x, own) = h.state(best);
-        let p = if h.len() == 1 { own } else { mixture_covariance(h, &x) };
+        let mut p = if h.len() == 1 { own } else { mixture_covariance(h, &x) };
+        self.add_bias_covariance(&mut p, &x);
         let velocity =
             if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
         Some(Estimate {
@@ -742,6 +759,50 @@ impl Glac {
             hypotheses: h.len(),
             weight: h.log_likelihood[best].exp(),
         })
+    }
+
+    /// Adds the position covariance an unmodelled per-antenna range bias
+    /// of 1-sigma σ_b λ/4π causes at `x` (see `bias_sigma_rad`): for
+    /// position p from ranges d = h(p) + b by least squares,
+    /// δp = (Jᵀ J)⁻¹ Jᵀ b, so Cov δp = σ² (Jᵀ J)⁻¹. Over the antennas that
+    /// have read the tag; skipped when they cannot fix the position
+    /// (singular JᵀJ), where the geometry check speaks instead.
+    fn add_bias_covariance(&self, p: &mut StateMatrix, x: &StateVector) {
+        let sigma_b = self.params.bias_sigma_rad;
+        if sigma_b == 0.0 || !self.last_frequency_hz.is_finite() {
+            return;
+        }
+        let position = Vector3::new(x[0], x[1], x[2]);
+        let mut normal = Matrix3::zeros();
+        for (a, antenna) in self.scene.antennas.iter().enumerate() {
+            if !self.antenna_read_s[a].is_finite() {
+                continue;
+            }
+            let mut e = position - antenna.position;
+            if self.axes == 2 {
+                e.z = 0.0;
+            }
+            let norm = e.norm();
+            if norm > 1e-9 {
+                e /= norm;
+                normal += e * e.transpose();
+            }
+        }
+        if self.axes == 2 {
+            normal[(2, 2)] = 1.0; // z is pinned; any value keeps it invertible
+        }
+        let Some(inverse) = normal.try_inverse() else { return };
+        if !inverse.iter().all(|v| v.is_finite()) {
+            return;
+        }
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * self.last_frequency_hz);
+        let variance = sigma_b * sigma_b * to_range * to_range;
+        let axes = self.axes;
+        for r in 0..axes {
+            for c in 0..axes {
+                p[(r, c)] += variance * inverse[(r, c)];
+            }
+        }
     }
 
     /// Whether the reported hypothesis gated the latest reading.
@@ -924,6 +985,7 @@ impl Glac {
             self.restart();
         }
         self.last_time_s = m.time_s;
+        self.last_frequency_hz = m.frequency_hz;
         self.antenna_interval_s[m.antenna] = m.time_s - self.antenna_read_s[m.antenna];
         self.antenna_read_s[m.antenna] = m.time_s;
         if self.phase == Phase::Initialising {
@@ -1062,6 +1124,40 @@ mod tests {
         // One hypothesis with all the weight: its own covariance.
         h.log_likelihood = vec![0.0, -1e3];
         assert!((mixture_covariance(&h, &a) - p).norm() < 1e-15);
+    }
+
+    /// The unmodelled bias adds σ_b² (λ/4π)² (JᵀJ)⁻¹: with antennas on the
+    /// three axes (J = I) exactly σ_b² (λ/4π)² per axis, and only for
+    /// antennas that have read the tag.
+    #[test]
+    fn bias_covariance_is_the_least_squares_spread_of_a_range_bias() {
+        let positions = [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, -1.0]];
+        let antennas = positions
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], p[2]), phase_offset_rad: 0.0, role: Default::default() })
+            .collect();
+        let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, None, vec![]).unwrap();
+        let mut tracker = Glac::new(scene, GlacParams { bias_sigma_rad: 0.1, ..GlacParams::default() }).unwrap();
+        let x = StateVector::zeros();
+        let mut p = StateMatrix::zeros();
+        tracker.add_bias_covariance(&mut p, &x);
+        assert_eq!(p, StateMatrix::zeros(), "no read yet: nothing known of the carrier");
+        tracker.last_frequency_hz = 915e6;
+        tracker.antenna_read_s = vec![0.0; 3];
+        tracker.add_bias_covariance(&mut p, &x);
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * 915e6);
+        let expected = (0.1 * to_range).powi(2);
+        for k in 0..3 {
+            assert!((p[(k, k)] - expected).abs() < 1e-15);
+        }
+        assert!(p[(0, 1)].abs() < 1e-18 && p[(3, 3)] == 0.0);
+        // Two antennas cannot fix a 3D position: nothing is added (the
+        // geometry check reports such layouts).
+        let mut q = StateMatrix::zeros();
+        tracker.antenna_read_s[2] = f64::NEG_INFINITY;
+        tracker.add_bias_covariance(&mut q, &x);
+        assert_eq!(q, StateMatrix::zeros());
     }
 
     #[test]
