@@ -184,6 +184,7 @@ fn make_glac_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> 
             "phase_wander_rad" => p.phase_wander_rad = f()?,
             "phase_wander_s" => p.phase_wander_s = f()?,
             "bias_sigma_rad" => p.bias_sigma_rad = f()?,
+            "max_speed_m_s" => p.max_speed_m_s = f()?,
             "init_window_s" => p.init_window_s = f()?,
             "init_max_window_s" => p.init_max_window_s = f()?,
             "init_position_sigma_m" => p.init_position_sigma_m = f()?,
@@ -633,6 +634,7 @@ fn default_params<'py>(py: Python<'py>, method: &str) -> PyResult<Bound<'py, PyD
     d.set_item("phase_wander_rad", p.phase_wander_rad)?;
     d.set_item("phase_wander_s", p.phase_wander_s)?;
     d.set_item("bias_sigma_rad", p.bias_sigma_rad)?;
+    d.set_item("max_speed_m_s", p.max_speed_m_s)?;
     d.set_item("init_window_s", p.init_window_s)?;
     d.set_item("init_max_window_s", p.init_max_window_s)?;
     d.set_item("init_position_sigma_m", p.init_position_sigma_m)?;

@@ -108,6 +108,12 @@ pub struct GlacParams {
     pub max_consecutive_outliers: u32,
     /// Start over when a tag has not been read for this long, seconds.
     pub reinit_gap_s: f64,
+    /// Fastest the tag can move, m/s: after a restart (a read gap, or lost
+    /// lock) the new search keeps only candidates within
+    /// `max_speed_m_s · gap + 3σ` of the last estimate, and until it
+    /// commits the tracker reports that last estimate with the reachable
+    /// ball as its uncertainty (re-acquisition from the last good state).
+    pub max_speed_m_s: f64,
     /// Hypotheses further than this outside the region are removed, metres.
     pub region_margin_m: f64,
     /// Hypotheses closer than this (position) are merged, metres.
@@ -147,6 +153,7 @@ impl Default for GlacParams {
             gate_sigmas: 3.0,
             max_consecutive_outliers: 8,
             reinit_gap_s: 1.0,
+            max_speed_m_s: 1.0,
             region_margin_m: 0.05,
             merge_distance_m: 0.002,
             max_hypotheses: 200_000,
@@ -176,6 +183,7 @@ impl GlacParams {
             ("init_velocity_sigma_m_s", self.init_velocity_sigma_m_s),
             ("gate_sigmas", self.gate_sigmas),
             ("reinit_gap_s", self.reinit_gap_s),
+            ("max_speed_m_s", self.max_speed_m_s),
             ("phase_wander_s", self.phase_wander_s),
         ];
         for (name, v) in positive {
@@ -342,6 +350,9 @@ pub struct Glac {
     antenna_interval_s: Vec<f64>,
     /// Carrier of the latest read, Hz (NaN before any).
     last_frequency_hz: f64,
+    /// The latest estimate (time s, position m, its 3×3 covariance m²):
+    /// where re-acquisition starts from.
+    last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
     stats: TrackerStats,
 }
 
@@ -365,6 +376,7 @@ impl Glac {
             antenna_read_s: vec![f64::NEG_INFINITY; n_antennas],
             antenna_interval_s: vec![f64::INFINITY; n_antennas],
             last_frequency_hz: f64::NAN,
+            last_good: None,
             stats: TrackerStats::default(),
         })
     }
@@ -453,6 +465,7 @@ impl Glac {
         let v_sigma = if with_velocity { self.params.init_velocity_sigma_m_s } else { 0.0 };
         let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
         self.hypotheses.clear();
+        let initial = self.reachable(initial, t_x);
         for h in &initial {
             let mut x = h.state;
             if self.axes == 2 {
@@ -478,6 +491,27 @@ impl Glac {
             return false;
         }
         true
+    }
+
+    /// Re-acquisition: of the initial candidates, those the tag can have
+    /// reached from the last good state (within `max_speed_m_s` · Δt + 3σ
+    /// of it, σ its largest position sigma). All of them when there is no
+    /// last state, or when none is reachable (the bound was wrong: the tag
+    /// was moved faster; searching everywhere beats losing it).
+    fn reachable(&self, initial: Vec<super::initial::InitialHypothesis>, t_x: f64) -> Vec<super::initial::InitialHypothesis> {
+        let Some((t, position, covariance)) = self.last_good else { return initial };
+        let sigma = covariance.diagonal().iter().fold(0.0f64, |m, v| m.max(*v)).sqrt();
+        let radius = self.params.max_speed_m_s * (t_x - t).max(0.0) + 3.0 * sigma;
+        let near: Vec<_> = initial
+            .iter()
+            .filter(|h| (Vector3::new(h.state[0], h.state[1], h.state[2]) - position).norm() <= radius)
+            .cloned()
+            .collect();
+        if near.is_empty() {
+            initial
+        } else {
+            near
+        }
     }
 
     /// One reading through every hypothesis (fast or naive inference), or
@@ -992,9 +1026,9 @@ impl Glac {
             self.stats.initialising += 1;
             self.buffer.push(*m);
             if !self.try_initialise() {
-                return None;
+                return self.coasting_estimate(m.time_s);
             }
-            return self.best_estimate(m.time_s);
+            return self.remember(self.best_estimate(m.time_s));
         }
         self.track(m);
         if self.hypotheses.len() == 0 {
@@ -1002,7 +1036,7 @@ impl Glac {
             self.restart();
             self.buffer.push(*m);
             self.stats.initialising += 1;
-            return None;
+            return self.coasting_estimate(m.time_s);
         }
         if self.params.inference != Inference::Naive && self.best_gated_last() {
             self.stats.outliers += 1;
@@ -1010,7 +1044,45 @@ impl Glac {
         if self.params.inference == Inference::Synchronous && !self.group.is_empty() {
             return None; // no new estimate until the group completes
         }
-        self.best_estimate(m.time_s)
+        self.remember(self.best_estimate(m.time_s))
+    }
+
+    /// Keeps `estimate` as the last good state (for re-acquisition).
+    fn remember(&mut self, estimate: Option<Estimate>) -> Option<Estimate> {
+        if let Some(e) = &estimate {
+            let c = &e.covariance;
+            let covariance = Matrix3::from_fn(|r, k| c[r * 6 + k]);
+            self.last_good = Some((e.time_s, Vector3::from(e.position), covariance));
+        }
+        estimate
+    }
+
+    /// While re-initialising after a restart: the last good position, with
+    /// its covariance grown by the ball the tag can have reached since,
+    /// radius r = `max_speed_m_s` · Δt (a uniform ball's per-axis variance
+    /// r²/5 is added; 3σ then exceeds r). Velocity 0 ± `max_speed_m_s`.
+    /// Honest rather than silent: the user sees where the tag can be.
+    fn coasting_estimate(&self, time_s: f64) -> Option<Estimate> {
+        let (t, position, covariance) = self.last_good?;
+        let radius = self.params.max_speed_m_s * (time_s - t).max(0.0);
+        let mut c = [0.0; 36];
+        for r in 0..3 {
+            for k in 0..3 {
+                c[r * 6 + k] = covariance[(r, k)];
+            }
+        }
+        for k in 0..self.axes {
+            c[k * 6 + k] += radius * radius / 5.0;
+            c[(k + 3) * 6 + k + 3] = self.params.max_speed_m_s * self.params.max_speed_m_s;
+        }
+        Some(Estimate {
+            time_s,
+            position: [position.x, position.y, position.z],
+            velocity: [0.0; 3],
+            covariance: c,
+            hypotheses: 0,
+            weight: 0.0,
+        })
     }
 }
 
@@ -1044,6 +1116,7 @@ impl Tracker for Glac {
         self.last_time_s = f64::NEG_INFINITY;
         self.antenna_read_s.fill(f64::NEG_INFINITY);
         self.antenna_interval_s.fill(f64::INFINITY);
+        self.last_good = None;
     }
 }
 
@@ -1158,6 +1231,62 @@ mod tests {
         tracker.antenna_read_s[2] = f64::NEG_INFINITY;
         tracker.add_bias_covariance(&mut q, &x);
         assert_eq!(q, StateMatrix::zeros());
+    }
+
+    /// After a read gap the tracker reports the last good position with
+    /// the reachable ball as its uncertainty until it re-commits, and the
+    /// new search keeps only candidates the tag can have reached.
+    #[test]
+    fn reacquires_from_the_last_good_state_after_a_gap() {
+        let scene = scene();
+        let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        let all = reads(&scene, 300); // 10 s at 30 reads/s
+        // Reads stop from 4 s to 5.5 s (longer than reinit_gap_s = 1 s).
+        let kept: Vec<_> = all.iter().filter(|m| m.time_s < 4.0 || m.time_s >= 5.5).collect();
+        let mut before = None;
+        let mut coasting = Vec::new();
+        let mut after = Vec::new();
+        for m in kept {
+            let Some(e) = tracker.step(&Measurement::Phase(*m)) else { continue };
+            if m.time_s < 4.0 {
+                before = Some(e);
+            } else if e.hypotheses == 0 {
+                coasting.push(e);
+            } else {
+                after.push((m.time_s, e));
+            }
+        }
+        assert_eq!(tracker.stats().reinitialisations, 1);
+        let before = before.unwrap();
+        assert!(!coasting.is_empty(), "no estimate while re-initialising");
+        for e in &coasting {
+            assert_eq!(e.position, before.position);
+            let radius = tracker.params().max_speed_m_s * (e.time_s - before.time_s);
+            assert!(e.position_sigma()[0] * 3.0 >= radius, "the reachable ball must lie within 3 sigma");
+        }
+        // Re-committed within the re-initialisation window, on the truth.
+        let (t, first) = &after[0];
+        assert!(*t < 5.5 + 2.0 * GlacParams::default().init_max_window_s);
+        let truth = Vector3::new(0.6 + 0.1 * t, 0.3 + 0.05 * t, 0.0);
+        assert!((Vector3::from(first.position) - truth).norm() < 0.01);
+    }
+
+    #[test]
+    fn reachable_keeps_candidates_within_the_speed_bound() {
+        let mut tracker = Glac::new(scene(), GlacParams { max_speed_m_s: 0.5, ..GlacParams::default() }).unwrap();
+        let at = |x: f64| super::super::initial::InitialHypothesis {
+            state: StateVector::from_iterator([x, 0.3, 0.0, 0.0, 0.0, 0.0]),
+            log_likelihood: 0.0,
+            max_residual_m: 0.0,
+        };
+        let candidates = || vec![at(0.5), at(0.9), at(1.5)];
+        assert_eq!(tracker.reachable(candidates(), 1.0).len(), 3, "no last state: every candidate");
+        tracker.last_good = Some((0.0, Vector3::new(0.5, 0.3, 0.0), Matrix3::identity() * 1e-6));
+        // 1 s at 0.5 m/s + 3 mm: 0.5 and 0.9 are reachable, 1.5 is not.
+        let kept: Vec<f64> = tracker.reachable(candidates(), 1.0).iter().map(|h| h.state[0]).collect();
+        assert_eq!(kept, vec![0.5, 0.9]);
+        // None reachable: the bound was wrong, search everywhere.
+        assert_eq!(tracker.reachable(vec![at(1.5)], 1.0).len(), 1);
     }
 
     #[test]
