@@ -26,6 +26,8 @@ import sys
 import time
 from pathlib import Path
 
+import numpy as np
+
 DEMO_SCENARIO = "glac-3d-arm"
 """The scenario ``scattertrack demo`` (and so ``make demo``) runs by default."""
 
@@ -155,6 +157,8 @@ def print_tracker_summary(result, reads, wall_s: float) -> None:
             f"{tag.get('reinitialisations', 0)} reinitialisations, "
             f"at most {tag.get('max_hypotheses', 0)} hypotheses"
         )
+    for line in unresolved_warnings(result):
+        say(line)
     if len(stats) > MAX_TAGS_LISTED:
         rest = list(stats.values())[MAX_TAGS_LISTED:]
         say(
@@ -168,6 +172,33 @@ def print_tracker_summary(result, reads, wall_s: float) -> None:
         _, mean_ns, max_ns = latency
         line += f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(max_ns)} max per read"
     say(line)
+
+
+# A row is unresolved while its largest sigma exceeds this (m): a quarter
+# of the λ/2 ≈ 16 cm candidate spacing, the scale at which competing
+# candidate trajectories (or geometric twins) still carry weight.
+UNRESOLVED_SIGMA_M = 0.04
+
+
+def unresolved_warnings(result) -> list[str]:
+    """One ``warning:`` line per tag whose track ends unresolved (its last
+    row's largest sigma above :data:`UNRESOLVED_SIGMA_M`), saying how much
+    of the track was; a tag that resolved says nothing."""
+    if result.sigma is None or len(result) == 0:
+        return []
+    lines = []
+    largest = np.nanmax(result.sigma, axis=1)
+    for epc in dict.fromkeys(result.epc.tolist()):
+        rows = np.flatnonzero(result.epc == epc)
+        unresolved = largest[rows] > UNRESOLVED_SIGMA_M
+        if unresolved[-1]:
+            lines.append(
+                f"warning: tag {epc}: the reads did not resolve its position: "
+                f"{unresolved.mean() * 100:.0f} % of its rows, the last included, have a sigma above "
+                f"{UNRESOLVED_SIGMA_M * 100:.0f} cm (up to {largest[rows].max() * 100:.0f} cm); "
+                "the sigmas cover the competing candidates, the position is the likeliest of them"
+            )
+    return lines
 
 
 def run_tracker(method: str, scene, reads, params: dict, progress: bool):
