@@ -184,6 +184,8 @@ fn make_glac_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> 
             "phase_wander_rad" => p.phase_wander_rad = f()?,
             "phase_wander_s" => p.phase_wander_s = f()?,
             "bias_sigma_rad" => p.bias_sigma_rad = f()?,
+            "bias_state" => p.bias_state = value.extract()?,
+            "bias_time_s" => p.bias_time_s = f()?,
             "max_speed_m_s" => p.max_speed_m_s = f()?,
             "init_window_s" => p.init_window_s = f()?,
             "init_max_window_s" => p.init_max_window_s = f()?,
@@ -634,6 +636,8 @@ fn default_params<'py>(py: Python<'py>, method: &str) -> PyResult<Bound<'py, PyD
     d.set_item("phase_wander_rad", p.phase_wander_rad)?;
     d.set_item("phase_wander_s", p.phase_wander_s)?;
     d.set_item("bias_sigma_rad", p.bias_sigma_rad)?;
+    d.set_item("bias_state", p.bias_state)?;
+    d.set_item("bias_time_s", p.bias_time_s)?;
     d.set_item("max_speed_m_s", p.max_speed_m_s)?;
     d.set_item("init_window_s", p.init_window_s)?;
     d.set_item("init_max_window_s", p.init_max_window_s)?;

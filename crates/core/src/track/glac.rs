@@ -82,15 +82,24 @@ pub struct GlacParams {
     pub phase_wander_rad: f64,
     /// Correlation time τ of that error, seconds.
     pub phase_wander_s: f64,
-    /// 1-sigma of a slowly varying phase bias per antenna that the filter
-    /// does not model (wander, residual calibration, multipath; real
-    /// readers show 0.05–0.1 rad over ~0.5 s beyond their read-to-read
-    /// noise), radians. It changes no estimate: its effect on the
-    /// position, σ_b² (λ/4π)² (Jᵀ J)⁻¹ with J the unit vectors from the
-    /// antennas to the tag, is added to the reported covariance (a
-    /// "consider" covariance), so that a scene stating only the white
-    /// noise still gets sigmas that cover the truth. 0 disables it.
+    /// 1-sigma of a slowly varying phase bias per antenna (wander,
+    /// residual calibration, multipath; real readers show 0.05–0.1 rad over
+    /// ~0.5 s beyond their read-to-read noise), radians. With `bias_state`
+    /// (fast inference) each hypothesis estimates it; otherwise its effect
+    /// on the position, σ_b² (λ/4π)² (Jᵀ J)⁻¹ with J the unit vectors from
+    /// the antennas to the tag, is added to the reported covariance (a
+    /// "consider" covariance) without changing the estimate. Either way a
+    /// scene that states only the white noise gets sigmas that cover the
+    /// truth. 0 disables both.
     pub bias_sigma_rad: f64,
+    /// Estimate that bias per antenna in each hypothesis as an AR(1)
+    /// state (stationary 1-sigma `bias_sigma_rad`, correlation time
+    /// `bias_time_s`) instead of only counting it in the reported sigma
+    /// (fast inference). The innovation then separates a slow bias from
+    /// the motion, so that a true trajectory is not charged for it.
+    pub bias_state: bool,
+    /// Correlation time τ_b of the bias, seconds.
+    pub bias_time_s: f64,
     /// Collect at least this long before initialising, seconds.
     pub init_window_s: f64,
     /// Give up waiting for every antenna after this long, seconds.
@@ -144,6 +153,8 @@ impl Default for GlacParams {
             phase_wander_rad: 0.0,
             phase_wander_s: 0.5,
             bias_sigma_rad: 0.07,
+            bias_state: true,
+            bias_time_s: 0.5,
             init_window_s: 0.3,
             init_max_window_s: 1.0,
             initial: InitialState::default(),
@@ -185,6 +196,7 @@ impl GlacParams {
             ("reinit_gap_s", self.reinit_gap_s),
             ("max_speed_m_s", self.max_speed_m_s),
             ("phase_wander_s", self.phase_wander_s),
+            ("bias_time_s", self.bias_time_s),
         ];
         for (name, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
@@ -238,7 +250,15 @@ struct Hypotheses {
     log_likelihood: Vec<f64>,
     /// Consecutive gated readings.
     outliers: Vec<u32>,
+    /// Per antenna (the first [`MAX_BIASES`]): the estimated range bias
+    /// (m) and its variance (m²) of the AR(1) phase-bias state.
+    bias: Vec<[f64; MAX_BIASES]>,
+    bias_variance: Vec<[f64; MAX_BIASES]>,
 }
+
+/// Antennas (by index) that get a bias state; further ones count their
+/// bias as white noise. Fixed-size so a hypothesis allocates nothing.
+pub const MAX_BIASES: usize = 8;
 
 impl Hypotheses {
     fn len(&self) -> usize {
@@ -251,6 +271,8 @@ impl Hypotheses {
         self.mu.clear();
         self.log_likelihood.clear();
         self.outliers.clear();
+        self.bias.clear();
+        self.bias_variance.clear();
     }
 
     fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
@@ -259,6 +281,10 @@ impl Hypotheses {
         self.mu.push([1.0, 0.0]);
         self.log_likelihood.push(log_likelihood);
         self.outliers.push(0);
+        // Unknown until the antenna is first read, when the AR(1)
+        // prediction (ρ = 0) sets the stationary variance.
+        self.bias.push([0.0; MAX_BIASES]);
+        self.bias_variance.push([0.0; MAX_BIASES]);
     }
 
     /// Appends a copy of hypothesis `i` (for ambiguity branching).
@@ -268,6 +294,8 @@ impl Hypotheses {
         self.mu.push(self.mu[i]);
         self.log_likelihood.push(self.log_likelihood[i]);
         self.outliers.push(self.outliers[i]);
+        self.bias.push(self.bias[i]);
+        self.bias_variance.push(self.bias_variance[i]);
     }
 
     /// The reported state of hypothesis `i`: the IMM combination (which
@@ -290,6 +318,8 @@ impl Hypotheses {
                 self.mu.swap(w, r);
                 self.log_likelihood.swap(w, r);
                 self.outliers.swap(w, r);
+                self.bias.swap(w, r);
+                self.bias_variance.swap(w, r);
                 w += 1;
             }
         }
@@ -298,6 +328,8 @@ impl Hypotheses {
         self.mu.truncate(w);
         self.log_likelihood.truncate(w);
         self.outliers.truncate(w);
+        self.bias.truncate(w);
+        self.bias_variance.truncate(w);
     }
 
     /// Index of the likeliest hypothesis (the one reported), if any.
@@ -350,6 +382,9 @@ pub struct Glac {
     antenna_interval_s: Vec<f64>,
     /// Carrier of the latest read, Hz (NaN before any).
     last_frequency_hz: f64,
+    /// Per antenna: time the hypotheses' bias states were last
+    /// propagated to, seconds (−∞: not yet, the next read starts it).
+    bias_time_s: Vec<f64>,
     /// The latest estimate (time s, position m, its 3×3 covariance m²):
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
@@ -376,6 +411,7 @@ impl Glac {
             antenna_read_s: vec![f64::NEG_INFINITY; n_antennas],
             antenna_interval_s: vec![f64::INFINITY; n_antennas],
             last_frequency_hz: f64::NAN,
+            bias_time_s: vec![f64::NEG_INFINITY; n_antennas],
             last_good: None,
             stats: TrackerStats::default(),
         })
@@ -452,7 +488,10 @@ impl Glac {
             return false;
         }
         let f = self.buffer[0].frequency_hz;
-        let range_sigma = self.range_variance(f).sqrt();
+        // The bias is part of each initial range's error too.
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
+        let bias = self.params.bias_sigma_rad * to_range;
+        let range_sigma = (self.range_variance(f) + bias * bias).sqrt();
         let with_velocity = self.params.motion.has_velocity();
         let Some((t_x, initial)) =
             initial_hypotheses(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity)
@@ -477,6 +516,7 @@ impl Glac {
         self.hypotheses.normalise();
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
+        self.bias_time_s.fill(f64::NEG_INFINITY);
         self.group_antennas = counts.iter().map(|&c| c >= 2).collect();
         self.group.clear();
         self.phase = Phase::Tracking;
@@ -549,24 +589,32 @@ impl Glac {
             likelihood: self.params.likelihood,
             axes: self.axes,
         };
+        let bias = self.bias_step(m);
         let h = &mut self.hypotheses;
         let n = h.len();
         let branch_limit = self.params.max_branching_hypotheses;
-        let mut branches: Vec<(usize, f64)> = Vec::new();
+        // A branch is an exact copy of the predicted hypothesis: it keeps
+        // that prediction (bias, predicted reading, its variance).
+        let mut branches: Vec<(usize, f64, BiasPrediction, f64, f64)> = Vec::new();
         for i in 0..n {
-            let (predicted_range, variance) = step.predict(h, i);
-            let z = nearest_candidate(step.residue, step.spacing, predicted_range);
+            let (range, variance) = step.predict(h, i);
+            let b = bias.predict(h, i);
+            // The reading predicts range + bias, with both uncertainties.
+            let (predicted, variance) = (range + b.mean, variance + b.variance);
+            let z = nearest_candidate(step.residue, step.spacing, predicted);
             if n + branches.len() < branch_limit && 9.0 * variance > 0.25 * step.spacing * step.spacing {
-                let second = if predicted_range > z { z + step.spacing } else { z - step.spacing };
+                let second = if predicted > z { z + step.spacing } else { z - step.spacing };
                 if second >= 0.0 {
                     h.duplicate(i);
-                    branches.push((h.len() - 1, second));
+                    branches.push((h.len() - 1, second, b, predicted, variance));
                 }
             }
-            step.update(h, i, z);
+            step.update(h, i, z - b.mean, b.variance);
+            bias.update(h, i, &b, z - predicted, variance);
         }
-        for &(j, z) in &branches {
-            step.update(h, j, z);
+        for &(j, z, b, predicted, variance) in &branches {
+            step.update(h, j, z - b.mean, b.variance);
+            bias.update(h, j, &b, z - predicted, variance);
         }
         let models = if step.manoeuvre.is_some() { 2 } else { 1 };
         self.stats.filter_updates += (h.len() * models) as u64;
@@ -803,7 +851,9 @@ impl Glac {
     /// (singular JᵀJ), where the geometry check speaks instead.
     fn add_bias_covariance(&self, p: &mut StateMatrix, x: &StateVector) {
         let sigma_b = self.params.bias_sigma_rad;
-        if sigma_b == 0.0 || !self.last_frequency_hz.is_finite() {
+        // With bias states the filter's own P carries the bias.
+        let modelled = self.params.bias_state && self.params.inference == Inference::Fast;
+        if sigma_b == 0.0 || modelled || !self.last_frequency_hz.is_finite() {
             return;
         }
         let position = Vector3::new(x[0], x[1], x[2]);
@@ -839,6 +889,20 @@ impl Glac {
         }
     }
 
+    /// The bias states' step for reading `m`, and the antenna's bias clock
+    /// moved to its time.
+    fn bias_step(&mut self, m: &PhaseRead) -> BiasStep {
+        if !self.params.bias_state || m.antenna >= MAX_BIASES || self.params.bias_sigma_rad == 0.0 {
+            return BiasStep { antenna: None, rho: 0.0, drive: 0.0 };
+        }
+        let dt = m.time_s - self.bias_time_s[m.antenna];
+        self.bias_time_s[m.antenna] = m.time_s;
+        let rho = if dt.is_finite() { (-dt.max(0.0) / self.params.bias_time_s).exp() } else { 0.0 };
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * m.frequency_hz);
+        let stationary = (self.params.bias_sigma_rad * to_range).powi(2);
+        BiasStep { antenna: Some(m.antenna), rho, drive: stationary * (1.0 - rho * rho) }
+    }
+
     /// Whether the reported hypothesis gated the latest reading.
     fn best_gated_last(&self) -> bool {
         let h = &self.hypotheses;
@@ -864,6 +928,53 @@ fn mixture_covariance(h: &Hypotheses, centre: &StateVector) -> StateMatrix {
         sum += (p + d * d.transpose()) * w;
     }
     sum
+}
+
+/// One antenna's AR(1) bias prediction for one hypothesis: mean (m) and
+/// variance (m²) at the reading's time.
+#[derive(Debug, Clone, Copy, Default)]
+struct BiasPrediction {
+    mean: f64,
+    variance: f64,
+}
+
+/// What one reading means for the hypotheses' bias states of its antenna:
+/// `b ← ρ b`, `V ← ρ² V + σ_b² (1 − ρ²)` with ρ = exp(−Δt/τ_b) since the
+/// antenna's previous read (ρ = 0 on its first: the stationary prior), and
+/// after the state update the bias takes its share of the innovation,
+/// `b ← b + V/S · ν`, `V ← V − V²/S` (S the innovation variance of range
+/// plus bias). The cross-covariance of bias and state that an exact joint
+/// filter would carry is dropped (a decoupled, per-antenna scalar filter):
+/// that overstates the next innovation's variance a little (conservative)
+/// and keeps the step O(1) in the number of antennas.
+struct BiasStep {
+    /// Antenna index, if it has a bias state.
+    antenna: Option<usize>,
+    rho: f64,
+    /// σ_b² (1 − ρ²), m².
+    drive: f64,
+}
+
+impl BiasStep {
+    fn predict(&self, h: &Hypotheses, i: usize) -> BiasPrediction {
+        let Some(a) = self.antenna else { return BiasPrediction::default() };
+        BiasPrediction { mean: self.rho * h.bias[i][a], variance: self.rho * self.rho * h.bias_variance[i][a] + self.drive }
+    }
+
+    /// `innovation` (m) of the reading against range + bias, `variance`
+    /// its S (m²). A gated reading (the hypothesis' outlier count rose)
+    /// leaves the bias at its prediction.
+    fn update(&self, h: &mut Hypotheses, i: usize, b: &BiasPrediction, innovation: f64, variance: f64) {
+        let Some(a) = self.antenna else { return };
+        if h.outliers[i] == 0 && variance > 0.0 {
+            let gain = b.variance / variance;
+            h.bias[i][a] = b.mean + gain * innovation;
+            h.bias_variance[i][a] = b.variance * (1.0 - gain);
+        } else {
+            h.bias[i][a] = b.mean;
+            h.bias_variance[i][a] = b.variance;
+        }
+    }
 }
 
 /// Everything one reading means for every hypothesis (fast inference).
@@ -916,17 +1027,19 @@ impl FastStep {
         }
     }
 
-    /// Updates predicted hypothesis `i` with candidate distance `z` (m),
+    /// Updates predicted hypothesis `i` with candidate distance `z` (m)
+    /// and `extra_r` (m²) of noise beyond R (the bias state's variance),
     /// gating (3σ recovery) and adding the reading's log-likelihood. A
     /// gated reading is charged the density at the gate, so a hypothesis
     /// cannot gain by rejecting data.
-    fn update(&self, h: &mut Hypotheses, i: usize, z: f64) {
+    fn update(&self, h: &mut Hypotheses, i: usize, z: f64, extra_r: f64) {
         let gated = |s: f64| -0.5 * (self.gate2 + (2.0 * std::f64::consts::PI * s).ln());
+        let r = self.r + extra_r;
         if self.manoeuvre.is_none() {
             let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
             let x_predicted = *x;
             let (d, jac) = range(x, &self.antenna, self.axes, true);
-            let (u, b) = innovation(p, z, d, &jac.unwrap(), self.r);
+            let (u, b) = innovation(p, z, d, &jac.unwrap(), r);
             h.log_likelihood[i] += if u.innovation * u.innovation <= self.gate2 * u.variance {
                 h.outliers[i] = 0;
                 apply_scalar(x, p, &u, &b);
@@ -934,7 +1047,7 @@ impl FastStep {
                     Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
                     Likelihood::Paper => {
                         let d_post = range(x, &self.antenna, self.axes, false).0;
-                        log_gaussian(d_post - z, self.r) + transition_log_density(x, &x_predicted, &self.transition)
+                        log_gaussian(d_post - z, r) + transition_log_density(x, &x_predicted, &self.transition)
                     }
                 }
             } else {
@@ -952,7 +1065,7 @@ impl FastStep {
         // every reading.
         let updates: [_; 2] = std::array::from_fn(|j| {
             let (d, jac) = range(&h.x[i][j], &self.antenna, self.axes, true);
-            let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), self.r);
+            let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), r);
             accepted |= u.innovation * u.innovation <= self.gate2 * u.variance;
             density[j] = log_gaussian(u.innovation, u.variance);
             variance[j] = u.variance;
@@ -1117,6 +1230,7 @@ impl Tracker for Glac {
         self.antenna_read_s.fill(f64::NEG_INFINITY);
         self.antenna_interval_s.fill(f64::INFINITY);
         self.last_good = None;
+        self.bias_time_s.fill(f64::NEG_INFINITY);
     }
 }
 
@@ -1211,7 +1325,8 @@ mod tests {
             .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], p[2]), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
         let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, None, vec![]).unwrap();
-        let mut tracker = Glac::new(scene, GlacParams { bias_sigma_rad: 0.1, ..GlacParams::default() }).unwrap();
+        let params = GlacParams { bias_sigma_rad: 0.1, bias_state: false, ..GlacParams::default() };
+        let mut tracker = Glac::new(scene, params).unwrap();
         let x = StateVector::zeros();
         let mut p = StateMatrix::zeros();
         tracker.add_bias_covariance(&mut p, &x);
@@ -1287,6 +1402,61 @@ mod tests {
         assert_eq!(kept, vec![0.5, 0.9]);
         // None reachable: the bound was wrong, search everywhere.
         assert_eq!(tracker.reachable(vec![at(1.5)], 1.0).len(), 1);
+    }
+
+    /// The AR(1) bias prediction: ρ = exp(−Δt/τ) since the antenna's last
+    /// read, stationary on its first read.
+    #[test]
+    fn bias_state_follows_the_ar1_model() {
+        let scene = scene();
+        let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        let read = |t: f64| PhaseRead { time_s: t, antenna: 1, frequency_hz: 915e6, phase_rad: 0.0 };
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * 915e6);
+        let stationary = (0.07 * to_range).powi(2);
+        let first = tracker.bias_step(&read(1.0));
+        assert_eq!((first.antenna, first.rho), (Some(1), 0.0));
+        assert!((first.drive - stationary).abs() < 1e-18);
+        let next = tracker.bias_step(&read(1.25));
+        assert!((next.rho - (-0.25f64 / 0.5).exp()).abs() < 1e-12);
+        assert!((next.drive - stationary * (1.0 - next.rho * next.rho)).abs() < 1e-18);
+        let mut off = Glac::new(scene.clone(), GlacParams { bias_state: false, ..GlacParams::default() }).unwrap();
+        assert_eq!(off.bias_step(&read(1.0)).antenna, None);
+    }
+
+    /// A slow phase bias on one antenna (0.15 rad, a 3 s sinusoid, as
+    /// multipath or wander would give): the bias states absorb it, and
+    /// the track is closer to the truth than without them.
+    #[test]
+    fn bias_states_absorb_a_slow_antenna_bias() {
+        let scene = scene();
+        let biased: Vec<PhaseRead> = reads(&scene, 240)
+            .into_iter()
+            .map(|mut m| {
+                if m.antenna == 2 {
+                    m.phase_rad = (m.phase_rad + 0.15 * (std::f64::consts::TAU * m.time_s / 3.0).sin()).rem_euclid(std::f64::consts::TAU);
+                }
+                m
+            })
+            .collect();
+        let error = |bias_state: bool| {
+            let params = GlacParams { bias_state, bias_sigma_rad: 0.15, phase_noise_rad: Some(0.02), ..GlacParams::default() };
+            let mut tracker = Glac::new(scene.clone(), params).unwrap();
+            let mut sum = 0.0;
+            let mut count = 0;
+            for m in &biased {
+                if let Some(e) = tracker.step(&Measurement::Phase(*m)) {
+                    if m.time_s > 3.0 {
+                        let t = m.time_s;
+                        let truth = Vector3::new(0.6 + 0.1 * t, 0.3 + 0.05 * t, 0.0);
+                        sum += (Vector3::from(e.position) - truth).norm();
+                        count += 1;
+                    }
+                }
+            }
+            sum / count as f64
+        };
+        let (with, without) = (error(true), error(false));
+        assert!(with < 0.8 * without, "mean error with bias states {with} m, without {without} m");
     }
 
     #[test]
