@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
     repeated_cells,
@@ -58,7 +59,7 @@ class Frames:
     time_s: np.ndarray
     """Frame time, seconds, float64 (n,)."""
     epc: np.ndarray
-    """Tag id, numpy unicode (n,)."""
+    """Tag id (n,): strings, an object array from :func:`read_frames` (each distinct id stored once)."""
     tx: np.ndarray
     """Transmit antenna id (scene ``role = "tx"``), int64 (n,)."""
     rx: np.ndarray
@@ -185,13 +186,15 @@ def read_frames(path, scene: Scene | None = None) -> Frames:
     if scene is not None:
         roles = {int(a.id): a.role for a in scene.antennas}
     parts, lines = [], []
+    epcs = TextTable()
     with CsvReader(path, REQUIRED) as reader:
         for chunk in reader.chunks():
-            part = _parse_chunk(chunk, roles)
+            part = _parse_chunk(chunk, roles, epcs)
             chunk.raise_first_problem()
             parts.append(part)
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
+    columns["epc"] = epcs.decode(columns["epc"])
     return _finish(columns, np.concatenate(lines))
 
 
@@ -208,10 +211,10 @@ def _check_antennas(chunk, name: str, ids: np.ndarray, roles: dict, wanted: str)
         )
 
 
-def _parse_chunk(chunk, roles: dict | None) -> dict:
-    """Convert and check one chunk's columns; problems are recorded in the chunk."""
+def _parse_chunk(chunk, roles: dict | None, epcs: TextTable) -> dict:
+    """Convert and check one chunk's columns (``epc`` as codes into ``epcs``); problems are recorded in the chunk."""
     time = chunk.floats("time_s")
-    epc = chunk.texts("epc")
+    epc = chunk.texts("epc", epcs)
     tx = chunk.integers("tx")
     rx = chunk.integers("rx")
     if roles is not None:
@@ -224,7 +227,7 @@ def _parse_chunk(chunk, roles: dict | None) -> dict:
     channel.imag = chunk.floats("h_im")
     return {
         "time_s": time,
-        "epc": np.array(epc, dtype=str),
+        "epc": epc,
         "tx": tx,
         "rx": rx,
         "frequency_hz": frequency,

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
     whole_group,
@@ -38,11 +39,12 @@ def read_truth(path) -> Truth:
     with nan where a row's cells are empty. Raises :class:`FormatError` (file, line, column) for a malformed file.
     """
     times, epcs, positions, velocities, orientations = [], [], [], [], []
+    table = TextTable()
     with CsvReader(path, REQUIRED, VELOCITY + ORIENTATION) as reader:
         has_orientation = whole_group(reader, ORIENTATION)
         for chunk in reader.chunks():
             times.append(chunk.floats("time_s"))
-            epcs.append(np.array(chunk.texts("epc"), dtype=str))
+            epcs.append(chunk.texts("epc", table))
             positions.append(np.column_stack([chunk.floats(name) for name in POSITION]))
             velocity = [
                 chunk.floats(name, allow_empty=True)
@@ -60,7 +62,7 @@ def read_truth(path) -> Truth:
     order = np.argsort(time, kind="stable")
     return Truth(
         time_s=time[order],
-        epc=np.concatenate(epcs)[order],
+        epc=table.decode(np.concatenate(epcs)[order]),
         position=np.concatenate(positions)[order],
         velocity=np.concatenate(velocities)[order],
         orientation=np.concatenate(orientations)[order] if has_orientation else None,
