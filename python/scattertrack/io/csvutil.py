@@ -89,6 +89,12 @@ class Chunk:
             value = self.columns[self.column_position[name]][row]
             self.add_problem(row, name, message.format(value=repr(value)))
 
+    def flag_values(self, name: str, values: np.ndarray, bad: np.ndarray, describe) -> None:
+        """Like :meth:`flag`, the message being ``describe(cell text, value)``: a hint that depends on the value."""
+        if bad.any():
+            row = int(np.argmax(bad))
+            self.add_problem(row, name, describe(self.cells(name)[row].strip(), float(values[row])))
+
     def raise_first_problem(self) -> None:
         """Raise the problem with the lowest line, then the leftmost column, if any."""
         if self.problems:

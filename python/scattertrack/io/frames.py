@@ -23,6 +23,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scattertrack.io import units
 from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
@@ -31,6 +32,7 @@ from scattertrack.io.csvutil import (
     text_column,
     write_columns,
 )
+from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Scene, SkipReport
 
 REQUIRED = ["time_s", "epc", "tx", "rx", "frequency_hz", "h_re", "h_im"]
@@ -179,7 +181,7 @@ def read_frames(path, scene: Scene | None = None) -> Frames:
     ``"duplicate row"`` (the first in the file is kept); rows out of time
     order are counted in ``reordered`` and sorted. Raises
     :class:`FormatError` (file, line, column) for a missing column, a
-    non-numeric or non-finite value, a non-positive frequency, an antenna
+    non-numeric or non-finite value, a frequency outside 100 MHz to 10 GHz, an antenna
     that is not in the scene or has the wrong role, or an empty file.
     """
     roles = None
@@ -195,7 +197,9 @@ def read_frames(path, scene: Scene | None = None) -> Frames:
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
     columns["epc"] = epcs.decode(columns["epc"])
-    return _finish(columns, np.concatenate(lines))
+    lines = np.concatenate(lines)
+    warn_clock_jumps(path, columns["time_s"], lines)
+    return _finish(columns, lines)
 
 
 def _check_antennas(chunk, name: str, ids: np.ndarray, roles: dict, wanted: str) -> None:
@@ -221,7 +225,7 @@ def _parse_chunk(chunk, roles: dict | None, epcs: TextTable) -> dict:
         _check_antennas(chunk, "tx", tx, roles, "tx")
         _check_antennas(chunk, "rx", rx, roles, "rx")
     frequency = chunk.floats("frequency_hz")
-    chunk.flag("frequency_hz", frequency <= 0.0, "frequency must be positive: {value}")
+    chunk.flag_values("frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
     channel = np.empty(len(chunk), dtype=np.complex128)
     channel.real = chunk.floats("h_re")
     channel.imag = chunk.floats("h_im")

@@ -86,10 +86,10 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Tex
     if antenna_ids is not None:
         chunk.flag("antenna", ~np.isin(antenna, antenna_ids), "antenna {value} is not in the scene")
     frequency = chunk.floats("frequency_hz")
-    _flag_first(chunk, "frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
+    chunk.flag_values("frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
     phase = chunk.floats("phase_rad")
     outside = (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
-    _flag_first(chunk, "phase_rad", phase, outside, lambda text, value: units.phase_message(text, value, phase, period))
+    chunk.flag_values("phase_rad", phase, outside, lambda text, value: units.phase_message(text, value, phase, period))
     # Within the tolerance: fold rounding noise back into [0, P).
     phase = np.where(phase >= period, phase - period, phase)
     phase = np.where(phase < 0.0, 0.0, phase)
@@ -107,13 +107,6 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Tex
         "phase_rad": phase,
         **optional,
     }
-
-
-def _flag_first(chunk, name: str, values: np.ndarray, bad: np.ndarray, message) -> None:
-    """Record the first row of ``bad`` with ``message(cell text, value)`` (the hint depends on the value)."""
-    if bad.any():
-        row = int(np.argmax(bad))
-        chunk.add_problem(row, name, message(chunk.cells(name)[row].strip(), float(values[row])))
 
 
 def epc_problem(epc: str) -> str | None:
