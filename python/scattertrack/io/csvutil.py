@@ -157,7 +157,7 @@ class CsvReader:
         self.column_position: dict[str, int] = {}
         self.width = 0
         self._file = None
-        self._plain = False  # whether the block being returned is plain ASCII
+        self._plain = False  # whether the last block from the fast path is plain ASCII (csv's never are)
         self._csv_rows = None  # a csv.reader once the plain fast path no longer applies
         self._last_line = 0  # the last file line consumed
 
@@ -221,7 +221,6 @@ class CsvReader:
             if columns:
                 any_rows = True
                 yield Chunk(self.path, self.column_position, columns, lines, plain=self._plain)
-                self._plain = False
         if not any_rows and not self.allow_no_rows:
             raise FormatError(self.path, self._header_lines + 1, None, "no data rows")
 
