@@ -24,6 +24,7 @@ import json
 import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -56,6 +57,43 @@ EXTRA_PARAMETERS = ("phase_noise_rad",)
 
 class UsageError(ValueError):
     """Bad command-line input that is not about a file (reported like any ValueError)."""
+
+
+SEED_MAX = 2**63 - 1
+"""Seeds must fit in a signed 64-bit integer (numpy's generators take any non-negative one)."""
+
+OPTION_RANGES = {
+    "duration": (lambda v: v > 0, "> 0 (seconds)"),
+    "seed": (lambda v: 0 <= v <= SEED_MAX, f"an integer from 0 to {SEED_MAX}"),
+    "speed": (lambda v: v > 0, "> 0 (a multiple of the recorded timing)"),
+    "workers": (lambda v: 1 <= v <= 1024, "from 1 to 1024"),
+    "prewake_us": (lambda v: 0 <= v <= 1e6, "in [0, 1e6] (microseconds)"),
+    "ema_alpha": (lambda v: 0 < v <= 1, "in (0, 1]"),
+    "threshold_m": (lambda v: v > 0, "> 0 (metres)"),
+}
+"""Allowed values of the numeric options, by argparse destination: checked for every command
+before it runs, so a bad value never reaches a scenario file or the Rust core."""
+
+
+def check_options(args) -> None:
+    """Refuse a numeric option outside its range, or a non-finite one (UsageError naming the option)."""
+    for name, (allowed, description) in OPTION_RANGES.items():
+        value = getattr(args, name, None)
+        if value is None:
+            continue
+        finite = math.isfinite(value) if isinstance(value, float) else True
+        if not finite or not allowed(value):
+            raise UsageError(f"--{name.replace('_', '-')} must be {description}, got {value}")
+
+
+def print_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Input warnings as one ``warning: ...`` line on stderr; other warnings as Python shows them."""
+    from scattertrack.io import InputWarning
+
+    if issubclass(category, InputWarning):
+        print(f"warning: {message}", file=sys.stderr, flush=True)
+    else:
+        sys.stderr.write(warnings.formatwarning(message, category, filename, lineno, line))
 
 
 # --- small helpers -------------------------------------------------------------
@@ -297,8 +335,6 @@ def simulate_iq_and_write(args) -> int:
             f"--iq simulates the raw IQ of a turbotrack scenario's helper or a marvel scenario's controller: "
             f"scenario {args.scenario} is for the {declared} pipeline"
         )
-    if args.duration is not None and not args.duration > 0:
-        raise UsageError(f"--duration must be > 0, got {args.duration}")
     simulation = sim.simulate_iq_scenario(scenario, seed=args.seed, duration_s=args.duration)
     out = sim.write_iq_simulation(simulation, args.out)
     replies = len(simulation.recording.meta["captures"])
@@ -318,8 +354,6 @@ def simulate_marvel_iq_and_write(args, scenario: dict) -> int:
     from scattertrack.sim import marvel
 
     if args.duration is not None:
-        if not args.duration > 0:
-            raise UsageError(f"--duration must be > 0, got {args.duration}")
         scenario = scenario | {"duration_s": args.duration}
     simulation, recording = marvel.simulate_marvel_iq(scenario, seed=args.seed)
     out = marvel.write_marvel_iq_simulation(simulation, recording, args.out)
@@ -574,12 +608,6 @@ def command_stream(args) -> int:
     if args.method not in tracking.WIDEBAND_METHODS:
         raise UsageError(f"stream runs the localization-helper methods ({', '.join(tracking.WIDEBAND_METHODS)}), not '{args.method}'")
     check_parameters(args.method, scene, params)
-    if args.speed is not None and not args.speed > 0:
-        raise UsageError(f"--speed must be > 0, got {args.speed}")
-    if args.workers is not None and args.workers < 1:
-        raise UsageError(f"--workers must be >= 1, got {args.workers}")
-    if not 0.0 <= args.prewake_us <= 1e6:
-        raise UsageError(f"--prewake-us must be in [0, 1e6], got {args.prewake_us}")
     calibration = calibration_for(args)
     speed = None if args.fast else (1.0 if args.speed is None else args.speed)
     result = stream_sigmf(
@@ -871,8 +899,15 @@ def main(argv: list[str] | None = None) -> int:
         # argparse exits for --help (0) and usage errors (2); return the code so
         # that main() can be called in-process.
         return exit.code if isinstance(exit.code, int) else 2
+    from scattertrack.io import InputWarning
+
     try:
-        return args.run(args)
+        check_options(args)
+        with warnings.catch_warnings():
+            # Every input warning is shown, each on its own line (Python's default shows a text once).
+            warnings.simplefilter("always", category=InputWarning)
+            warnings.showwarning = print_warning
+            return args.run(args)
     except (ValueError, KeyError, OSError) as error:
         # FormatError is a ValueError: its message already names file, line and column.
         print(f"scattertrack: error: {error_message(error)}", file=sys.stderr)

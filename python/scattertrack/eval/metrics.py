@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scattertrack.io.cells import TextTable
 from scattertrack.io.types import SkipReport, Track, Truth
 
 OUTSIDE_TRUTH_SPAN = "outside the truth time span"
@@ -307,14 +308,13 @@ def compare_files(truth_path, track_path, **kw) -> Report:
 
 def _group_rows(epc: np.ndarray) -> list[tuple[str, np.ndarray]]:
     """Row indices of each tag, tags in order of first appearance, rows in file order."""
-    epc = np.asarray(epc).astype(str)
-    if len(epc) == 0:
+    # Codes in order of first appearance; no fixed-width array (its size would follow the longest epc).
+    codes, names = TextTable().encode([str(e) for e in np.asarray(epc, dtype=object).reshape(-1).tolist()])
+    if len(codes) == 0:
         return []
-    names, first, codes = np.unique(epc, return_index=True, return_inverse=True)
     order = np.argsort(codes, kind="stable")  # stable: rows of a tag keep their order
     bounds = np.cumsum(np.bincount(codes, minlength=len(names)))[:-1]
-    rows_by_code = np.split(order, bounds)
-    return [(str(names[code]), rows_by_code[code]) for code in np.argsort(first)]
+    return list(zip(names, np.split(order, bounds)))
 
 
 def _truth_of_tag(truth: Truth, rows: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

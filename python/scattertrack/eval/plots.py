@@ -131,7 +131,7 @@ def save_track_plot(
     truth_time = np.zeros(0)
     truth_position = np.zeros((0, 3))
     if truth is not None:
-        truth_rows = np.flatnonzero(np.asarray(truth.epc).astype(str) == epc)
+        truth_rows = np.flatnonzero(np.asarray(truth.epc, dtype=object) == epc)
         truth_rows = truth_rows[np.argsort(truth.time_s[truth_rows], kind="stable")]
         truth_time = truth.time_s[truth_rows]
         truth_position = truth.position[truth_rows]

@@ -75,6 +75,9 @@ def format_report(report: Report, *, title: str | None = None) -> str:
     lines.append("-" * len(header))
     lines.append(row("overall", cells[-1]))
 
+    if not report.per_tag and not report.excluded.total:
+        # A tracker that never committed to an estimate writes a header-only track.csv.
+        lines.append("no estimates: the track has no rows, so there is nothing to evaluate")
     converged = sum(math.isfinite(m.convergence_time_s) for m in report.per_tag.values())
     filters = []
     if report.skip_first_s > 0:

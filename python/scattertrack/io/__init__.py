@@ -1,10 +1,11 @@
 """Readers and writers of the public formats (FORMATS.md sections 1-7).
 
 Contract: every reader validates and raises :class:`FormatError` naming the
-file, the 1-based line and the column for a malformed file; rows it declines
-(duplicates) are counted in the returned object's ``skipped`` report, never
-dropped silently; rows out of time order are sorted (and counted in
-``reordered``). Writers produce files the readers (and outside programs)
+file, the 1-based line and the column for a malformed file; suspicious but
+valid input (a clock jump, an implausible prior) issues an
+:class:`InputWarning`; rows it declines (duplicates) are counted in the
+returned object's ``skipped`` report, never dropped silently; rows out of
+time order are sorted (and counted in ``reordered``). Writers produce files the readers (and outside programs)
 accept.
 """
 
@@ -14,6 +15,7 @@ from scattertrack.io.types import (
     Features,
     FormatError,
     Imu,
+    InputWarning,
     Reader,
     Reads,
     Region,
@@ -46,6 +48,7 @@ __all__ = [
     "Features",
     "FormatError",
     "Imu",
+    "InputWarning",
     "Frames",
     "Reader",
     "Reads",

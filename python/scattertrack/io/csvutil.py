@@ -17,13 +17,13 @@ lowest line (then the leftmost column), whichever check found it.
 from __future__ import annotations
 
 import csv
-import math
 from dataclasses import dataclass, field
 from itertools import chain, islice
 from operator import methodcaller
 
 import numpy as np
 
+from scattertrack.io import cells
 from scattertrack.io.types import FormatError
 
 CHUNK_ROWS = 65_536
@@ -53,6 +53,8 @@ class Chunk:
     """Index of each column in the file's header, by name."""
     columns: list
     lines: list[int] | range
+    plain: bool = False
+    """Whether every cell is known to be plain ASCII without '_' (:func:`cells.is_plain_ascii`)."""
     problems: list[tuple[int, int, str, str]] = field(default_factory=list)
     """(row index in chunk, column position, column name, message)."""
 
@@ -87,6 +89,12 @@ class Chunk:
             value = self.columns[self.column_position[name]][row]
             self.add_problem(row, name, message.format(value=repr(value)))
 
+    def flag_values(self, name: str, values: np.ndarray, bad: np.ndarray, describe) -> None:
+        """Like :meth:`flag`, the message being ``describe(cell text, value)``: a hint that depends on the value."""
+        if bad.any():
+            row = int(np.argmax(bad))
+            self.add_problem(row, name, describe(self.cells(name)[row].strip(), float(values[row])))
+
     def raise_first_problem(self) -> None:
         """Raise the problem with the lowest line, then the leftmost column, if any."""
         if self.problems:
@@ -94,71 +102,39 @@ class Chunk:
             raise FormatError(self.path, self.lines[row], name, message)
 
     def floats(self, name: str, allow_empty: bool = False, allow_nan: bool = False) -> np.ndarray:
-        """One column as float64.
+        """One column as float64 (ASCII decimal only, see :mod:`scattertrack.io.cells`).
 
         ``allow_empty``: an empty cell reads as nan (optional columns).
-        ``allow_nan``: the literal ``nan`` is accepted; infinities never are.
+        ``allow_nan``: the word ``nan`` is accepted; infinities never are.
         """
-        cells = self.cells(name)
-        checked = len(cells)  # rows whose values are real, not placeholders
-        try:
-            values = np.array(list(map(float, cells)), dtype=np.float64)
-        except ValueError:
-            values = None
-        if values is None and allow_empty:
-            try:
-                values = np.array([float(c) if c else math.nan for c in cells], dtype=np.float64)
-            except ValueError:
-                pass
-        if values is None:
-            values, checked = self._floats_one_by_one(name, cells, allow_empty)
-        bad = np.isinf(values[:checked]) if allow_nan else ~np.isfinite(values[:checked])
-        if bad.any() and allow_empty:
-            # An empty cell also reads as nan: only a written nan or inf is bad.
-            bad &= np.array([bool(c.strip()) for c in cells[:checked]])
-        self.flag(name, bad, "not a finite number: {value}")
+        values, problem = cells.floats(self.cells(name), allow_empty, allow_nan, self.plain)
+        self._add_cell_problem(name, problem)
         return values
-
-    def _floats_one_by_one(self, name, cells, allow_empty) -> tuple[np.ndarray, int]:
-        """Convert cell by cell up to the first bad cell; return values and its index."""
-        values = np.full(len(cells), math.nan)
-        for i, text in enumerate(cells):
-            if allow_empty and not text.strip():
-                continue
-            try:
-                values[i] = float(text)
-            except ValueError:
-                message = "empty value" if not text.strip() else f"not a number: {text!r}"
-                self.add_problem(i, name, message)
-                return values, i
-        return values, len(cells)
 
     def integers(self, name: str) -> np.ndarray:
-        """One column as int64 (digits only, as ``int()`` reads them)."""
-        cells = self.cells(name)
-        try:
-            return np.array(list(map(int, cells)), dtype=np.int64)
-        except (ValueError, OverflowError):
-            pass
-        values = np.zeros(len(cells), dtype=np.int64)
-        for i, text in enumerate(cells):
-            try:
-                values[i] = int(text)
-            except ValueError:
-                message = "empty value" if not text.strip() else f"not an integer: {text!r}"
-                self.add_problem(i, name, message)
-                break
-            except OverflowError:
-                self.add_problem(i, name, f"integer out of range: {text!r}")
-                break
+        """One column as int64: ASCII digits with an optional sign, within int64."""
+        values, problem = cells.integers(self.cells(name), self.plain)
+        self._add_cell_problem(name, problem)
         return values
 
-    def texts(self, name: str) -> list[str]:
-        """One column as stripped strings; an empty cell is a problem."""
-        values = [c.strip() for c in self.cells(name)]
-        if not all(values):
-            self.add_problem(values.index(""), name, "empty value")
-        return values
+    def _add_cell_problem(self, name: str, problem: tuple[int, str] | None) -> None:
+        if problem is not None:
+            self.add_problem(problem[0], name, problem[1])
+
+    def texts(self, name: str, table: cells.TextTable, check=None) -> np.ndarray:
+        """One column of stripped texts as int64 codes into ``table`` (see :class:`cells.TextTable`).
+
+        An empty cell is a problem; so is a text for which ``check(text)``
+        returns a message (each distinct text is checked once, when first seen).
+        """
+        texts = [c.strip() for c in self.cells(name)]
+        codes, new = table.encode(texts)
+        for text in new:
+            message = "empty value" if not text else (check(text) if check is not None else None)
+            if message is not None:
+                self.add_problem(texts.index(text), name, message)
+                break
+        return codes
 
 
 class CsvReader:
@@ -172,13 +148,16 @@ class CsvReader:
     chunk that is not plain on, the csv module reads the rest.
     """
 
-    def __init__(self, path, required: list[str], optional: list[str] = ()):
+    def __init__(self, path, required: list[str], optional: list[str] = (), allow_no_rows: bool = False):
         self.path = str(path)
         self.required = list(required)
         self.optional = list(optional)
+        self.allow_no_rows = allow_no_rows
+        """Whether a header without data rows is a valid (empty) file, as for a track with no estimates."""
         self.column_position: dict[str, int] = {}
         self.width = 0
         self._file = None
+        self._plain = False  # whether the last block from the fast path is plain ASCII (csv's never are)
         self._csv_rows = None  # a csv.reader once the plain fast path no longer applies
         self._last_line = 0  # the last file line consumed
 
@@ -194,6 +173,14 @@ class CsvReader:
     def _read_header(self) -> None:
         line = self._decode(self._file.readline)
         self._last_line = 1
+        while line.count('"') % 2 and line.endswith(("\n", "\r")):
+            # A quoted column name spans lines: the header ends where its quotes close.
+            more = self._decode(self._file.readline)
+            if not more:
+                break
+            line += more
+            self._last_line += 1
+        self._header_lines = self._last_line
         header = next(csv.reader([line]), [])
         if _is_blank(header):
             raise FormatError(self.path, 1, None, "empty file: expected a header line")
@@ -233,9 +220,9 @@ class CsvReader:
                 columns = list(zip(*rows)) if rows else None
             if columns:
                 any_rows = True
-                yield Chunk(self.path, self.column_position, columns, lines)
-        if not any_rows:
-            raise FormatError(self.path, 2, None, "no data rows")
+                yield Chunk(self.path, self.column_position, columns, lines, plain=self._plain)
+        if not any_rows and not self.allow_no_rows:
+            raise FormatError(self.path, self._header_lines + 1, None, "no data rows")
 
     def _read_plain(self):
         """Fast path: up to CHUNK_ROWS lines as columns, or (None, None) to use csv.
@@ -248,14 +235,17 @@ class CsvReader:
         first = self._last_line + 1
         if "\r" in block:
             block = block.replace("\r\n", "\n")  # Windows line ends; a lone \r goes to csv
+        self._plain = False
         if block and '"' not in block and "\r" not in block and self.width > 1:
             if block.endswith("\n"):
                 block = block[:-1]
             field_counts = set(map(methodcaller("count", ","), block.split("\n")))
             if field_counts == {self.width - 1}:
                 self._last_line += len(text_lines)
-                cells = block.replace("\n", ",").split(",")
-                columns = [cells[k :: self.width] for k in range(self.width)]
+                # One scan of the whole block spares each numeric column its own.
+                self._plain = cells.is_plain_ascii(block)
+                fields = block.replace("\n", ",").split(",")
+                columns = [fields[k :: self.width] for k in range(self.width)]
                 return columns, range(first, first + len(text_lines))
         # Hand these lines and the rest of the file to the csv module.
         self._csv_rows = csv.reader(chain(text_lines, self._file))
@@ -352,8 +342,14 @@ def write_columns(path, header: list[str], columns: list[list[str]]) -> None:
 
 
 def text_column(values) -> list[str]:
-    """Strings for a text column such as ``epc``, quoted where needed."""
-    return repeated_cells(np.asarray(values, dtype=str), quote_text)
+    """Strings for a text column such as ``epc``, quoted where needed.
+
+    Each distinct text is quoted once; no fixed-width array is made, whose
+    size would follow the longest text (see :class:`cells.TextTable`).
+    """
+    texts = [str(v) for v in np.asarray(values, dtype=object).reshape(-1).tolist()]
+    quoted = {text: quote_text(text) for text in dict.fromkeys(texts)}
+    return list(map(quoted.__getitem__, texts))
 
 
 def repeated_cells(values: np.ndarray, to_text) -> list[str]:

@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, sort_by_time, write_columns
+from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Features
 
 REQUIRED = ["time_s", "range_m", "azimuth_rad", "elevation_rad"]
@@ -36,9 +37,11 @@ def read_features(path) -> Features:
 
     Raises :class:`FormatError` (file, line, column) for a missing column, a
     non-numeric or non-finite cell, a non-positive range or sigma, an
-    elevation outside [-pi/2, pi/2], or a file without data rows.
+    elevation outside [-pi/2, pi/2], or a file without data rows; warns
+    (:class:`InputWarning`) at a clock jump (:mod:`scattertrack.io.timeline`).
     """
     parts: dict[str, list] = {name: [] for name in REQUIRED + OPTIONAL}
+    lines = []
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:
         for chunk in reader.chunks():
             values = {name: chunk.floats(name) for name in REQUIRED}
@@ -58,7 +61,9 @@ def read_features(path) -> Features:
             chunk.raise_first_problem()
             for name, column in values.items():
                 parts[name].append(column)
+            lines.append(chunk.line_numbers())
     columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
+    warn_clock_jumps(path, columns["time_s"], np.concatenate(lines))
     columns, reordered = sort_by_time(columns)
     return Features(**columns, reordered=reordered)
 

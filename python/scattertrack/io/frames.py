@@ -23,6 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scattertrack.io import units
+from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
     repeated_cells,
@@ -30,6 +32,7 @@ from scattertrack.io.csvutil import (
     text_column,
     write_columns,
 )
+from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Scene, SkipReport
 
 REQUIRED = ["time_s", "epc", "tx", "rx", "frequency_hz", "h_re", "h_im"]
@@ -58,7 +61,7 @@ class Frames:
     time_s: np.ndarray
     """Frame time, seconds, float64 (n,)."""
     epc: np.ndarray
-    """Tag id, numpy unicode (n,)."""
+    """Tag id (n,): strings, an object array from :func:`read_frames` (each distinct id stored once)."""
     tx: np.ndarray
     """Transmit antenna id (scene ``role = "tx"``), int64 (n,)."""
     rx: np.ndarray
@@ -178,21 +181,25 @@ def read_frames(path, scene: Scene | None = None) -> Frames:
     ``"duplicate row"`` (the first in the file is kept); rows out of time
     order are counted in ``reordered`` and sorted. Raises
     :class:`FormatError` (file, line, column) for a missing column, a
-    non-numeric or non-finite value, a non-positive frequency, an antenna
+    non-numeric or non-finite value, a frequency outside 100 MHz to 10 GHz, an antenna
     that is not in the scene or has the wrong role, or an empty file.
     """
     roles = None
     if scene is not None:
         roles = {int(a.id): a.role for a in scene.antennas}
     parts, lines = [], []
+    epcs = TextTable()
     with CsvReader(path, REQUIRED) as reader:
         for chunk in reader.chunks():
-            part = _parse_chunk(chunk, roles)
+            part = _parse_chunk(chunk, roles, epcs)
             chunk.raise_first_problem()
             parts.append(part)
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
-    return _finish(columns, np.concatenate(lines))
+    columns["epc"] = epcs.decode(columns["epc"])
+    lines = np.concatenate(lines)
+    warn_clock_jumps(path, columns["time_s"], lines)
+    return _finish(columns, lines)
 
 
 def _check_antennas(chunk, name: str, ids: np.ndarray, roles: dict, wanted: str) -> None:
@@ -208,23 +215,23 @@ def _check_antennas(chunk, name: str, ids: np.ndarray, roles: dict, wanted: str)
         )
 
 
-def _parse_chunk(chunk, roles: dict | None) -> dict:
-    """Convert and check one chunk's columns; problems are recorded in the chunk."""
+def _parse_chunk(chunk, roles: dict | None, epcs: TextTable) -> dict:
+    """Convert and check one chunk's columns (``epc`` as codes into ``epcs``); problems are recorded in the chunk."""
     time = chunk.floats("time_s")
-    epc = chunk.texts("epc")
+    epc = chunk.texts("epc", epcs)
     tx = chunk.integers("tx")
     rx = chunk.integers("rx")
     if roles is not None:
         _check_antennas(chunk, "tx", tx, roles, "tx")
         _check_antennas(chunk, "rx", rx, roles, "rx")
     frequency = chunk.floats("frequency_hz")
-    chunk.flag("frequency_hz", frequency <= 0.0, "frequency must be positive: {value}")
+    chunk.flag_values("frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
     channel = np.empty(len(chunk), dtype=np.complex128)
     channel.real = chunk.floats("h_re")
     channel.imag = chunk.floats("h_im")
     return {
         "time_s": time,
-        "epc": np.array(epc, dtype=str),
+        "epc": epc,
         "tx": tx,
         "rx": rx,
         "frequency_hz": frequency,

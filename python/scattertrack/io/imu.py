@@ -21,6 +21,7 @@ import math
 import numpy as np
 
 from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, write_columns
+from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Imu, SkipReport
 
 ACCEL = ["ax", "ay", "az"]
@@ -41,7 +42,8 @@ def read_imu(path) -> Imu:
 
     Raises :class:`FormatError` (file, line, column) for a missing column, a
     non-numeric or non-finite cell (``nan`` included; an empty ``baro_z`` is
-    allowed and reads as nan) or a file without data rows.
+    allowed and reads as nan) or a file without data rows; warns
+    (:class:`InputWarning`) at a clock jump (:mod:`scattertrack.io.timeline`).
     """
     times, accels, gyros, baros, lines = [], [], [], [], []
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:
@@ -57,6 +59,7 @@ def read_imu(path) -> Imu:
             lines.append(chunk.line_numbers())
     time = np.concatenate(times)
     line = np.concatenate(lines)
+    warn_clock_jumps(path, time, line)
     keep, skipped = _forward_in_time(time, line)
     time = time[keep]
     return Imu(

@@ -9,9 +9,12 @@ One row per phase reading: ``time_s`` (seconds), ``epc`` (tag id),
 from __future__ import annotations
 
 import math
+import re
 
 import numpy as np
 
+from scattertrack.io import units
+from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
     format_fixed,
@@ -21,7 +24,8 @@ from scattertrack.io.csvutil import (
     text_column,
     write_columns,
 )
-from scattertrack.io.types import Reads, Scene, SkipReport
+from scattertrack.io.timeline import warn_clock_jumps
+from scattertrack.io.types import Reads, Scene, SkipReport, warn_input
 
 REQUIRED = ["time_s", "epc", "antenna", "frequency_hz", "phase_rad"]
 OPTIONAL = ["rssi_dbm", "doppler_hz"]
@@ -32,6 +36,11 @@ PHASE_TOLERANCE_RAD = 1e-9
 KEY_COLUMNS = REQUIRED
 """Columns that make two rows the same read (rssi and doppler may differ)."""
 
+HEX = re.compile(r"[0-9A-Fa-f]+")
+"""An EPC: hex digits of any length, either case (kept as written)."""
+BYTES_LITERAL = re.compile(r"b(['\"]).*\1")
+"""``b'E200'``: how Python prints bytes; a future importer may unwrap it, reads.csv does not."""
+
 DUPLICATE = "duplicate row"
 """The SkipReport reason for a read identical to an earlier one."""
 
@@ -41,9 +50,12 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
 
     With a ``scene``, antenna ids must be ones it defines and phases must lie
     in [0, P) for its reader's period P (radians); without one, P = 2*pi.
-    Exact duplicates of an earlier read are skipped and counted under
-    ``"duplicate row"``; rows out of time order are counted in ``reordered``.
-    Raises :class:`FormatError` (file, line, column) for a malformed file.
+    EPCs are hex of any length and case, kept exactly as written; frequencies
+    must lie in 100 MHz to 10 GHz. Exact duplicates of an earlier read are
+    skipped and counted under ``"duplicate row"``; rows out of time order are
+    counted in ``reordered``. Raises :class:`FormatError` (file, line, column)
+    for a malformed file; issues an :class:`InputWarning` for a clock jump
+    (:mod:`scattertrack.io.timeline`) and for EPCs that differ only in case.
     """
     period = 2.0 * math.pi
     antenna_ids = None
@@ -52,28 +64,32 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
         antenna_ids = np.array([a.id for a in scene.antennas], dtype=np.int64)
     parts = []
     lines = []
+    epcs = TextTable()
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:
         for chunk in reader.chunks():
-            part = _parse_chunk(chunk, period, antenna_ids)
+            part = _parse_chunk(chunk, period, antenna_ids, epcs)
             chunk.raise_first_problem()
             parts.append(part)
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
-    return _finish(columns, np.concatenate(lines))
+    lines = np.concatenate(lines)
+    warn_clock_jumps(path, columns["time_s"], lines)
+    _warn_case_twins(path, epcs, columns["epc"], lines)
+    return _finish(columns, lines, epcs.texts())
 
 
-def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None) -> dict:
-    """Convert and check one chunk's columns; problems are recorded in the chunk."""
+def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: TextTable) -> dict:
+    """Convert and check one chunk's columns (``epc`` as codes into ``epcs``); problems are recorded in the chunk."""
     time = chunk.floats("time_s")
-    epc = chunk.texts("epc")
+    epc = chunk.texts("epc", epcs, check=epc_problem)
     antenna = chunk.integers("antenna")
     if antenna_ids is not None:
         chunk.flag("antenna", ~np.isin(antenna, antenna_ids), "antenna {value} is not in the scene")
     frequency = chunk.floats("frequency_hz")
-    chunk.flag("frequency_hz", frequency <= 0.0, "frequency must be positive: {value}")
+    chunk.flag_values("frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
     phase = chunk.floats("phase_rad")
     outside = (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
-    chunk.flag("phase_rad", outside, f"phase outside [0, {period:.6f}): {{value}}")
+    chunk.flag_values("phase_rad", phase, outside, lambda text, value: units.phase_message(text, value, phase, period))
     # Within the tolerance: fold rounding noise back into [0, P).
     phase = np.where(phase >= period, phase - period, phase)
     phase = np.where(phase < 0.0, 0.0, phase)
@@ -85,7 +101,7 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None) -> dict:
             optional[name] = np.full(len(chunk), math.nan)
     return {
         "time_s": time,
-        "epc": np.array(epc, dtype=str),
+        "epc": epc,
         "antenna": antenna,
         "frequency_hz": frequency,
         "phase_rad": phase,
@@ -93,8 +109,37 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None) -> dict:
     }
 
 
-def _finish(columns: dict, lines: np.ndarray) -> Reads:
-    """Skip exact duplicates, count out-of-order rows and sort stably by time."""
+def epc_problem(epc: str) -> str | None:
+    """Why ``epc`` is not a hex EPC, or None if it is one."""
+    if HEX.fullmatch(epc):
+        return None
+    if BYTES_LITERAL.fullmatch(epc):
+        return (f"EPC {epc!r} looks like a Python bytes literal: write the hex digits alone "
+                f"({epc[2:-1]!r}); EPCs are hex digits 0-9, a-f, A-F")
+    odd = next((c for c in epc if not (c.isascii() and c.isprintable())), None)
+    if odd is not None:
+        return f"EPC {epc!r} holds the control or non-ASCII character U+{ord(odd):04X}; EPCs are hex digits 0-9, a-f, A-F"
+    return f"EPC {epc!r} is not hex: EPCs are hex digits 0-9, a-f, A-F (any length, either case)"
+
+
+def _warn_case_twins(path, epcs: TextTable, codes: np.ndarray, lines: np.ndarray) -> None:
+    """Warn when two EPCs differ only in letter case: they are tracked as two tags."""
+    first_of: dict[str, str] = {}
+    for epc in epcs.code_of:
+        twin = first_of.setdefault(epc.upper(), epc)
+        if twin != epc:
+            line = int(lines[int(np.argmax(codes == epcs.code_of[epc]))])
+            warn_input(path, line, "epc", f"EPC {epc!r} differs from {twin!r} only in letter case: "
+                                          "they are kept as written and tracked as two tags")
+            return
+
+
+def _finish(columns: dict, lines: np.ndarray, epc_table: np.ndarray) -> Reads:
+    """Skip exact duplicates, count out-of-order rows and sort stably by time.
+
+    ``columns["epc"]`` holds codes into ``epc_table`` until the end, where
+    they become the shared strings (see :class:`scattertrack.io.cells.TextTable`).
+    """
     skipped = SkipReport()
     duplicate = _duplicates(columns)
     for i in np.flatnonzero(duplicate).tolist():
@@ -104,7 +149,7 @@ def _finish(columns: dict, lines: np.ndarray) -> Reads:
     columns, reordered = sort_by_time(columns)
     return Reads(
         time_s=columns["time_s"],
-        epc=columns["epc"],
+        epc=epc_table[columns["epc"]],
         antenna=columns["antenna"],
         frequency_hz=columns["frequency_hz"],
         phase_rad=columns["phase_rad"],
@@ -147,6 +192,7 @@ def write_reads(path, reads: Reads) -> None:
     """
     for name in ("time_s", "frequency_hz", "phase_rad"):
         require_finite(path, name, getattr(reads, name))
+    _require_readable(path, reads)
     header = list(REQUIRED)
     columns = [
         format_fixed(reads.time_s, 6),
@@ -162,6 +208,19 @@ def write_reads(path, reads: Reads) -> None:
             header.append(name)
             columns.append(format_fixed(values, 2, empty_nan=True))
     write_columns(path, header, columns)
+
+
+def _require_readable(path, reads: Reads) -> None:
+    """Refuse (ValueError) EPCs and frequencies that :func:`read_reads` would reject."""
+    for epc in dict.fromkeys(np.asarray(reads.epc, dtype=object).tolist()):
+        problem = epc_problem(str(epc))
+        if problem is not None:
+            raise ValueError(f"{path}: cannot write {problem}")
+    frequency = np.asarray(reads.frequency_hz, dtype=np.float64)
+    outside = units.frequency_outside(frequency)
+    if outside.any():
+        value = float(frequency[np.argmax(outside)])
+        raise ValueError(f"{path}: cannot write {units.frequency_message(repr(value), value)}")
 
 
 def _phase_cells(phase_rad: np.ndarray) -> list[str]:

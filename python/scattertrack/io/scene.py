@@ -26,6 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
+from scattertrack.io import units
+from scattertrack.io.cells import INT64_MAX, INT64_MIN
 from scattertrack.io.types import (
     Antenna,
     ChannelOffset,
@@ -33,6 +35,7 @@ from scattertrack.io.types import (
     Reader,
     Region,
     Scene,
+    warn_input,
 )
 
 READER_KINDS = ("cots", "sdr-helper", "lora-backscatter")
@@ -44,6 +47,18 @@ HELPER_ROLES = ("tx", "rx")
 HELPER_NUMBERS = ("centre_frequency_hz", "bandwidth_hz", "blf_hz")
 """Positive numbers (hertz) of a helper scene's ``[helper]`` table; ``n_subcarriers`` is a positive integer."""
 PERIODS = ("2pi", "pi")
+KNOWN_KEYS = {
+    "reader": ("kind", "phase_sign", "phase_period", "phase_noise_rad"),
+    "antennas": ("id", "position", "phase_offset_rad", "role"),
+    "region": ("min", "max"),
+    "channel_offsets": ("frequency_hz", "phase_offset_rad"),
+}
+"""Keys of the known tables; another key there is accepted with a warning (it is likely a typo
+whose setting would otherwise be lost without a word)."""
+NOISE_PRIOR_RANGE_RAD = (0.001, 1.0)
+"""A ``phase_noise_rad`` at or below the first or above the second, radians, is implausible
+(warned): COTS readers measure about 0.01-0.2 rad; a filter given 1e-4 rad rejects every read
+as an outlier, one given > 1 rad learns nothing from phase."""
 KNOWN_TOP_LEVEL = (
     "name",
     "dimensions",
@@ -187,6 +202,17 @@ class _SceneChecker:
             line = _line_of_key(self.text, near)
         return FormatError(self.path, line, key_path, message)
 
+    def warn(self, key_path: str, message: str) -> None:
+        """An :class:`InputWarning` at ``key_path`` (valid but suspicious)."""
+        warn_input(self.path, _line_of_key(self.text, key_path), key_path, message)
+
+    def warn_unknown_keys(self, table: dict, kind: str, where: str | None = None) -> None:
+        """Warn about keys of a known table that the format does not define (the table is still read)."""
+        where = where or kind
+        for key in table:
+            if key not in KNOWN_KEYS[kind]:
+                self.warn(f"{where}.{key}", f"unknown key (ignored); [{kind}] keys are {', '.join(KNOWN_KEYS[kind])}")
+
     def number(self, table: dict, key: str, key_path: str, default=_NO_DEFAULT) -> float | None:
         """A finite number (int or float) from ``table[key]``, or ``default`` if absent."""
         if key not in table:
@@ -247,7 +273,9 @@ class _SceneChecker:
             raise self.fail("reader", "missing required table [reader]")
         reader = self.reader(self.table(document, "reader"))
         antennas = self.antennas(document, reader.kind)
-        region = self.region(self.table(document, "region")) if "region" in document else None
+        region = None
+        if "region" in document:
+            region = self.region(self.table(document, "region"), dimensions, plane_z)
         channel_offsets = self.channel_offsets(document)
         extra = {k: v for k, v in document.items() if k not in KNOWN_TOP_LEVEL}
         if reader.kind == "sdr-helper":
@@ -266,12 +294,17 @@ class _SceneChecker:
         )
 
     def reader(self, table: dict) -> Reader:
+        self.warn_unknown_keys(table, "reader")
         kind = self.choice(table, "kind", "reader.kind", READER_KINDS)
         phase_sign = self.choice(table, "phase_sign", "reader.phase_sign", (1, -1), 1)
         phase_period = self.choice(table, "phase_period", "reader.phase_period", PERIODS, "2pi")
         noise = self.number(table, "phase_noise_rad", "reader.phase_noise_rad", default=None)
         if noise is not None and noise <= 0.0:
             raise self.fail("reader.phase_noise_rad", f"must be positive, found {noise!r}")
+        low, high = NOISE_PRIOR_RANGE_RAD
+        if noise is not None and not low < noise <= high:
+            self.warn("reader.phase_noise_rad", f"implausible phase noise prior {noise!r} rad (1-sigma; "
+                      f"readers measure about 0.01-0.2 rad; warned at or below {low:g} and above {high:g})")
         return Reader(kind, phase_sign, phase_period, noise)
 
     def antennas(self, document: dict, kind: str) -> list[Antenna]:
@@ -283,11 +316,15 @@ class _SceneChecker:
         antennas = []
         for i, table in enumerate(tables):
             where = f"antennas[{i}]"
+            self.warn_unknown_keys(table, "antennas", where)
             antenna_id = table.get("id")
             if antenna_id is None:
                 raise self.fail(f"{where}.id", "missing required key", near=where)
             if not isinstance(antenna_id, int) or isinstance(antenna_id, bool):
                 raise self.fail(f"{where}.id", f"expected an integer, found {antenna_id!r}")
+            if not INT64_MIN <= antenna_id <= INT64_MAX:
+                raise self.fail(f"{where}.id", f"antenna id {antenna_id} out of range: ids must fit in a signed "
+                                               f"64-bit integer ({INT64_MIN} to {INT64_MAX})")
             if any(a.id == antenna_id for a in antennas):
                 raise self.fail(f"{where}.id", f"antenna id {antenna_id} is used twice")
             antennas.append(
@@ -335,20 +372,48 @@ class _SceneChecker:
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:
                 raise self.fail("helper.n_subcarriers", f"expected a positive integer, found {value!r}")
 
-    def region(self, table: dict) -> Region:
-        low = self.vector3(table, "min", "region.min")
-        high = self.vector3(table, "max", "region.max")
-        if not (low < high).all():
-            raise self.fail("region.max", f"must exceed region.min on every axis: {low} vs {high}")
+    def region(self, table: dict, dimensions: int, plane_z: float | None) -> Region:
+        """The box where tags can be, metres (FORMATS.md 1).
+
+        With ``dimensions = 2`` only x and y bound the tag: z may have zero
+        extent (min z = max z = plane_z, the natural way to write a plane)
+        or be left out (two values per corner; z is then plane_z).
+        """
+        self.warn_unknown_keys(table, "region")
+        if dimensions == 3:
+            low = self.vector3(table, "min", "region.min")
+            high = self.vector3(table, "max", "region.max")
+            if not (low < high).all():
+                raise self.fail("region.max", f"must exceed region.min on every axis: {low} vs {high}")
+            return Region(low, high)
+        low = self.plane_corner(table, "min", plane_z)
+        high = self.plane_corner(table, "max", plane_z)
+        if not (low[:2] < high[:2]).all():
+            raise self.fail("region.max", f"must exceed region.min in x and y: {low} vs {high}")
+        if low[2] > high[2]:
+            raise self.fail("region.max", f"z must be at least region.min's z: {low[2]} vs {high[2]}")
+        if not low[2] <= plane_z <= high[2]:
+            self.warn("region.min", f"the region's z range [{low[2]}, {high[2]}] m does not hold plane_z = {plane_z}: "
+                      "z is ignored in 2D, but the numbers disagree")
         return Region(low, high)
+
+    def plane_corner(self, table: dict, key: str, plane_z: float) -> np.ndarray:
+        """A corner of a 2D scene's region: [x, y] (z = plane_z) or [x, y, z], metres."""
+        value = table.get(key)
+        if isinstance(value, list) and len(value) == 2 and all(_is_number(v) and math.isfinite(v) for v in value):
+            return np.array([*value, plane_z], dtype=np.float64)
+        if isinstance(value, list) and len(value) != 3 and key in table:
+            raise self.fail(f"region.{key}", f"expected 2 or 3 finite numbers (dimensions = 2), found {value!r}")
+        return self.vector3(table, key, f"region.{key}")
 
     def channel_offsets(self, document: dict) -> list[ChannelOffset]:
         offsets = []
         for i, table in enumerate(self.array_of_tables(document, "channel_offsets")):
             where = f"channel_offsets[{i}]"
+            self.warn_unknown_keys(table, "channel_offsets", where)
             frequency = self.number(table, "frequency_hz", f"{where}.frequency_hz")
-            if frequency <= 0.0:
-                raise self.fail(f"{where}.frequency_hz", f"must be positive, found {frequency!r}")
+            if units.frequency_outside(np.array([frequency]))[0]:
+                raise self.fail(f"{where}.frequency_hz", units.frequency_message(repr(table["frequency_hz"]), frequency))
             offset = self.number(table, "phase_offset_rad", f"{where}.phase_offset_rad")
             offsets.append(ChannelOffset(frequency, offset))
         return offsets

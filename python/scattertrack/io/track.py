@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
     whole_group,
@@ -39,12 +40,14 @@ def read_track(path) -> Track:
     """
     parts = {"time": [], "epc": [], "position": [], "velocity": [], "sigma": [], "q": []}
     lines = []
-    with CsvReader(path, REQUIRED, SIGMA + ORIENTATION) as reader:
+    table = TextTable()
+    # A tracker that never committed to an estimate writes the header alone: a valid, empty track.
+    with CsvReader(path, REQUIRED, SIGMA + ORIENTATION, allow_no_rows=True) as reader:
         has_sigma = whole_group(reader, SIGMA)
         has_orientation = whole_group(reader, ORIENTATION)
         for chunk in reader.chunks():
             parts["time"].append(chunk.floats("time_s"))
-            parts["epc"].append(np.array(chunk.texts("epc"), dtype=str))
+            parts["epc"].append(chunk.texts("epc", table))
             parts["position"].append(np.column_stack([chunk.floats(n) for n in POSITION]))
             velocity = [chunk.floats(n, allow_nan=True) for n in VELOCITY]
             parts["velocity"].append(np.column_stack(velocity))
@@ -56,16 +59,25 @@ def read_track(path) -> Track:
                 parts["q"].append(np.column_stack(q))
             chunk.raise_first_problem()
             lines.append(chunk.line_numbers())
+    widths = {"time": 0, "epc": 0, "position": 3, "velocity": 3, "sigma": 3, "q": 4}
+    columns = {name: _joined(chunks, widths[name]) for name, chunks in parts.items()}
     track = Track(
-        time_s=np.concatenate(parts["time"]),
-        epc=np.concatenate(parts["epc"]),
-        position=np.concatenate(parts["position"]),
-        velocity=np.concatenate(parts["velocity"]),
-        sigma=np.concatenate(parts["sigma"]) if has_sigma else None,
-        orientation=np.concatenate(parts["q"]) if has_orientation else None,
+        time_s=columns["time"],
+        epc=table.decode(columns["epc"]),
+        position=columns["position"],
+        velocity=columns["velocity"],
+        sigma=columns["sigma"] if has_sigma else None,
+        orientation=columns["q"] if has_orientation else None,
     )
-    _check_time_order(path, track, np.concatenate(lines))
+    _check_time_order(path, track, _joined(lines, 0))
     return track
+
+
+def _joined(chunks: list[np.ndarray], width: int) -> np.ndarray:
+    """The chunks of one column joined; shape (0,) or (0, width) for a track without rows."""
+    if chunks:
+        return np.concatenate(chunks)
+    return np.zeros((0, width) if width else 0)
 
 
 def _check_time_order(path, track: Track, lines: np.ndarray) -> None:

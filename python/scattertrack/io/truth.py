@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
     whole_group,
@@ -22,12 +23,14 @@ from scattertrack.io.csvutil import (
     text_column,
     write_columns,
 )
-from scattertrack.io.types import Truth
+from scattertrack.io.types import Truth, warn_input
 
 POSITION = ["x", "y", "z"]
 VELOCITY = ["vx", "vy", "vz"]
 ORIENTATION = ["qw", "qx", "qy", "qz"]
 REQUIRED = ["time_s", "epc", *POSITION]
+MIN_RATE_HZ = 100.0
+"""Truth should be sampled at least this often, Hz (FORMATS.md 3), for linear interpolation."""
 
 
 def read_truth(path) -> Truth:
@@ -35,14 +38,16 @@ def read_truth(path) -> Truth:
 
     Velocity (m/s) is nan where its column is absent or its cell is empty;
     ``orientation`` is None without the quaternion columns, else (n, 4)
-    with nan where a row's cells are empty. Raises :class:`FormatError` (file, line, column) for a malformed file.
+    with nan where a row's cells are empty. Raises :class:`FormatError` (file, line, column) for a malformed file;
+    warns (:class:`InputWarning`) for a tag sampled below 100 Hz or with rows at one time that disagree.
     """
-    times, epcs, positions, velocities, orientations = [], [], [], [], []
+    times, epcs, positions, velocities, orientations, lines = [], [], [], [], [], []
+    table = TextTable()
     with CsvReader(path, REQUIRED, VELOCITY + ORIENTATION) as reader:
         has_orientation = whole_group(reader, ORIENTATION)
         for chunk in reader.chunks():
             times.append(chunk.floats("time_s"))
-            epcs.append(np.array(chunk.texts("epc"), dtype=str))
+            epcs.append(chunk.texts("epc", table))
             positions.append(np.column_stack([chunk.floats(name) for name in POSITION]))
             velocity = [
                 chunk.floats(name, allow_empty=True)
@@ -55,16 +60,51 @@ def read_truth(path) -> Truth:
                 q = [chunk.floats(name, allow_empty=True) for name in ORIENTATION]
                 orientations.append(np.column_stack(q))
             chunk.raise_first_problem()
+            lines.append(chunk.line_numbers())
     time = np.concatenate(times)
+    codes = np.concatenate(epcs)
+    position = np.concatenate(positions)
+    _warn_sampling(path, time, codes, position, np.concatenate(lines), table.texts())
     # Keep the file's order among equal times: truth of several tags may interleave.
     order = np.argsort(time, kind="stable")
     return Truth(
         time_s=time[order],
-        epc=np.concatenate(epcs)[order],
-        position=np.concatenate(positions)[order],
+        epc=table.decode(codes[order]),
+        position=position[order],
         velocity=np.concatenate(velocities)[order],
         orientation=np.concatenate(orientations)[order] if has_orientation else None,
     )
+
+
+def _warn_sampling(path, time, codes, position, lines, names) -> None:
+    """Warn (:class:`InputWarning`) about truth that evaluation cannot interpolate faithfully.
+
+    Per tag (``codes`` index ``names``): a median spacing of distinct times
+    longer than 1 / :data:`MIN_RATE_HZ` seconds, and two rows at one time
+    with different positions (evaluation uses the first in the file).
+    """
+    order = np.lexsort((np.arange(len(time)), time, codes))  # by tag, then time, file order kept
+    time, codes, position, lines = time[order], codes[order], position[order], lines[order]
+    same_tag = codes[1:] == codes[:-1]
+    step = np.diff(time)
+    conflict = same_tag & (step == 0.0) & np.any(position[1:] != position[:-1], axis=1)
+    if conflict.any():
+        row = int(np.argmax(conflict)) + 1
+        warn_input(path, int(lines[row]), "time_s",
+                   f"tag {names[codes[row]]!r} has rows at time {time[row]:.6f} s with different positions "
+                   f"(line {int(lines[row - 1])} and this one): the first is used; "
+                   f"{int(np.count_nonzero(conflict))} such rows in the file")
+    starts = np.flatnonzero(np.concatenate([[True], ~same_tag]))
+    for start, end in zip(starts, [*starts[1:], len(time)]):
+        spacing = step[start : end - 1]
+        spacing = spacing[spacing > 0.0]
+        # The 1e-6 margin keeps 100 Hz written in decimal (0.01 s steps) from warning.
+        if len(spacing) and np.median(spacing) > (1.0 + 1e-6) / MIN_RATE_HZ:
+            rate = 1.0 / float(np.median(spacing))
+            warn_input(path, int(lines[start]), "time_s",
+                       f"truth of tag {names[codes[start]]!r} is sampled at {rate:.3g} Hz (median spacing "
+                       f"{1.0 / rate:.4g} s), below the {MIN_RATE_HZ:g} Hz that FORMATS.md asks for: "
+                       "linear interpolation between rows adds error to the evaluation")
 
 
 def write_truth(path, truth: Truth) -> None:

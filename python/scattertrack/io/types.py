@@ -9,6 +9,7 @@ Units are SI: metres, seconds, radians, hertz, dBm.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -34,6 +35,27 @@ class FormatError(ValueError):
         where = self.path if line is None else f"{self.path}:{line}"
         col = f" column '{column}':" if column is not None else ""
         super().__init__(f"{where}:{col} {message}")
+
+
+class InputWarning(UserWarning):
+    """Valid but suspicious input (a clock jump, an implausible prior...), issued with :func:`warnings.warn`.
+
+    The text reads like a :class:`FormatError`'s, ``"reads.csv:12: column
+    'time_s': clock jumps back by 10 s ..."``; the command line prints it as
+    a line starting ``warning:``. ``path``, ``line`` and ``column`` locate it.
+    """
+
+    def __init__(self, path, line: int | None, column: str | None, message: str):
+        self.path = str(path)
+        self.line = line
+        self.column = column
+        self.message = message
+        super().__init__(str(FormatError(path, line, column, message)))
+
+
+def warn_input(path, line: int | None, column: str | None, message: str) -> None:
+    """Issue an :class:`InputWarning` (shown once per distinct text by Python's default filter)."""
+    warnings.warn(InputWarning(path, line, column, message), stacklevel=3)
 
 
 @dataclass
@@ -159,7 +181,7 @@ class Reads:
     """Tag reads (``reads.csv``), columnar, sorted by time (stable)."""
 
     time_s: np.ndarray  # float64
-    epc: np.ndarray  # str (numpy unicode)
+    epc: np.ndarray  # str; from read_reads an object array whose rows share one str per distinct EPC
     antenna: np.ndarray  # int64, antenna id as in the scene
     frequency_hz: np.ndarray  # float64
     phase_rad: np.ndarray  # float64 in [0, P)

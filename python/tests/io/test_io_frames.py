@@ -229,7 +229,7 @@ def test_missing_required_column(write_file, scene, column):
         ("0.1,E1,0,1,915000000,nan,0.0", "h_re", "not a finite number"),
         ("0.1,E1,0,1,915000000,1.0,inf", "h_im", "not a finite number"),
         ("inf,E1,0,1,915000000,1.0,0.0", "time_s", "not a finite number"),
-        ("0.1,E1,0,1,-915000000,1.0,0.0", "frequency_hz", "must be positive"),
+        ("0.1,E1,0,1,-915000000,1.0,0.0", "frequency_hz", "outside 100 MHz to 10 GHz"),
         ("0.1,E1,0.5,1,915000000,1.0,0.0", "tx", "not an integer"),
         ("0.1,,0,1,915000000,1.0,0.0", "epc", "empty value"),
         ("0.1,E1,1,1,915000000,1.0,0.0", "tx", "role 'rx'"),

@@ -5,13 +5,14 @@ import tempfile
 from pathlib import Path
 
 import numpy as np
+import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from scattertrack.io import Reads, read_reads, write_reads
 
-# Tag ids: hex digits plus the characters that force CSV quoting.
-EPC = st.text(alphabet='0123456789ABCDEF,"', min_size=1, max_size=24)
+# Tag ids: hex digits of either case (reads.csv accepts nothing else; case is kept).
+EPC = st.text(alphabet="0123456789ABCDEFabcdef", min_size=1, max_size=24)
 OPTIONAL_VALUE = st.one_of(st.just(math.nan), st.floats(-200.0, 200.0))
 
 
@@ -25,7 +26,7 @@ def reads_strategy(draw) -> Reads:
         time_s=np.array(microseconds, dtype=np.float64) / 1e6,
         epc=np.array(draw(st.lists(EPC, min_size=n, max_size=n)), dtype=str),
         antenna=np.array(draw(st.lists(st.integers(0, 2**31), min_size=n, max_size=n))),
-        frequency_hz=np.array(draw(st.lists(st.floats(1e3, 1e11), min_size=n, max_size=n))),
+        frequency_hz=np.array(draw(st.lists(st.floats(100e6, 10e9), min_size=n, max_size=n))),
         phase_rad=np.array(
             draw(st.lists(st.floats(0.0, 2 * math.pi, exclude_max=True), min_size=n, max_size=n))
         ),
@@ -34,6 +35,7 @@ def reads_strategy(draw) -> Reads:
     )
 
 
+@pytest.mark.filterwarnings("ignore::scattertrack.io.InputWarning")  # random times jump about
 @settings(max_examples=150, deadline=None)
 @given(reads_strategy())
 def test_reads_round_trip(reads):

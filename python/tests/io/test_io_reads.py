@@ -129,14 +129,16 @@ def test_byte_order_mark_crlf_and_trailing_blank_lines(write_file):
 
 
 def test_quoted_cells(write_file):
-    text = HEADER + '0.1,"E2,00",1,915e6,1.0,,\n0.2,"x""y",1,915e6,1.0,,\n'
+    header = HEADER.replace("\n", ",note\n")
+    text = header + '0.1,"E200",1,"915e6",1.0,,,"a, b"\n0.2,E2FF,"1",915e6,1.0,,,"x""y"\n'
     reads = read_reads(write_file("reads.csv", text))
-    assert reads.epc.tolist() == ["E2,00", 'x"y']
+    assert reads.epc.tolist() == ["E200", "E2FF"]
+    np.testing.assert_array_equal(reads.frequency_hz, [915e6, 915e6])
 
 
-def test_quoted_epc_round_trip(tmp_path):
+def test_epc_case_and_length_round_trip(tmp_path):
     reads = make_reads(3)
-    reads.epc = np.array(['A,1', 'B"2', "C3"])
+    reads.epc = np.array(["e2a0ff", "ABCDEF0123" * 100, "7"])
     write_reads(tmp_path / "reads.csv", reads)
     np.testing.assert_array_equal(read_reads(tmp_path / "reads.csv").epc, reads.epc)
 
@@ -316,7 +318,8 @@ def test_line_numbers_after_many_chunks_and_quotes(write_file, monkeypatch):
 
 
 def test_line_numbers_with_a_quoted_line_break(write_file):
-    text = HEADER + '0.1,"E\n1",1,915e6,1.0,,\n0.2,E1,1,915e6,x,,\n'
+    header = HEADER.replace("\n", ",note\n")
+    text = header + '0.1,E1,1,915e6,1.0,,,"two\nlines"\n0.2,E1,1,915e6,x,,,\n'
     error = error_for(write_file, text)
     assert (error.line, error.column) == (4, "phase_rad")
 

@@ -66,6 +66,7 @@ def test_truth_round_trip(tmp_path, with_velocity):
     assert_truth_equal(truth, read_truth(tmp_path / "truth.csv"))
 
 
+@pytest.mark.filterwarnings("ignore:.*sampled at 10 Hz")  # 10 Hz keeps the file short
 def test_truth_sorted_by_time_keeping_file_order(write_file):
     text = "epc,time_s,x,y,z\nB,0.2,1,1,1\nA,0.1,2,2,2\nC,0.2,3,3,3\nA,0.0,4,4,4\n"
     truth = read_truth(write_file("truth.csv", text))

@@ -1,0 +1,63 @@
+"""Clock jumps in a time column: valid input, but worth a warning.
+
+Rows may arrive out of time order (FORMATS.md 2: readers batch and
+interleave reports) and the readers sort them. A reorder of a few hundred
+milliseconds is what buffering produces; a row more than
+:data:`BACKWARD_JUMP_S` earlier than a row before it means the reader's clock
+was reset or two logs were concatenated, and sorting then silently mixes two
+sessions. A gap of more than :data:`FORWARD_GAP_S` with no rows at all
+means a clock jump forward or a paused log: trackers coast through gaps,
+but after a minute a tag may be anywhere.
+
+Both are checked in file order against the latest time seen so far, so a
+single glitched row gives one warning, not one per row after it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from scattertrack.io.types import warn_input
+
+BACKWARD_JUMP_S = 1.0
+"""A row earlier than the latest time before it by more than this, seconds, is a clock jump back."""
+
+FORWARD_GAP_S = 60.0
+"""A step forward from the latest time before it larger than this, seconds, is a clock jump forward."""
+
+
+def warn_clock_jumps(path, time_s: np.ndarray, lines: np.ndarray, column: str = "time_s") -> None:
+    """Warn (:class:`InputWarning`) at the first clock jump back and the first jump forward, in file order.
+
+    ``time_s``: the column in file order, seconds; ``lines``: each row's
+    1-based file line. Each warning says how many such jumps the file has.
+    """
+    if len(time_s) < 2:
+        return
+    latest = np.maximum.accumulate(time_s)[:-1]
+    step = time_s[1:] - latest
+    back = step < -BACKWARD_JUMP_S
+    forward = step > FORWARD_GAP_S
+    if back.any():
+        # Count onsets: after a reset the rows stay behind the latest time for a while.
+        jumps = int(np.count_nonzero(back & ~np.concatenate([[False], back[:-1]])))
+        row = int(np.argmax(back)) + 1
+        warn_input(
+            path, int(lines[row]), column,
+            f"clock jumps back by {-step[row - 1]:.6g} s (to {time_s[row]:.6f} s after {latest[row - 1]:.6f} s); "
+            f"rows are sorted by time, but a reorder beyond {BACKWARD_JUMP_S:g} s suggests a clock reset "
+            f"or joined logs ({_count(jumps, 'such jump')} in the file)",
+        )
+    if forward.any():
+        row = int(np.argmax(forward)) + 1
+        warn_input(
+            path, int(lines[row]), column,
+            f"clock jumps forward by {step[row - 1]:.6g} s (from {latest[row - 1]:.6f} s to {time_s[row]:.6f} s) "
+            f"with no rows between: a clock jump or a paused log (gaps beyond {FORWARD_GAP_S:g} s are warned; "
+            f"{_count(int(np.count_nonzero(forward)), 'such gap')} in the file)",
+        )
+
+
+def _count(n: int, what: str) -> str:
+    """'1 such jump', '3 such jumps'."""
+    return f"{n} {what}" if n == 1 else f"{n} {what}s"

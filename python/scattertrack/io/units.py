@@ -1,0 +1,66 @@
+"""Range checks of physical columns that name the unit a wrong value was likely written in.
+
+Files from other programs often carry a carrier frequency in MHz or a phase
+in degrees or in a reader's raw units. Such a value is rejected (FORMATS.md:
+SI units everywhere) with the likely unit and its conversion, so that the
+user can fix the exporter instead of guessing.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+FREQUENCY_MIN_HZ = 100e6
+FREQUENCY_MAX_HZ = 10e9
+"""Carriers outside 100 MHz to 10 GHz, hertz, are not RF backscatter (UHF RFID is 860-960 MHz,
+LoRa 433 MHz to 2.4 GHz, helpers up to a few GHz): a unit mistake."""
+
+FREQUENCY_UNITS = (
+    (100.0, 10e3, "MHz", "1e6"),
+    (0.1, 10.0, "GHz", "1e9"),
+    (100e3, 10e6, "kHz", "1e3"),
+)
+"""(low, high, unit, factor): a value in [low, high] is in range once multiplied by the factor."""
+
+DEGREES_MAX = 360.0
+IMPINJ_PHASE_UNITS = 4096
+"""Impinj readers report phase as an integer 0..4095 (FORMATS.md 2: x * 2*pi / 4096)."""
+
+
+def frequency_outside(values: np.ndarray) -> np.ndarray:
+    """Mask of frequencies (Hz) outside [:data:`FREQUENCY_MIN_HZ`, :data:`FREQUENCY_MAX_HZ`]; nan is not flagged."""
+    return (values < FREQUENCY_MIN_HZ) | (values > FREQUENCY_MAX_HZ)
+
+
+def frequency_message(text: str, value: float) -> str:
+    """Why the frequency ``value`` (written as ``text``) is rejected, with the likely unit."""
+    message = f"frequency {text} is outside 100 MHz to 10 GHz (frequencies are in hertz)"
+    for low, high, unit, factor in FREQUENCY_UNITS:
+        if low <= abs(value) <= high:
+            return f"{message}: looks like {unit}: multiply by {factor}"
+    return message
+
+
+def phase_message(text: str, value: float, column: np.ndarray, period_rad: float) -> str:
+    """Why the phase ``value`` (radians, written as ``text``) is outside [0, P), with the likely unit.
+
+    ``column``: the phases around it (a chunk of the file), which tell degrees
+    (all at most 360) from Impinj units (up to 4095) and from (-pi, pi].
+    """
+    period = "pi" if math.isclose(period_rad, math.pi) else "2*pi"
+    message = f"phase {text} is outside [0, {period}) (phases are in radians)"
+    finite = column[np.isfinite(column)]
+    largest, smallest = float(finite.max()), float(finite.min())
+    whole = bool(np.all(finite == np.round(finite)))
+    impinj = "divide by 4096 and multiply by 2*pi"
+    if value >= period_rad and largest <= DEGREES_MAX and smallest >= 0.0:
+        if whole:
+            return f"{message}: looks like degrees (multiply by pi/180) or Impinj units (0-4095: {impinj})"
+        return f"{message}: looks like degrees: multiply by pi/180"
+    if value >= period_rad and largest < IMPINJ_PHASE_UNITS and smallest >= 0.0:
+        return f"{message}: looks like Impinj units (0-4095): {impinj}"
+    if value < 0.0 and smallest >= -math.pi - 1e-9 and period == "2*pi":
+        return f"{message}: looks like (-pi, pi]: add 2*pi to negative phases"
+    return message
