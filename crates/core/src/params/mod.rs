@@ -35,6 +35,7 @@ pub struct Parameter<P> {
     set: Setter<P>,
 }
 
+#[allow(clippy::too_many_arguments)] // one per column of a table row
 fn row<P>(name: &str, kind: Kind, optional: bool, range: Range, unit: &str, description: &str, get: Getter<P>, set: Setter<P>) -> Parameter<P> {
     let schema = Schema {
         name: name.to_string(),

@@ -182,7 +182,8 @@ impl Schema {
                 _ => Err(self.error(&given)),
             },
             Kind::Float => match trimmed.parse::<f64>() {
-                Ok(x) => self.convert(&Value::Float(x)).map_err(|_| self.error(&given)),
+                // Out of range: the number as read (-1, inf), not the text.
+                Ok(x) => self.convert(&Value::Float(x)),
                 Err(_) => Err(self.error(&given)),
             },
             Kind::Choice(_) => self.parse_choice(&given),
