@@ -1,6 +1,6 @@
 """Type stubs of the Rust extension (thin bindings over scattertrack-core)."""
 
-from typing import Any
+from typing import Any, Literal, TypedDict
 
 import numpy as np
 import numpy.typing as npt
@@ -92,9 +92,57 @@ class Engine:
     def latency_percentiles(self, quantiles: list[float]) -> list[float]:
         """Quantiles (0-1) of the per-step cost, ns."""
 
-def methods() -> list[str]: ...
+# --------------------------------------------------------------------------
+# Parameter tables and the method registry (python/src/params.rs)
+
+class MethodRow(TypedDict):
+    name: str
+    pipeline: Literal["cots", "helper", "drone"]
+    input: Literal["reads", "frames", "features+imu", "sigmf+imu"]
+    input_files: str
+    estimator: Literal["core", "python"]
+    description: str
+
+def methods() -> list[MethodRow]:
+    """Every registered method (the core's registry), in listing order."""
+
 def default_params(method: str = "glac") -> dict[str, Any]:
-    """The parameters ``method`` accepts, with their defaults."""
+    """Defaults of a core method's parameters; ValueError for an unknown or Python-side method."""
+
+ParameterValue = bool | int | float | str | None
+
+class ParameterRow(TypedDict):
+    name: str
+    type: str
+    """As the docs show it: "float", "integer", "bool", "float or none", "fast | naive"."""
+    kind: Literal["bool", "integer", "float", "choice"]
+    optional: bool
+    choices: list[str] | None
+    default: ParameterValue
+    range: str
+    """"> 0", ">= 1", "[0, 1]", "(0, inf]"; "finite" (any finite float) or "-" (not numeric)."""
+    unit: str
+    description: str
+
+class ParameterTable:
+    """One method's parameter table; values are checked by the core's rules."""
+
+    def __init__(self, label: str, rows: list[dict[str, Any]]) -> None:
+        """A table from rows written in Python (name, kind, default, and optionally
+        optional, choices, range as text, unit, description); every default must pass its row."""
+    @staticmethod
+    def of_method(method: str) -> ParameterTable:
+        """The table of a core method (ValueError for an unknown or Python-side one)."""
+    @property
+    def label(self) -> str: ...
+    def rows(self) -> list[ParameterRow]: ...
+    def names(self) -> list[str]: ...
+    def defaults(self) -> dict[str, ParameterValue]: ...
+    def check(self, params: dict[str, Any]) -> dict[str, ParameterValue]:
+        """Values checked and converted to each row's type (text read as :meth:`parse` reads it);
+        ValueError naming the parameter, what it must be and the value given."""
+    def parse(self, pairs: list[tuple[str, str]]) -> dict[str, ParameterValue]:
+        """Command-line ``NAME=TEXT`` pairs as typed values (bools: true/false/yes/no/1/0)."""
 
 # --------------------------------------------------------------------------
 # scattertrack-dsp: the helper's one-shot wideband channel estimation (python/src/dsp.rs)

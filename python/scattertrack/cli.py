@@ -38,23 +38,6 @@ DEMO_OUT = "out/demo"
 MAX_TAGS_LISTED = 10
 """Per-tag lines printed by ``track``; more tags are summarised in one line."""
 
-METHOD_DESCRIPTIONS = {
-    "glac": "GLAC: HMM over candidate trajectories, one EKF each, nearest-neighbour "
-    "pruning and initial state pruning (the paper's tracker)",
-    "glac-no-velocity": "GLAC with a position random walk instead of the constant-velocity model "
-    "(paper sec. 5.2.2, scheme 2)",
-    "glac-sync": "GLAC treating each group of reads covering every antenna as one "
-    "trilaterated measurement (sec. 5.2.2, scheme 3)",
-    "glac-sync-no-velocity": "glac-sync with a position random walk (sec. 5.2.2)",
-    "glac-naive": "GLAC without nearest-neighbour pruning or quick stop: every hypothesis "
-    "branches on every candidate distance, capped by max_hypotheses (sec. 5.2.3)",
-}
-"""One line per method for ``scattertrack methods``; methods missing here are listed without one."""
-
-EXTRA_PARAMETERS = ("phase_noise_rad",)
-"""Parameters the trackers accept that ``default_params()`` leaves out (their default is the scene's prior)."""
-
-
 class UsageError(ValueError):
     """Bad command-line input that is not about a file (reported like any ValueError)."""
 
@@ -135,52 +118,35 @@ def format_millimetres(metres: float) -> str:
     return f"{metres * 1e3:.1f} mm" if math.isfinite(metres) else "n/a"
 
 
-def parse_parameter(text: str) -> tuple[str, object]:
-    """One ``--param name=value``: the value as int if it reads as one, else
-    float, else ``None`` for ``none`` (switches an optional feature off, e.g.
-    ``manoeuvre_q=none``), else text."""
+def parse_parameter(text: str) -> tuple[str, str]:
+    """One ``--param name=value`` as (name, text); the method's parameter
+    table reads the text (:func:`tracker_parameters`), once the method is known."""
     name, equals, value = text.partition("=")
     name = name.strip()
     if not equals or not name:
         raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
-    value = value.strip()
-    if value.lower() == "none":
-        return name, None
-    for convert in (int, float):
-        try:
-            return name, convert(value)
-        except ValueError:
-            pass
-    return name, value
+    return name, value.strip()
+
+
+def tracker_parameters(method: str, pairs) -> dict:
+    """``--param`` pairs read by ``method``'s table: typed values, or a ValueError naming the
+    parameter and what it must be (an unknown name lists the close matches)."""
+    from scattertrack.track import parameters
+
+    return parameters.parse(method, pairs or [])
 
 
 def check_parameters(method: str, scene, params: dict) -> None:
-    """Refuse unknown or ill-typed tracker parameters with a message naming the parameter.
+    """Refuse parameters the tracker would refuse, before any input is read.
 
-    The tracker checks them too, but its errors for a wrong value type do not
-    say which parameter was wrong; checking them one at a time here does.
+    ``params`` are already typed and in range (:func:`tracker_parameters`);
+    building the tracker once more checks what one row cannot: combinations
+    (likelihood=paper needs manoeuvre_q=none) and the scene's fitness. Its
+    errors name the parameter.
     """
     from scattertrack import track
 
-    track.make(method, scene)  # an unknown method or unusable scene fails here, on its own
-    extra = set(EXTRA_PARAMETERS) if method not in track.WIDEBAND_METHODS else set()
-    known = sorted(set(track.default_params(method)) | extra)
-    for name, value in params.items():
-        if name not in known:
-            raise UsageError(f"unknown parameter '{name}' for method '{method}' (known: {', '.join(known)})")
-    try:
-        track.make(method, scene, **params)
-        return
-    except (TypeError, ValueError) as error:
-        combined = error
-    # Name the culprit when one parameter is wrong on its own; otherwise the
-    # combination is (e.g. likelihood=paper needs manoeuvre_q=none).
-    for name, value in params.items():
-        try:
-            track.make(method, scene, **{name: value})
-        except (TypeError, ValueError) as error:
-            raise UsageError(f"parameter {name}={value!r}: {error}") from None
-    raise UsageError(f"parameters {params}: {combined}") from None
+    track.make(method, scene, **params)
 
 
 def print_tracker_summary(result, reads, wall_s: float) -> None:
@@ -435,14 +401,20 @@ def command_scenarios(args) -> int:
 
 
 def command_methods(args) -> int:
-    from scattertrack import track
-    from scattertrack.track import marvel
+    """One line per method (name, description, input); ``--params NAME``: that method's table."""
+    from scattertrack.track import methods, parameters
 
-    names = list(track.METHODS) + [name for name in marvel.MARVEL_METHODS if name not in track.METHODS]
-    descriptions = {**METHOD_DESCRIPTIONS, **marvel.METHOD_DESCRIPTIONS}
-    width = max(len(name) for name in names)
-    for name in names:
-        say(f"{name.ljust(width)}  {descriptions.get(name, '')}".rstrip())
+    if args.markdown:
+        sys.stdout.write(parameters.markdown())
+        return 0
+    if args.params:
+        methods.method(args.params)  # an unknown name is an error naming the known ones
+        for line in parameters.plain_table(args.params):
+            say(line)
+        return 0
+    width = max(len(name) for name in methods.METHODS)
+    for m in methods.REGISTRY.values():
+        say(f"{m.name.ljust(width)}  {m.description} (input: {m.input_files})")
     return 0
 
 
@@ -452,8 +424,9 @@ def command_track(args) -> int:
     from scattertrack import track as tracking
     from scattertrack.track import marvel
 
+    # Before reading anything: an unknown method or a bad value fails at once.
+    params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
-    params = dict(args.param or [])
     if args.method in marvel.MARVEL_METHODS:
         return track_marvel(args, scene, params)
     if args.features or args.imu:
@@ -488,10 +461,8 @@ def track_marvel(args, scene, params: dict) -> int:
     from scattertrack import io
     from scattertrack.track import marvel
 
-    known = marvel.default_params(args.method)
-    for name in params:
-        if name not in known:
-            raise UsageError(f"unknown parameter '{name}' for method '{args.method}' (known: {', '.join(sorted(known))})")
+    from scattertrack.track import methods
+
     if args.reads or args.frames:
         raise UsageError(f"method '{args.method}' takes --imu with --features or --sigmf, not --reads or --frames")
     if not args.imu:
@@ -506,7 +477,7 @@ def track_marvel(args, scene, params: dict) -> int:
         epochs = int(result.stats.get("drone", {}).get("epochs", len(result)))
         source = args.sigmf
     else:
-        if args.method != "marvel":
+        if methods.method(args.method).input == "sigmf+imu":
             raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
         features = io.read_features(args.features)
         say(f"read {plural(len(features), 'feature row')} from {args.features}; {features.reordered} out of time order (sorted)")
@@ -603,8 +574,8 @@ def command_stream(args) -> int:
     from scattertrack import track as tracking
     from scattertrack.track.stream import stream_sigmf
 
+    params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
-    params = dict(args.param or [])
     if args.method not in tracking.WIDEBAND_METHODS:
         raise UsageError(f"stream runs the localization-helper methods ({', '.join(tracking.WIDEBAND_METHODS)}), not '{args.method}'")
     check_parameters(args.method, scene, params)
@@ -770,7 +741,14 @@ def build_parser() -> argparse.ArgumentParser:
     scenarios = commands.add_parser("scenarios", help="list the named simulation scenarios and their pipeline")
     scenarios.set_defaults(run=command_scenarios)
 
-    methods = commands.add_parser("methods", help="list the tracking methods")
+    methods = commands.add_parser(
+        "methods",
+        help="list the tracking methods, or one method's parameters",
+        description="One line per method: its name, what it does and its input. With --params METHOD: "
+        "that method's parameters (name, type, default, range, unit, description), as docs/parameters.md.",
+    )
+    methods.add_argument("--params", metavar="METHOD", help="print this method's parameter table")
+    methods.add_argument("--markdown", action="store_true", help="print every table as Markdown (docs/parameters.md)")
     methods.set_defaults(run=command_methods)
 
     track = commands.add_parser(
@@ -807,7 +785,7 @@ def build_parser() -> argparse.ArgumentParser:
         action="append",
         type=parse_parameter,
         metavar="NAME=VALUE",
-        help="tracker parameter, repeatable (see docs/guide.md for the list)",
+        help="tracker parameter, repeatable (see 'scattertrack methods --params METHOD' or docs/parameters.md)",
     )
     track.add_argument("--no-progress", action="store_true", help="no progress bar")
     track.set_defaults(run=command_track)

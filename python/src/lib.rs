@@ -3,20 +3,17 @@
 
 mod dsp;
 mod lora;
+mod params;
 
 use nalgebra::Vector3;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
-use pyo3::exceptions::{PyKeyError, PyValueError};
+use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use scattertrack_core::engine::Engine as CoreEngine;
-use scattertrack_core::model::wideband::CandidateWeighting;
-use scattertrack_core::model::MotionModel;
 use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Role, Scene};
-use scattertrack_core::track::{
-    self, Estimate, GlacParams, Inference, Likelihood, Measurement, Params, PhaseRead, TrackerStats, TurboTrackParams, WidebandFrame,
-};
+use scattertrack_core::track::{Estimate, Measurement, PhaseRead, TrackerStats, WidebandFrame};
 use nalgebra::Complex;
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
@@ -76,141 +73,6 @@ fn make_scene(
     }
     let channels = cf.iter().zip(co.iter()).map(|(&f, &o)| ChannelOffset { frequency_hz: f, phase_offset_rad: o }).collect();
     Scene::new(dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antennas, region, channels).map_err(value_error)
-}
-
-/// Whether a method consumes wideband frames (TurboTrack and its variants).
-fn is_wideband(method: &str) -> bool {
-    matches!(method, "turbotrack" | "gaussian-pf" | "uniform-pf" | "ellipse-intersection" | "rfind")
-}
-
-/// Reads the parameters of `method` from a dict of names → values into the
-/// block that method uses; unknown names are an error.
-fn make_params(method: &str, params: Option<&Bound<'_, PyDict>>) -> PyResult<Params> {
-    if is_wideband(method) {
-        Ok(make_turbotrack_params(params)?.into())
-    } else {
-        Ok(make_glac_params(params)?.into())
-    }
-}
-
-/// TurboTrack parameters from a dict (names as in `TurboTrackParams`;
-/// candidate extraction as `candidate_<field>`).
-fn make_turbotrack_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<TurboTrackParams> {
-    let mut p = TurboTrackParams::default();
-    let Some(params) = params else { return Ok(p) };
-    for (key, value) in params.iter() {
-        let key: String = key.extract()?;
-        let f = || -> PyResult<f64> { value.extract::<f64>() };
-        match key.as_str() {
-            "particles" => p.particles = value.extract()?,
-            "transition_sigma_m" => p.transition_sigma_m = f()?,
-            "reference_interval_s" => p.reference_interval_s = f()?,
-            "resample_threshold" => p.resample_threshold = f()?,
-            "perimeter_threshold_m" => p.perimeter_threshold_m = f()?,
-            "max_initial_components" => p.max_initial_components = value.extract()?,
-            "intersection_tolerance_m" => p.intersection_tolerance_m = f()?,
-            "distance_sigma_m" => p.distance_sigma_m = if value.is_none() { None } else { Some(f()?) },
-            "weight_floor" => p.weight_floor = f()?,
-            "outlier_chi2" => p.outlier_chi2 = f()?,
-            "outlier_jump_m" => p.outlier_jump_m = f()?,
-            "max_speed_m_s" => p.max_speed_m_s = f()?,
-            "max_consecutive_outliers" => p.max_consecutive_outliers = value.extract()?,
-            "reinit_gap_s" => p.reinit_gap_s = f()?,
-            "region_margin_m" => p.region_margin_m = f()?,
-            "history_frames" => p.history_frames = value.extract()?,
-            "velocity_window_s" => p.velocity_window_s = f()?,
-            "seed" => p.seed = value.extract()?,
-            "rfind_window_s" => p.rfind_window_s = f()?,
-            "candidate_min_relative_weight" => p.candidates.min_relative_weight = f()?,
-            "candidate_max_candidates" => p.candidates.max_candidates = value.extract()?,
-            "candidate_weight_exponent" => p.candidates.weight_exponent = f()?,
-            "candidate_likelihood_temper" => p.candidates.likelihood_temper = f()?,
-            "candidate_weighting" => {
-                p.candidates.weighting = match value.extract::<String>()?.as_str() {
-                    "amplitude" => CandidateWeighting::Amplitude,
-                    "likelihood" => CandidateWeighting::Likelihood,
-                    other => return Err(value_error(format!("candidate_weighting must be amplitude or likelihood, got {other}"))),
-                }
-            }
-            "candidate_min_sigma_m" => p.candidates.min_sigma_m = f()?,
-            "candidate_max_sigma_m" => p.candidates.max_sigma_m = f()?,
-            other => return Err(PyKeyError::new_err(format!("unknown TurboTrack parameter '{other}'"))),
-        }
-    }
-    Ok(p)
-}
-
-/// Reads GLAC parameters from a dict of names → numbers/strings; unknown
-/// names are an error (a typo must not be ignored silently).
-fn make_glac_params(params: Option<&Bound<'_, PyDict>>) -> PyResult<GlacParams> {
-    let mut p = GlacParams::default();
-    let Some(params) = params else { return Ok(p) };
-    for (key, value) in params.iter() {
-        let key: String = key.extract()?;
-        let f = || -> PyResult<f64> { value.extract::<f64>() };
-        match key.as_str() {
-            "q" => {
-                p.motion = match p.motion {
-                    MotionModel::ConstantVelocity { .. } => MotionModel::ConstantVelocity { q: f()? },
-                    MotionModel::RandomWalk { .. } => MotionModel::RandomWalk { q: f()? },
-                }
-            }
-            "motion" => {
-                let q = match p.motion {
-                    MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
-                };
-                p.motion = match value.extract::<String>()?.as_str() {
-                    "constant-velocity" => MotionModel::ConstantVelocity { q },
-                    "random-walk" => MotionModel::RandomWalk { q },
-                    other => return Err(value_error(format!("motion must be constant-velocity or random-walk, got {other}"))),
-                }
-            }
-            "inference" => {
-                p.inference = match value.extract::<String>()?.as_str() {
-                    "fast" => Inference::Fast,
-                    "naive" => Inference::Naive,
-                    "synchronous" => Inference::Synchronous,
-                    other => return Err(value_error(format!("inference must be fast, naive or synchronous, got {other}"))),
-                }
-            }
-            "likelihood" => {
-                p.likelihood = match value.extract::<String>()?.as_str() {
-                    "innovation" => Likelihood::Innovation,
-                    "paper" => Likelihood::Paper,
-                    other => return Err(value_error(format!("likelihood must be innovation or paper, got {other}"))),
-                }
-            }
-            "phase_noise_rad" => p.phase_noise_rad = Some(f()?),
-            "phase_wander_rad" => p.phase_wander_rad = f()?,
-            "phase_wander_s" => p.phase_wander_s = f()?,
-            "bias_sigma_rad" => p.bias_sigma_rad = f()?,
-            "bias_state" => p.bias_state = value.extract()?,
-            "bias_time_s" => p.bias_time_s = f()?,
-            "max_speed_m_s" => p.max_speed_m_s = f()?,
-            "init_window_s" => p.init_window_s = f()?,
-            "init_max_window_s" => p.init_max_window_s = f()?,
-            "init_position_sigma_m" => p.init_position_sigma_m = f()?,
-            "init_velocity_sigma_m_s" => p.init_velocity_sigma_m_s = f()?,
-            "quick_stop" => p.quick_stop = f()?,
-            "gate_sigmas" => p.gate_sigmas = f()?,
-            "max_consecutive_outliers" => p.max_consecutive_outliers = value.extract()?,
-            "reinit_gap_s" => p.reinit_gap_s = f()?,
-            "region_margin_m" => p.region_margin_m = f()?,
-            "merge_distance_m" => p.merge_distance_m = f()?,
-            "max_hypotheses" => p.max_hypotheses = value.extract()?,
-            "manoeuvre_q" => p.manoeuvre_q = if value.is_none() { None } else { Some(f()?) },
-            "model_switch_probability" => p.model_switch_probability = f()?,
-            "max_branching_hypotheses" => p.max_branching_hypotheses = value.extract()?,
-            "perimeter_threshold_m" => p.initial.perimeter_threshold_m = f()?,
-            "residual_threshold_m" => p.initial.residual_threshold_m = f()?,
-            "interpolation_sigma_m" => p.initial.interpolation_sigma_m = f()?,
-            "init_max_hypotheses" => p.initial.max_hypotheses = value.extract()?,
-            "init_max_speed_m_s" => p.initial.max_speed_m_s = f()?,
-            "init_max_pair_gap_s" => p.initial.max_pair_gap_s = f()?,
-            other => return Err(PyKeyError::new_err(format!("unknown GLAC parameter '{other}'"))),
-        }
-    }
-    Ok(p)
 }
 
 fn stats_dict<'py>(py: Python<'py>, s: &TrackerStats) -> PyResult<Bound<'py, PyDict>> {
@@ -334,7 +196,7 @@ impl Engine {
             roles,
         )?;
         let antennas = scene.antennas.len();
-        let inner = CoreEngine::new(scene, method, make_params(method, params)?).map_err(value_error)?;
+        let inner = CoreEngine::new(scene, method, params::make_params(method, params)?).map_err(value_error)?;
         Ok(Self { inner, antennas })
     }
 
@@ -578,90 +440,6 @@ impl Engine {
     }
 }
 
-/// Registered method names.
-#[pyfunction]
-fn methods() -> Vec<&'static str> {
-    track::METHODS.to_vec()
-}
-
-/// Default GLAC parameters as a dict (the names `Engine` accepts).
-#[pyfunction]
-#[pyo3(signature = (method="glac"))]
-fn default_params<'py>(py: Python<'py>, method: &str) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    if is_wideband(method) {
-        let p = TurboTrackParams::default();
-        d.set_item("particles", p.particles)?;
-        d.set_item("transition_sigma_m", p.transition_sigma_m)?;
-        d.set_item("reference_interval_s", p.reference_interval_s)?;
-        d.set_item("resample_threshold", p.resample_threshold)?;
-        d.set_item("perimeter_threshold_m", p.perimeter_threshold_m)?;
-        d.set_item("max_initial_components", p.max_initial_components)?;
-        d.set_item("intersection_tolerance_m", p.intersection_tolerance_m)?;
-        d.set_item("distance_sigma_m", p.distance_sigma_m)?;
-        d.set_item("weight_floor", p.weight_floor)?;
-        d.set_item("outlier_chi2", p.outlier_chi2)?;
-        d.set_item("outlier_jump_m", p.outlier_jump_m)?;
-        d.set_item("max_speed_m_s", p.max_speed_m_s)?;
-        d.set_item("max_consecutive_outliers", p.max_consecutive_outliers)?;
-        d.set_item("reinit_gap_s", p.reinit_gap_s)?;
-        d.set_item("region_margin_m", p.region_margin_m)?;
-        d.set_item("history_frames", p.history_frames)?;
-        d.set_item("velocity_window_s", p.velocity_window_s)?;
-        d.set_item("seed", p.seed)?;
-        d.set_item("rfind_window_s", p.rfind_window_s)?;
-        d.set_item("candidate_min_relative_weight", p.candidates.min_relative_weight)?;
-        d.set_item("candidate_max_candidates", p.candidates.max_candidates)?;
-        d.set_item("candidate_weight_exponent", p.candidates.weight_exponent)?;
-        d.set_item("candidate_likelihood_temper", p.candidates.likelihood_temper)?;
-        d.set_item(
-            "candidate_weighting",
-            match p.candidates.weighting {
-                CandidateWeighting::Amplitude => "amplitude",
-                CandidateWeighting::Likelihood => "likelihood",
-            },
-        )?;
-        d.set_item("candidate_min_sigma_m", p.candidates.min_sigma_m)?;
-        d.set_item("candidate_max_sigma_m", p.candidates.max_sigma_m)?;
-        return Ok(d);
-    }
-    let p = GlacParams::default();
-    let q = match p.motion {
-        MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
-    };
-    d.set_item("q", q)?;
-    d.set_item("motion", "constant-velocity")?;
-    d.set_item("inference", "fast")?;
-    d.set_item("likelihood", "innovation")?;
-    d.set_item("phase_wander_rad", p.phase_wander_rad)?;
-    d.set_item("phase_wander_s", p.phase_wander_s)?;
-    d.set_item("bias_sigma_rad", p.bias_sigma_rad)?;
-    d.set_item("bias_state", p.bias_state)?;
-    d.set_item("bias_time_s", p.bias_time_s)?;
-    d.set_item("max_speed_m_s", p.max_speed_m_s)?;
-    d.set_item("init_window_s", p.init_window_s)?;
-    d.set_item("init_max_window_s", p.init_max_window_s)?;
-    d.set_item("init_position_sigma_m", p.init_position_sigma_m)?;
-    d.set_item("init_velocity_sigma_m_s", p.init_velocity_sigma_m_s)?;
-    d.set_item("quick_stop", p.quick_stop)?;
-    d.set_item("gate_sigmas", p.gate_sigmas)?;
-    d.set_item("max_consecutive_outliers", p.max_consecutive_outliers)?;
-    d.set_item("reinit_gap_s", p.reinit_gap_s)?;
-    d.set_item("region_margin_m", p.region_margin_m)?;
-    d.set_item("merge_distance_m", p.merge_distance_m)?;
-    d.set_item("max_hypotheses", p.max_hypotheses)?;
-    d.set_item("manoeuvre_q", p.manoeuvre_q)?;
-    d.set_item("model_switch_probability", p.model_switch_probability)?;
-    d.set_item("max_branching_hypotheses", p.max_branching_hypotheses)?;
-    d.set_item("perimeter_threshold_m", p.initial.perimeter_threshold_m)?;
-    d.set_item("residual_threshold_m", p.initial.residual_threshold_m)?;
-    d.set_item("interpolation_sigma_m", p.initial.interpolation_sigma_m)?;
-    d.set_item("init_max_hypotheses", p.initial.max_hypotheses)?;
-    d.set_item("init_max_speed_m_s", p.initial.max_speed_m_s)?;
-    d.set_item("init_max_pair_gap_s", p.initial.max_pair_gap_s)?;
-    Ok(d)
-}
-
 /// A reply's header as given from Python (validated).
 struct StreamHeader {
     tag: usize,
@@ -782,8 +560,7 @@ impl Engine {
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<Engine>()?;
-    m.add_function(wrap_pyfunction!(methods, m)?)?;
-    m.add_function(wrap_pyfunction!(default_params, m)?)?;
+    params::register(m)?;
     dsp::register(m)?;
     lora::register(m)?;
     Ok(())

@@ -9,6 +9,8 @@
 //! - [`filter`]: EKF predict/update as pure functions on (x, P).
 //! - [`track`]: the [`track::Tracker`] interface and one file per method
 //!   (GLAC and its variants).
+//! - [`params`]: typed parameter tables (name, type, range, unit, default)
+//!   read by the bindings, the CLI and the docs.
 //! - [`engine`]: many tags, reorder window, latency statistics.
 //!
 //! Units are SI everywhere (m, s, rad, Hz); numbers are `f64`.
@@ -19,6 +21,7 @@ pub mod error;
 pub mod filter;
 pub mod geometry;
 pub mod model;
+pub mod params;
 pub mod scene;
 pub mod track;
 

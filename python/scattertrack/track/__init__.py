@@ -12,19 +12,22 @@ wideband frames (TurboTrack and its variants). Inputs a tracker declines
 
 from scattertrack.io.frames import Frames
 from scattertrack.io.types import Reads, Scene, Track
-from scattertrack.track import glac, wideband
+from scattertrack.track import glac, methods, parameters
 from scattertrack.track.glac import METHODS, Estimate, Tracker, make
-from scattertrack.track.wideband import WIDEBAND_METHODS, run_frames
+from scattertrack.track.methods import REGISTRY, WIDEBAND_METHODS
+from scattertrack.track.wideband import run_frames
 
 
 def default_params(method: str = "glac") -> dict:
-    """The parameters ``method`` accepts, with their defaults (SI units)."""
-    return wideband.default_params(method) if method in WIDEBAND_METHODS else glac.default_params()
+    """The parameters ``method`` accepts, with their defaults (SI units);
+    ValueError naming the known methods for an unknown one."""
+    return parameters.default_params(method)
 
 
 def run(method: str, scene: Scene, data: Reads | Frames, **kwargs) -> Track:
     """Tracks every tag in ``data``: phase reads (reads.csv) or wideband
     frames (frames.csv), whichever the method consumes."""
+    methods.method(method)  # an unknown name fails here, naming the known ones
     if isinstance(data, Frames):
         if method not in WIDEBAND_METHODS:
             raise ValueError(f"method '{method}' takes phase reads; frames need one of {', '.join(WIDEBAND_METHODS)}")
@@ -34,4 +37,4 @@ def run(method: str, scene: Scene, data: Reads | Frames, **kwargs) -> Track:
     return glac.run(method, scene, data, **kwargs)
 
 
-__all__ = ["METHODS", "WIDEBAND_METHODS", "Estimate", "Tracker", "default_params", "make", "run", "run_frames"]
+__all__ = ["METHODS", "REGISTRY", "WIDEBAND_METHODS", "Estimate", "Tracker", "default_params", "make", "run", "run_frames"]

@@ -13,13 +13,16 @@ import numpy as np
 
 from scattertrack import _core
 from scattertrack.io.types import Reads, Scene, SkipReport, Track
+from scattertrack.track import methods as registry
+from scattertrack.track import parameters
 
-METHODS: list[str] = list(_core.methods())
+METHODS: list[str] = list(registry.METHODS)
+"""Every registered method (the registry in the Rust core)."""
 
 
-def default_params() -> dict:
+def default_params(method: str = "glac") -> dict:
     """GLAC's default parameters (names accepted by :func:`make`), SI units."""
-    return dict(_core.default_params())
+    return parameters.default_params(method)
 
 
 @dataclass
@@ -43,12 +46,13 @@ class Estimate:
 def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
     from scattertrack.track import wideband
 
-    if method in wideband.WIDEBAND_METHODS:
+    entry = registry.method(method)  # ValueError naming the known methods
+    if entry.input == "frames":
         return wideband.engine(method, scene, params)
+    if entry.estimator != "core":
+        raise ValueError(f"method '{method}' is the drone pipeline: use scattertrack.track.marvel (imu + features or a recording)")
     if scene.reader.kind != "cots":
         raise ValueError(f"method '{method}' needs a monostatic reader scene (kind = 'cots'), got '{scene.reader.kind}'")
-    if method not in METHODS:
-        raise ValueError(f"unknown method '{method}' (known: {', '.join(METHODS)})")
     positions = np.array([a.position for a in scene.antennas], dtype=float).reshape(-1, 3)
     offsets = np.array([a.phase_offset_rad for a in scene.antennas], dtype=float)
     region = None
@@ -58,24 +62,22 @@ def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
     channel_offsets = np.array([c.phase_offset_rad for c in scene.channel_offsets], dtype=float)
     noise = scene.reader.phase_noise_rad if scene.reader.phase_noise_rad else 0.1
     plane_z = scene.plane_z if scene.plane_z is not None else 0.0
-    try:
-        return _core.Engine(
-            scene.dimensions,
-            float(plane_z),
-            float(scene.reader.phase_sign),
-            float(scene.reader.period_rad),
-            float(noise),
-            positions,
-            offsets,
-            region,
-            frequencies,
-            channel_offsets,
-            method,
-            dict(params),
-        )
-    except KeyError as error:
-        # KeyError's str() quotes its message; unwrap it for a clean message.
-        raise ValueError(error.args[0] if error.args else str(error)) from None
+    # Parameters cross as one dict; the core's table checks every one
+    # (ValueError naming the parameter).
+    return _core.Engine(
+        scene.dimensions,
+        float(plane_z),
+        float(scene.reader.phase_sign),
+        float(scene.reader.period_rad),
+        float(noise),
+        positions,
+        offsets,
+        region,
+        frequencies,
+        channel_offsets,
+        method,
+        dict(params),
+    )
 
 
 class Tracker:

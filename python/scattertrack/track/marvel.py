@@ -82,6 +82,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scattertrack.track import methods as registry
+from scattertrack.track.marvel_params import SENSING_DEFAULTS, sensing_table
+from scattertrack.track.marvel_params import table as parameter_table
 from scattertrack.io.types import (
     SPEED_OF_LIGHT,
     Features,
@@ -91,66 +94,11 @@ from scattertrack.io.types import (
     Track,
 )
 
-MARVEL_METHODS = ("marvel", "ulocate")
-"""The drone pipeline's methods (inputs: IMU plus features or a LoRa recording)."""
-
-METHOD_DESCRIPTIONS = {
-    "marvel": "Marvel: LoRa-backscatter range/angle/heading fused with the IMU in a "
-    "sliding-window factor graph (GTSAM), controller position estimated (paper sec. IV)",
-    "ulocate": "mu-locate-style Doppler-blind pose sensing (from a SigMF recording), "
-    "fused the same way: the paper's Fig. 9 baseline",
-}
+MARVEL_METHODS = tuple(m.name for m in registry.REGISTRY.values() if m.pipeline == "drone")
+"""The drone pipeline's methods (inputs: IMU plus features or a LoRa recording), from the registry."""
 
 EPC = "drone"
 """The track's ``epc`` column: the pipeline tracks one body, the drone."""
-
-SENSING_DEFAULTS = {
-    # An epoch whose per-sample SNR (mean over its 2 x 4 x M dechirped peaks)
-    # is below this is not decoded: the SX1276's SF12 demodulation limit
-    # (docs/marvel.md section 9), 16 dB after the 36 dB dechirp gain. Pure
-    # noise reads about -27 dB (the largest of 4096 bins).
-    "min_snr_db": -20.0,  # dB per sample
-    # Floors added in quadrature to the DSP's thermal sigmas (module docstring, step 6).
-    "range_sigma_floor_m": 0.1,  # m
-    "angle_sigma_floor_rad": 0.01,  # rad, per tangent axis
-    "yaw_sigma_floor_rad": 0.05,  # rad
-    # Where the translational Doppler's direction comes from: "epoch" (this
-    # epoch's MUSIC angle), "previous" (the previous sensed epoch's), or
-    # "predicted" (the IMU-predicted gear centre minus the estimated controller).
-    "doppler_direction": "epoch",
-    # Epochs used for the clock error when the recording has no rest epoch.
-    "clock_flight_epochs": 20,
-    # While the clock error is still being estimated, an epoch goes to the
-    # fusion only once the estimate's uncertainty moves the chirp-timing range
-    # by less than this (m) or less than the epoch's own timing sigma: the
-    # timing range picks the phase range's fringe (5.8 m apart), and the
-    # first row places the controller (module docstring, step 2).
-    "clock_settle_m": 0.5,
-    # The speed the Doppler correction may assume, m/s: a predicted velocity
-    # above it is scaled down to it. A drone flies at most ~3 m/s here (paper
-    # sec. V); a diverging velocity would otherwise feed a wrong Doppler back
-    # into the sensing (a wrong timing range, a wrong fringe, a worse velocity).
-    "max_doppler_speed_m_s": 5.0,
-    # In flight the fringe is picked by the timing range and the fusion's
-    # predicted range together, unless they differ by more than this many of
-    # their combined sigmas: then by the timing range alone (a diverging
-    # fusion would otherwise pick fringes that confirm its error). Off by
-    # default: at 4 it helped behind three reflecting walls (0.96 -> 0.73 m)
-    # and hurt behind a ground reflection at 20 m, where the timing range is
-    # the one that is fringes off (one seed 5.6 -> 19.6 m snapshots).
-    "fringe_consistency_sigmas": math.inf,
-    # Add the DSP's consistency spreads to the row's sigmas (module docstring,
-    # step 6): the scatter of the four tags' MUSIC directions to the angle's,
-    # the scatter of the (antenna, tag) phase ranges to the range's. The
-    # thermal bounds and the floors say nothing about multipath; in a
-    # reflecting room (docs/marvel.md section 11) the angle is 7-10 degrees
-    # off where its thermal sigma is a tenth of a degree, and the fusion's
-    # gate then declined nearly every direction.
-    "consistency_sigmas": True,
-}
-"""Parameters of the pose sensing from a recording (SI units; module docstring)."""
-
-DOPPLER_DIRECTIONS = ("epoch", "previous", "predicted")
 
 SENSING_DECLINE_REASONS = {
     "non_finite_samples": "LoRa epoch with non-finite samples (declined)",
@@ -172,10 +120,7 @@ def default_params(method: str = "marvel") -> dict:
     pose sensing's (:data:`SENSING_DEFAULTS`, used with a recording only).
     """
     _check_method(method)
-    from scattertrack.fusion.estimator import MarvelParams
-
-    fusion = {field.name: field.default for field in dataclasses.fields(MarvelParams)}
-    return {**fusion, **SENSING_DEFAULTS}
+    return dict(parameter_table(method).defaults())
 
 
 def run_features(method: str, scene: Scene | None, imu: Imu, features: Features, *, progress: bool = False, **params) -> Track:
@@ -359,26 +304,9 @@ def _resolve_sensing(params: dict) -> dict:
     unknown = sorted(set(params) - set(SENSING_DEFAULTS))
     if unknown:
         raise ValueError(f"unknown pose-sensing parameter(s): {', '.join(unknown)} (known: {', '.join(SENSING_DEFAULTS)})")
-    out = {**SENSING_DEFAULTS, **params}
-    for name in ("min_snr_db", "range_sigma_floor_m", "angle_sigma_floor_rad", "yaw_sigma_floor_rad", "clock_settle_m"):
-        value = out[name]
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
-            raise ValueError(f"parameter {name} must be a finite number, got {value!r}")
-        if name != "min_snr_db" and value < 0:
-            raise ValueError(f"parameter {name} must be >= 0, got {value!r}")
-        out[name] = float(value)
-    if out["doppler_direction"] not in DOPPLER_DIRECTIONS:
-        raise ValueError(f"parameter doppler_direction must be one of {', '.join(DOPPLER_DIRECTIONS)}, got {out['doppler_direction']!r}")
-    sigmas = out["fringe_consistency_sigmas"]
-    if isinstance(sigmas, bool) or not isinstance(sigmas, (int, float)) or not sigmas > 0:
-        raise ValueError(f"parameter fringe_consistency_sigmas must be > 0 (inf: off), got {sigmas!r}")
-    out["fringe_consistency_sigmas"] = float(sigmas)
-    if not isinstance(out["consistency_sigmas"], bool):
-        raise ValueError(f"parameter consistency_sigmas must be True or False, got {out['consistency_sigmas']!r}")
-    count = out["clock_flight_epochs"]
-    if isinstance(count, bool) or not isinstance(count, int) or count < 1:
-        raise ValueError(f"parameter clock_flight_epochs must be a positive integer, got {count!r}")
-    return out
+    # The table checks every value (type, range) and reads text as the
+    # command line does: the same rules as every other method's parameters.
+    return {**SENSING_DEFAULTS, **sensing_table().check(dict(params))}
 
 
 def _split_params(params: dict) -> tuple[dict, dict]:

@@ -17,9 +17,9 @@ import numpy as np
 from scattertrack import _core
 from scattertrack.io.frames import Frames
 from scattertrack.io.types import Scene, Track
+from scattertrack.track import parameters
 from scattertrack.track.glac import track_from_columns
-
-WIDEBAND_METHODS = ("turbotrack", "gaussian-pf", "uniform-pf", "ellipse-intersection", "rfind")
+from scattertrack.track.methods import WIDEBAND_METHODS
 
 _DECLINED = {
     "out_of_order": "frame out of time order (declined by tracker)",
@@ -30,7 +30,7 @@ _DECLINED = {
 
 def default_params(method: str = "turbotrack") -> dict:
     """The method's default parameters (names accepted by ``make``), SI units."""
-    return dict(_core.default_params(method))
+    return parameters.default_params(method)
 
 
 def engine(method: str, scene: Scene, params: dict) -> _core.Engine:
@@ -43,24 +43,21 @@ def engine(method: str, scene: Scene, params: dict) -> _core.Engine:
     if scene.region is not None:
         region = (np.asarray(scene.region.min, dtype=float), np.asarray(scene.region.max, dtype=float))
     plane_z = scene.plane_z if scene.plane_z is not None else 0.0
-    try:
-        return _core.Engine(
-            scene.dimensions,
-            float(plane_z),
-            float(scene.reader.phase_sign),
-            float(scene.reader.period_rad),
-            float(scene.reader.phase_noise_rad or 0.1),
-            positions,
-            offsets,
-            region,
-            np.zeros(0),
-            np.zeros(0),
-            method,
-            dict(params),
-            [a.role for a in scene.antennas],
-        )
-    except KeyError as error:
-        raise ValueError(error.args[0] if error.args else str(error)) from None
+    return _core.Engine(
+        scene.dimensions,
+        float(plane_z),
+        float(scene.reader.phase_sign),
+        float(scene.reader.period_rad),
+        float(scene.reader.phase_noise_rad or 0.1),
+        positions,
+        offsets,
+        region,
+        np.zeros(0),
+        np.zeros(0),
+        method,
+        dict(params),
+        [a.role for a in scene.antennas],
+    )
 
 
 def run_frames(method: str, scene: Scene, frames: Frames, *, progress: bool = False, chunk: int = 2_000, **params) -> Track:

@@ -260,12 +260,12 @@ def test_track_unknown_parameter(capsys, session, tmp_path):
 
 def test_track_parameter_of_the_wrong_type(capsys, session, tmp_path):
     code, out, err = track_with_reads(capsys, session, tmp_path, reads_lines(session), "--param", "q=lots")
-    assert_input_error(code, out, err, "parameter q='lots'")
+    assert_input_error(code, out, err, "invalid parameter 'q'", "a float > 0", "'lots'")
 
 
 def test_track_parameter_out_of_range(capsys, session, tmp_path):
     code, out, err = track_with_reads(capsys, session, tmp_path, reads_lines(session), "--param", "q=-1")
-    assert_input_error(code, out, err, "q", "positive")
+    assert_input_error(code, out, err, "invalid parameter 'q'", "a float > 0", "got -1")
 
 
 def test_track_parameter_without_value_is_a_usage_error(capsys, session, tmp_path):

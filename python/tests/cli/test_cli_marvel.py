@@ -119,3 +119,21 @@ def test_non_monotonic_imu_is_counted_and_reported(capsys, flight, tmp_path):
     )
     assert code == 0, err
     assert "skipped 1" in stdout
+
+
+def test_marvel_parameters_reach_the_fusion_typed(capsys, flight, tmp_path, monkeypatch):
+    from scattertrack.track import marvel
+
+    seen = {}
+
+    def capture(method, scene, imu, features, progress=False, **params):
+        seen.update(params)
+        raise ValueError("stop here")
+
+    monkeypatch.setattr(marvel, "run_features", capture)
+    code, _, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml", "--features", flight / "features.csv",
+        "--imu", flight / "imu.csv", "--out", tmp_path / "t.csv", "--param", "use_baro=false", "--param", "smoother_lag_s=3",
+    )
+    assert code == 2 and "stop here" in err
+    assert seen == {"use_baro": False, "smoother_lag_s": 3.0}

@@ -134,7 +134,7 @@ def test_unknown_method_and_parameter_are_errors():
     sim = _sim("glac-2d-10cms", 7010, duration=1.0)
     with pytest.raises(ValueError, match="unknown method"):
         run("kalman-magic", sim.scene, sim.reads)
-    with pytest.raises(ValueError, match="unknown GLAC parameter 'qq'"):
+    with pytest.raises(ValueError, match="unknown parameter 'qq' for method 'glac'"):
         run("glac", sim.scene, sim.reads, qq=1.0)
     with pytest.raises(ValueError, match="q"):
         run("glac", sim.scene, sim.reads, q=-1.0)

@@ -388,4 +388,4 @@ def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
             assert np.median(angle) < 0.05 and np.median(distance) < 0.5
     assert marvel._spread(None) == 0.0 and marvel._spread(float("nan")) == 0.0 and marvel._spread(0.2) == 0.2
     with pytest.raises(ValueError, match="consistency_sigmas"):
-        marvel._resolve_sensing({"consistency_sigmas": "yes"})
+        marvel._resolve_sensing({"consistency_sigmas": "maybe"})

@@ -7,15 +7,20 @@
 //! tracker declines (out of order, gated outliers, unknown antenna) are
 //! counted in [`TrackerStats`], never dropped silently.
 //!
-//! Registering a method: add its file, one arm in [`make`], and its tests.
+//! Registering a method: add its file, its entry in [`registry::METHODS`]
+//! (name, pipeline, input, parameter table, description), one arm in
+//! [`make`], and its tests. Parameters: [`glac_params`], [`turbotrack_params`].
 
 pub mod bistatic;
 mod candidates;
 mod ellipse_intersection;
 mod glac;
+pub mod glac_params;
 mod initial;
+pub mod registry;
 mod rfind;
 mod turbotrack;
+pub mod turbotrack_params;
 
 pub use candidates::nearest_candidate;
 pub use glac::{Glac, GlacParams, Inference, Likelihood};
@@ -206,20 +211,7 @@ pub trait Tracker: Send + Sync {
     }
 }
 
-/// Registered method names, for messages and the CLI: GLAC and its
-/// variants consume phase reads, the rest wideband frames.
-pub const METHODS: &[&str] = &[
-    "glac",
-    "glac-no-velocity",
-    "glac-sync",
-    "glac-sync-no-velocity",
-    "glac-naive",
-    "turbotrack",
-    "gaussian-pf",
-    "uniform-pf",
-    "ellipse-intersection",
-    "rfind",
-];
+pub use registry::METHODS;
 
 /// Every method's parameters; [`make`] uses the block of the named method.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -244,6 +236,9 @@ impl From<TurboTrackParams> for Params {
 /// set the parameters that define them on top of `params` (GLAC sec.
 /// 5.2.2–5.2.3; TurboTrack thesis §7.2).
 pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
+    if !registry::method(name)?.in_core() {
+        return Err(Error::NotInCore(name.to_string()));
+    }
     let mut p = params.glac.clone();
     let mut w = params.turbotrack.clone();
     match name {
@@ -278,7 +273,8 @@ pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracke
             return Ok(Box::new(EllipseIntersection::new(scene.clone(), w)?));
         }
         "rfind" => return Ok(Box::new(RFind::new(scene.clone(), w)?)),
-        _ => return Err(Error::UnknownMethod(name.to_string(), METHODS.join(", "))),
+        // Registered in core but without an arm: a programming error, reported not panicked.
+        _ => return Err(Error::UnknownMethod(name.to_string(), registry::names().join(", "))),
     }
     Ok(Box::new(Glac::new(scene.clone(), p)?))
 }

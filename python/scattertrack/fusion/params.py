@@ -1,0 +1,245 @@
+"""The Marvel fusion's parameters (:class:`MarvelParams`) and their table.
+
+Why the table is in Python, not the Rust core: the estimator that reads
+these fields is Python (a GTSAM factor graph), so each field is declared
+once, here, with its default, range, unit and one-line description
+(:func:`scattertrack.parameter_rows.parameter`); the rows go to the core's
+checker (``_core.ParameterTable``) once, so values are parsed and refused
+exactly as the core's own tables do it (bool spellings, ranges, errors
+naming the parameter). The method registry (Rust, ``track/registry.rs``)
+lists ``marvel`` and ``ulocate`` with their table here.
+
+Adding a parameter: one field below, declared with ``parameter(...)``;
+docs/parameters.md is regenerated from it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from functools import cache
+
+from scattertrack.parameter_rows import parameter, rows_of
+
+GRAVITY_M_S2 = 9.80665
+"""Standard gravity, m/s^2; the world's gravity is ``(0, 0, -g)`` (docs/marvel.md section 1)."""
+
+
+@dataclass
+class MarvelParams:
+    """Tuning of :class:`MarvelEstimator`; SI units. IMU defaults: docs/marvel.md section 3."""
+
+    smoother_lag_s: float = parameter(6.0, "> 0", "s", "states older than this behind the newest epoch are marginalised (the revised track's lag)")
+    """States older than this behind the newest epoch are marginalised, s.
+    The causal rows barely depend on it; the revised track does (docs/marvel.md
+    section 11: square through walls 0.470 m at 3 s, 0.411 m at 6 and 10 s,
+    dev seeds), and the time per epoch grows with it."""
+    marginalize_every_s: float = parameter(1.0, ">= 0", "s", "states leave the window in groups spanning this long (<= smoother_lag_s; 0: each alone)")
+    """States leave the window in groups spanning this long, s: each state's
+    time stamp in the smoother is the end of its bucket ``[n T, (n + 1) T)``,
+    so the states of one bucket are marginalised together, once per bucket,
+    and each stays ``smoother_lag_s`` to ``smoother_lag_s + T`` in the window.
+    Why: marginalising re-eliminates iSAM2's Bayes tree from the oldest
+    clique to the root, which is the whole window (the controller is in every
+    clique), and when most variables are affected iSAM2 relinearises every
+    factor (its batch step); done each epoch, that was most of the time per
+    epoch. The revised rows of a group are read together just before it
+    leaves: the first marginal covariance walks the tree (about 10 ms at a 6 s
+    lag), the next ones reuse its cached separator marginals (about 0.1 ms).
+    0: each state stamped with its own time, marginalised alone."""
+    gravity_m_s2: float = parameter(GRAVITY_M_S2, "> 0", "m/s^2", "magnitude of gravity; the world's gravity is (0, 0, -g)")
+    accel_noise_density: float = parameter(1.0e-3, "> 0", "m/s^2/sqrt(Hz)", "accelerometer white noise")
+    """Accelerometer white noise, m/s^2/sqrt(Hz)."""
+    gyro_noise_density: float = parameter(8.7e-5, "> 0", "rad/s/sqrt(Hz)", "gyroscope white noise")
+    """Gyroscope white noise, rad/s/sqrt(Hz)."""
+    accel_bias_random_walk: float = parameter(1.0e-4, "> 0", "m/s^3/sqrt(Hz)", "accelerometer bias random walk")
+    """Accelerometer bias random walk, m/s^3/sqrt(Hz)."""
+    gyro_bias_random_walk: float = parameter(2.0e-5, "> 0", "rad/s^2/sqrt(Hz)", "gyroscope bias random walk")
+    """Gyroscope bias random walk, rad/s^2/sqrt(Hz)."""
+    accel_bias_sigma: float = parameter(0.02, "> 0", "m/s^2", "1-sigma of the accelerometer bias at take-off")
+    """1-sigma of the accelerometer bias at take-off, m/s^2."""
+    gyro_bias_sigma: float = parameter(0.002, "> 0", "rad/s", "1-sigma of the gyroscope bias at take-off")
+    """1-sigma of the gyroscope bias at take-off, rad/s."""
+    integration_sigma: float = parameter(1.0e-4, "> 0", "m/sqrt(Hz)", "position integration noise of the preintegration (sample-and-hold error)")
+    """Position integration noise of the preintegration, m/sqrt(Hz): covers
+    the sample-and-hold error of integrating discrete samples."""
+    imu_noise_scale: float = parameter(1.0, "> 0", "", "multiplies the two white-noise densities (a margin for unmodelled vibration)")
+    """Multiplies the two white-noise densities (a margin for unmodelled vibration)."""
+
+    range_sigma_m: float = parameter(0.5, "> 0", "m", "1-sigma of a range when the features give none")
+    """1-sigma of a range when the features give none, m."""
+    angle_sigma_rad: float = parameter(0.05, "> 0", "rad", "1-sigma of azimuth and elevation when the features give none")
+    """1-sigma of azimuth and elevation when the features give none, rad."""
+    yaw_sigma_rad: float = parameter(0.15, "> 0", "rad", "1-sigma of a yaw when the features give none")
+    """1-sigma of a yaw when the features give none, rad."""
+    use_yaw: bool = parameter(True, "any", "", "yaw factors from the features' yaw column")
+
+    correlation_distance_m: float = parameter(0.5, ">= 0", "m", "distance travelled over which the features' multipath errors decorrelate; 0: every row independent")
+    """Distance travelled over which the features' multipath errors
+    decorrelate, m (a few wavelengths at 915 MHz); 0: treat every row as
+    independent. See ``correlation_time_s`` and ``multipath``."""
+    correlation_time_s: float = parameter(5.0, "> 0", "s", "time over which they decorrelate at rest (people, doors)")
+    """Time over which they decorrelate at rest (people, doors), s. Rows
+    closer together than one decorrelation carry one measurement's worth of
+    information between them, not one each. Without accounting for it the
+    take-off rows, whose multipath error is one and the same, would pin the
+    controller (and with it the whole trajectory: range and angle do not see
+    a common shift) to that one error with a far too small covariance."""
+    multipath: str = parameter("states", "any", "", "correlated errors as graph states (Gauss-Markov) or by inflating the feature sigmas", choices=("states", "inflation"))
+    """How the correlation is accounted for. ``"states"``: the range and
+    direction errors are states ``M(k)`` of the graph, a first-order
+    Gauss-Markov process with correlation ``exp(-|dp| / correlation_distance_m
+    - dt / correlation_time_s)`` between epochs (``|dp|`` the IMU-predicted
+    displacement); a hovering drone's rows then inform the frozen error, not
+    its position. ``"inflation"``: the feature sigmas are multiplied by
+    sqrt(rows per decorrelation) and the rows treated as independent (the
+    cheaper approximation; a long hover still adds up to a pull towards its
+    one error). The yaw is always inflated."""
+    white_floor_range_m: float = parameter(0.02, ">= 0", "m", "least white 1-sigma of a range with multipath=states")
+    """Least white 1-sigma of a range with ``multipath = "states"``, m: a
+    stiffer factor makes the (nonlinear) range, linearised where iSAM2 last
+    relinearised, pull harder than its linearisation error allows."""
+    white_floor_angle_rad: float = parameter(0.002, ">= 0", "rad", "least white 1-sigma of each direction component with multipath=states")
+    """Least white 1-sigma of each direction component, rad (same reason)."""
+    range_bias_sigma_m: float = parameter(0.5, ">= 0", "m", "1-sigma prior of a constant range bias state (walls' excess path); 0: no such state")
+    """1-sigma prior of a constant range bias state ``W(0)`` (m, with
+    ``multipath = "states"``): the excess path of walls between the
+    controller and the drone, which the pose sensing cannot tell from range
+    (brick: ``(sqrt(eps_r) - 1) t`` = 0.19 m per 20 cm wall, docs/marvel.md
+    section 9; three walls 0.56 m). It is observable because the line of
+    sight turns as the drone flies while a controller shift would move
+    every range differently. 0: no such state."""
+    multipath_white_fraction: float = parameter(0.5, "(0, 1)", "", "with multipath=states, the white share of each feature sigma; the rest is correlated")
+    """With ``multipath = "states"``: the share of each feature sigma that is
+    white (thermal) noise; the rest, ``sqrt(1 - f^2)``, is the correlated
+    multipath error's 1-sigma (docs/marvel.md section 9: thermal errors are
+    millimetres to centimetres, multipath decimetres)."""
+
+    use_ground: bool = parameter(True, "any", "", "zero-velocity and zero-rotation factors at the origin until the IMU first shows motion")
+    """Before take-off the drone sits at rest at the origin: every epoch until
+    the IMU first shows motion gets "still at the origin, not moving, not
+    turning" factors (zero-velocity and zero-rotation updates, standard in
+    inertial navigation). The zero rotation makes the gyroscope bias
+    observable at rest; without it the bias is free to absorb the features'
+    correlated errors, and the tilt it integrates drags the trajectory away
+    by metres within seconds."""
+    rest_gyro_threshold_rad_s: float = parameter(0.05, "> 0", "rad/s", "an IMU sample with a larger angular rate means the drone has left the ground")
+    """An IMU sample with a larger angular rate means the drone has left the ground, rad/s."""
+    rest_accel_threshold_m_s2: float = parameter(0.3, "> 0", "m/s^2", "... or with a specific force whose magnitude differs from g by more")
+    """... or with a specific force whose magnitude differs from g by more, m/s^2."""
+    ground_position_sigma_m: float = parameter(0.02, "> 0", "m", "1-sigma of 'at the origin' on the ground")
+    """1-sigma of "at the origin" on the ground (the detector lags take-off by a few mm), m."""
+    ground_velocity_sigma_m_s: float = parameter(0.01, "> 0", "m/s", "1-sigma of 'not moving' on the ground")
+    """1-sigma of "not moving" on the ground, m/s."""
+    ground_rotation_sigma_rad: float = parameter(1.0e-4, "> 0", "rad", "1-sigma of 'not turning' between two ground epochs")
+    """1-sigma of "not turning" between two ground epochs, rad."""
+
+    prior_position_sigma_m: float = parameter(0.05, "> 0", "m", "take-off prior at rest at the origin, 1-sigma per axis")
+    """Take-off prior: at rest at the origin, 1-sigma per axis, m."""
+    prior_velocity_sigma_m_s: float = parameter(0.1, "> 0", "m/s", "take-off prior on the velocity, 1-sigma per axis")
+    prior_tilt_sigma_rad: float = parameter(0.05, "> 0", "rad", "1-sigma of roll and pitch from the averaged accelerometer")
+    """1-sigma of roll and pitch from the averaged accelerometer, rad."""
+    prior_yaw_sigma_rad: float = parameter(1.0, "> 0", "rad", "loose take-off yaw prior (the value comes from the first yaw feature)")
+    """Loose take-off yaw prior, rad: the yaw's value comes from the first
+    yaw feature when there is one (0 otherwise), its information from the
+    yaw factors."""
+    tilt_window_s: float = parameter(0.5, "> 0", "s", "accelerometer samples averaged for roll and pitch at take-off")
+    """Accelerometer samples averaged for roll and pitch at take-off, s."""
+
+    use_baro: bool = parameter(True, "any", "", "barometer factors when the IMU has baro_z")
+    """Barometer factors when ``baro_z`` is given."""
+    baro_sigma_m: float = parameter(0.1, "> 0", "m", "white noise of one barometer sample")
+    """White noise of one barometer sample, m."""
+    baro_random_walk: float = parameter(0.02, "> 0", "m/sqrt(s)", "random walk of the barometer's offset")
+    """Random walk of the barometer's offset, m/sqrt(s)."""
+    baro_window_s: float = parameter(0.05, "> 0", "s", "barometer samples in (t_k - window, t_k] are averaged for epoch k")
+    """Barometer samples in (t_k - window, t_k] are averaged for epoch k, s;
+    short, because their mean lags the epoch by about window / 2."""
+    baro_offset_prior_sigma_m: float = parameter(100.0, "> 0", "m", "loose prior on the barometer's offset (an arbitrary datum)")
+    """Loose prior on the offset (the barometer reads an arbitrary datum), m."""
+
+    gate_probability: float = parameter(0.999, "[0, 1)", "", "chi-square gate on each measurement's normalised innovation; 0: no gate")
+    """Chi-square gate on each measurement's normalised innovation (0: no gate)."""
+    min_epoch_interval_s: float = parameter(1.0e-3, ">= 0", "s", "rows closer than this to the previous epoch are declined")
+    """Rows closer than this to the previous epoch are declined: a
+    preintegration over a vanishing interval has a near-singular covariance."""
+    max_declined_epochs: int = parameter(5, ">= 0", "epochs", "after this many consecutive fully gated epochs the next row is taken ungated")
+    """After this many consecutive epochs with every measurement gated, the
+    next row is taken ungated (recovery from a wrong state instead of lock-out)."""
+    robust: str | None = parameter(None, "any", "", "a Huber kernel on the feature factors, or none", choices=("huber",), optional=True)
+    """None, or "huber": a Huber kernel on the feature factors."""
+    huber_k: float = parameter(1.345, "> 0", "sigma", "threshold of the Huber kernel")
+
+    max_speed_m_s: float = parameter(30.0, "> 0", "m/s", "a solve with the drone faster than this has diverged (row declined, smoother restarted)")
+    """A solve with the drone faster than this has diverged, m/s (ten times
+    the paper's fastest flight). Why a bound: behind reflecting walls at IQ
+    level the closed loop of features and fusion ran away (a controller at
+    1e108 m); the row is declined and the smoother restarts from the IMU's
+    prediction, like a failed solve."""
+    max_controller_range_m: float = parameter(1000.0, "> 0", "m", "a solve with the controller farther than this from the drone has diverged")
+    """A solve with the controller farther than this from the drone has
+    diverged, m (LoRa backscatter reaches tens of metres; paper: 50 m)."""
+
+    compute_sigma: bool = parameter(True, "any", "", "1-sigma position and controller in the output (marginal covariances; always with the gate on)")
+    """1-sigma position and controller in the output, from iSAM2's marginal
+    covariances of the newest pose, velocity and controller (about 0.4 ms of
+    the 2-3 ms per epoch, p50). The gate needs them too, so they are computed
+    whenever the gate is on; off with the gate off, the output sigmas are nan."""
+    heading_hold_sigma_rad: float = parameter(0.2, ">= 0", "rad", "no state leaves the window while the heading's 1-sigma exceeds this; 0: no hold")
+    """While the newest heading's marginal 1-sigma exceeds this (rad), no
+    state leaves the window (up to ``heading_hold_max_s`` after the first
+    epoch). Before the drone turns or accelerates sideways nothing observes
+    its heading (no magnetometer): the take-off heading is a guess. A state
+    marginalised then leaves a prior on the window linearised at that guess,
+    which can be tens of degrees off, and the error stays in the window's
+    prior after the heading has been found. Held, the first states are
+    revised with the heading once the first turn or leg reveals it. 0: no hold."""
+    heading_hold_max_s: float = parameter(20.0, ">= 0", "s", "longest heading hold after the first epoch")
+    """Longest hold of ``heading_hold_sigma_rad`` after the first epoch, s: the
+    window, and the time per update with it, stays bounded."""
+    relinearize_threshold: float = parameter(0.01, ">= 0", "", "iSAM2 relinearises a variable whose update exceeds this (tangent units: rad, m, m/s)")
+    """iSAM2 relinearises a variable whose update exceeds this (tangent units:
+    rad, m, m/s)."""
+    relinearize_skip: int = parameter(10, ">= 1", "updates", "iSAM2 checks for relinearisation every this many updates")
+    """iSAM2 checks for relinearisation every this many updates: once per
+    ``marginalize_every_s`` at 10 epochs/s. The controller is in every
+    range and direction factor, so relinearising it (or any state deep in
+    the window) re-eliminates the whole window; checked on every update
+    with the 0.01 threshold, that happened on nearly every one (p50 32 ms
+    per epoch against 2-3 ms). Measured on dev seeds 1000-1004 (square
+    through walls) and 1000-1002 (circle), mean causal / revised error:
+    threshold 0.01, skip 10: 0.681 / 0.413 m and 0.386 / 0.283 m; 0.01, 5:
+    0.684 / 0.420 and 0.385 / 0.280; 0.05, 1: 0.680 / 0.415 and 0.385 /
+    0.279 m (p50 17-23 ms); 0.1, 5: 0.685 / 0.418 and 0.384 / 0.279 m."""
+    factorization: str = parameter("QR", "any", "", "iSAM2 factorization", choices=("QR", "CHOLESKY"))
+    """iSAM2 factorization, "QR" or "CHOLESKY" (see the note in the constructor)."""
+    extra_iterations: int = parameter(0, ">= 0", "", "additional iSAM2 updates per epoch (more Gauss-Newton steps)")
+    """Additional iSAM2 updates per epoch (more Gauss-Newton steps)."""
+
+    @classmethod
+    def from_kwargs(cls, **kwargs) -> MarvelParams:
+        """Params with the given fields changed (ValueError for unknown names)."""
+        names = {f.name for f in fields(cls)}
+        unknown = sorted(set(kwargs) - names)
+        if unknown:
+            raise ValueError(f"unknown Marvel parameter(s): {', '.join(unknown)}")
+        return cls(**kwargs)
+
+    def __post_init__(self):
+        # Every field through its row once: the types and ranges that
+        # docs/parameters.md shows, text read as the command line reads it
+        # ("false" is False), an int given for a float made a float.
+        checked = fusion_table().check({f.name: getattr(self, f.name) for f in fields(self)})
+        for name, value in checked.items():
+            object.__setattr__(self, name, value)
+        # What one row cannot say: a group of states must fit in the window.
+        if not self.marginalize_every_s <= self.smoother_lag_s:
+            raise ValueError("marginalize_every_s must be in [0, smoother_lag_s] (seconds)")
+
+
+@cache
+def fusion_table():
+    """The table of :class:`MarvelParams` alone (the pose sensing's is added per method
+    in :mod:`scattertrack.track.marvel_params`)."""
+    from scattertrack import _core
+
+    return _core.ParameterTable("marvel", rows_of(MarvelParams))
