@@ -47,6 +47,7 @@ bench: setup
 	$(PY) bench/run.py
 	$(PY) bench/glac_ambiguity.py --seeds 100
 	$(PY) bench/glac_ambiguity.py --scenario glac-2d-40cms-modpi --seeds 100 --q 2
+	$(PY) bench/glac_robustness.py --seeds 100 --json out/bench/glac_robustness.json
 	$(PY) bench/turbotrack.py
 	$(PY) bench/marvel.py
 

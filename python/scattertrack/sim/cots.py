@@ -17,8 +17,9 @@ Schedule
     probability ``miss_probability``, and longer dropout bursts (a Poisson
     process of rate ``dropout_burst_rate_hz``, exponential durations of mean
     ``dropout_burst_mean_s``) silence one tag (``dropout_burst_scope =
-    "tag"``) or one tag-antenna link (``"link"``). Time stamps are rounded to
-    1 microsecond, as LLRP reports them.
+    "tag"``) or one tag-antenna link (``"link"``); scheduled outages
+    (``dropout_windows``, ``[start_s, end_s]`` pairs) silence every tag.
+    Time stamps are rounded to 1 microsecond, as LLRP reports them.
 
 Carrier
     One fixed channel (``frequency_hz``, default 915.25 MHz) or, with
@@ -98,6 +99,7 @@ READER_MODEL_DEFAULTS = {
     "dropout_burst_rate_hz": 0.0,  # bursts per second per tag (or per link)
     "dropout_burst_mean_s": 0.3,  # s, mean burst length (exponential)
     "dropout_burst_scope": "tag",  # "tag" or "link"
+    "dropout_windows": [],  # list of [start_s, end_s]: scheduled outages, no reads of any tag
     # carrier
     "frequency_hz": 915.25e6,  # Hz, the fixed channel when not hopping
     "hopping": False,
@@ -405,6 +407,10 @@ def generate_reads(
     keep = dropout_mask(
         time, antenna, tag, n_antennas, n_tags, duration_s, model, rngs["misses"], rngs["bursts"]
     )
+    # Scheduled outages (e.g. the reader paused, every tag shielded) come
+    # after the random draws, so a window leaves every other read as it was.
+    for start_s, end_s in model["dropout_windows"]:
+        keep &= ~((time >= start_s) & (time < end_s))
     time, antenna, tag = time[keep], antenna[keep], tag[keep]
     n = len(time)
 

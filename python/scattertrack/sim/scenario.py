@@ -477,6 +477,17 @@ def _resolve_reader_model(check: _Checker, given: dict, antenna_ids: set, phase_
         model["outlier_probability"], key + "outlier_probability", 0.0, maximum=1.0
     )
     check.choice(model["dropout_burst_scope"], key + "dropout_burst_scope", ("tag", "link"))
+    windows = model["dropout_windows"]
+    if not isinstance(windows, list):
+        check.fail(key + "dropout_windows", "must be a list of [start_s, end_s] pairs")
+    for i, window in enumerate(windows):
+        where = f"{key}dropout_windows[{i}]"
+        if not isinstance(window, list) or len(window) != 2:
+            check.fail(where, f"must be a pair [start_s, end_s] in seconds, got {window!r}")
+        start_s, end_s = (check.number(v, where, 0.0) for v in window)
+        if end_s <= start_s:
+            check.fail(where, f"must end after it starts, got {window!r}")
+        windows[i] = [start_s, end_s]
     for name in ("hopping", "write_channel_offsets", "report_rssi", "report_doppler"):
         check.boolean(model[name], key + name)
     if model["channels_hz"] is not None:

@@ -49,7 +49,12 @@ Kinds and their parameters (defaults in brackets):
     it to ``lift_m`` above ``place``, puts it down, and comes back).
 
 Every kind also accepts ``time_offset_s`` [0]: the trajectory is evaluated at
-``t + time_offset_s`` (start several tags at different points of one path).
+``t + time_offset_s`` (start several tags at different points of one path),
+and ``hold_at_s`` with ``hold_s``: from session time ``hold_at_s`` the tag
+stands still for ``hold_s`` seconds (velocity zero), then carries on from
+where it stopped (the path is evaluated ``hold_s`` late). Put the hold where
+the path is at rest, e.g. in a pick-and-place pause, for a stop without a
+jump in velocity.
 """
 
 from __future__ import annotations
@@ -79,7 +84,7 @@ OPTIONAL_KEYS = {
     "random": ("seed", "components", "speed_window_s"),
     "pick-and-place": ("waypoints", "pick", "place", "lift_m", "pause_s"),
 }
-COMMON_KEYS = ("kind", "time_offset_s")
+COMMON_KEYS = ("kind", "time_offset_s", "hold_at_s", "hold_s")
 
 
 def positions_velocities(kind_params: dict, t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,7 +94,18 @@ def positions_velocities(kind_params: dict, t: np.ndarray) -> tuple[np.ndarray, 
     module docstring). Raises ``ValueError`` for an unknown kind or a missing
     or malformed parameter.
     """
-    t = np.asarray(t, dtype=float).reshape(-1) + float(kind_params.get("time_offset_s", 0.0))
+    t = np.asarray(t, dtype=float).reshape(-1)
+    held = np.zeros(t.shape, dtype=bool)
+    if "hold_at_s" in kind_params or "hold_s" in kind_params:
+        if "hold_at_s" not in kind_params or "hold_s" not in kind_params:
+            raise ValueError("a hold needs both 'hold_at_s' and 'hold_s'")
+        hold_at_s, hold_s = float(kind_params["hold_at_s"]), float(kind_params["hold_s"])
+        if not (np.isfinite(hold_at_s) and np.isfinite(hold_s)) or hold_s < 0.0:
+            raise ValueError(f"'hold_s' must be a finite number >= 0, got {kind_params['hold_s']!r}")
+        held = (t >= hold_at_s) & (t < hold_at_s + hold_s)
+        # Path time: frozen during the hold, hold_s behind after it.
+        t = np.where(held, hold_at_s, np.where(t >= hold_at_s + hold_s, t - hold_s, t))
+    t = t + float(kind_params.get("time_offset_s", 0.0))
     kind = kind_params.get("kind")
     if kind not in KINDS:
         raise ValueError(f"unknown trajectory kind {kind!r}; expected one of {', '.join(KINDS)}")
@@ -104,7 +120,9 @@ def positions_velocities(kind_params: dict, t: np.ndarray) -> tuple[np.ndarray, 
         "random": _random,
         "pick-and-place": _pick_and_place,
     }[kind]
-    return function(kind_params, t)
+    position, velocity = function(kind_params, t)
+    velocity[held] = 0.0
+    return position, velocity
 
 
 def _vector(params: dict, key: str) -> np.ndarray:

@@ -326,6 +326,24 @@ def test_misses_and_dropout_bursts_remove_reads():
     assert np.sum((others > begin) & (others < end)) > 3
 
 
+def test_a_dropout_window_removes_every_read_inside_it_and_no_other():
+    full = simulate(scenario(reader_model={"miss_probability": 0.0}))
+    cut = simulate(scenario(reader_model={"miss_probability": 0.0, "dropout_windows": [[5.0, 15.0]]}))
+    inside = (full.reads.time_s >= 5.0) & (full.reads.time_s < 15.0)
+    assert inside.sum() > 200
+    assert not np.any((cut.reads.time_s >= 5.0) & (cut.reads.time_s < 15.0))
+    # The same schedule outside the window (the noise draws follow the read count).
+    np.testing.assert_array_equal(cut.reads.time_s, full.reads.time_s[~inside])
+
+
+@pytest.mark.parametrize("windows", [[[5.0]], [[3.0, 2.0]], [[-1.0, 2.0]], "5-15"])
+def test_a_malformed_dropout_window_is_refused(windows):
+    from scattertrack.io.types import FormatError
+
+    with pytest.raises(FormatError, match="dropout_windows"):
+        simulate(scenario(reader_model={"dropout_windows": windows}))
+
+
 def test_doppler_sign_and_rssi_trend():
     # Moving straight away from antenna 1 along its line of sight.
     away = {"kind": "line", "start": [0.3, 0.3, 0.3], "direction": [1.0, 1.0, 1.0], "speed": 0.5}

@@ -120,3 +120,26 @@ def test_unknown_kind_and_missing_parameter_are_errors():
         positions_velocities({"kind": "spiral"}, np.zeros(1))
     with pytest.raises(ValueError, match="speed"):
         positions_velocities({"kind": "circle", "centre": [0, 0, 0], "radius": 1.0}, np.zeros(1))
+
+
+def test_a_hold_stops_the_tag_then_it_carries_on_from_where_it_stopped():
+    arm = KINDS["pick-and-place"] | {"time_offset_s": 0.0}
+    held = arm | {"hold_at_s": 3.0, "hold_s": 8.0}
+    t = np.linspace(0.0, 20.0, 4001)
+    position, velocity = positions_velocities(held, t)
+    plain_position, plain_velocity = positions_velocities(arm, t)
+    before, during, after = t < 3.0, (t >= 3.0) & (t < 11.0), t >= 11.0
+    np.testing.assert_array_equal(position[before], plain_position[before])
+    at_stop, _ = positions_velocities(arm, np.array([3.0]))
+    assert np.all(position[during] == at_stop[0]) and np.all(velocity[during] == 0.0)
+    late, late_velocity = positions_velocities(arm, t[after] - 8.0)
+    np.testing.assert_allclose(position[after], late)
+    np.testing.assert_allclose(velocity[after], late_velocity)
+    assert np.abs(plain_velocity[during]).max() > 0.05  # without the hold it would have moved
+
+
+def test_a_hold_needs_both_keys():
+    with pytest.raises(ValueError, match="hold_at_s"):
+        positions_velocities(KINDS["static"] | {"hold_s": 2.0}, np.array([0.0]))
+    with pytest.raises(ValueError, match="hold_s"):
+        positions_velocities(KINDS["static"] | {"hold_at_s": 1.0, "hold_s": -1.0}, np.array([0.0]))
