@@ -50,6 +50,7 @@ import numpy as np
 
 import scattertrack
 from scattertrack import track as st_track
+from scattertrack.track import parameters as st_parameters
 from scattertrack.sim import load_scenario, simulate
 from scattertrack.sim.trajectory import positions_velocities
 
@@ -202,10 +203,10 @@ def run_one(job: tuple) -> dict:
     """Simulate, track (glac, defaults) and score one seed of one cell."""
     from scattertrack.eval import compare
 
-    key, scenario, seed, resume = job
+    key, scenario, seed, resume, params = job
     sim = simulate(scenario, seed=seed)
     started = time.perf_counter()
-    track = st_track.run("glac", sim.scene, sim.reads)
+    track = st_track.run("glac", sim.scene, sim.reads, **params)
     wall = time.perf_counter() - started
     result = bench_run.score(sim, track)
     rows, beyond = beyond_three_sigma(sim.truth, track)
@@ -239,19 +240,23 @@ def summarise(runs: list[dict], median_target_m: float | None) -> dict:
     return summary
 
 
-def run_cells(layouts, conditions, seeds, workers: int, duration_s: float | None = None, realistic: bool = True):
-    """Every (layout, condition) cell and realistic-3d-arm over ``seeds``; the runs in ``workers`` processes."""
+def run_cells(
+    layouts, conditions, seeds, workers: int, duration_s: float | None = None, realistic: bool = True, params=None
+):
+    """Every (layout, condition) cell and realistic-3d-arm over ``seeds``; the runs in ``workers``
+    processes; ``params``: GLAC parameters (default: its defaults)."""
+    params = dict(params or {})
     jobs = []
     for layout in layouts:
         for condition in conditions:
             scenario = cell_scenario(layout, condition, duration_s)
             resume = resume_s(scenario, condition)
-            jobs += [((layout, condition), scenario, seed, resume) for seed in seeds]
+            jobs += [((layout, condition), scenario, seed, resume, params) for seed in seeds]
     if realistic:
         scenario = load_scenario("realistic-3d-arm")
         if duration_s is not None:
             scenario = scenario | {"duration_s": float(duration_s)}
-        jobs += [(("realistic-3d-arm", "defaults"), scenario, seed, None) for seed in seeds]
+        jobs += [(("realistic-3d-arm", "defaults"), scenario, seed, None, params) for seed in seeds]
     if workers > 1:
         with ProcessPoolExecutor(max_workers=workers) as pool:
             runs = list(pool.map(run_one, jobs, chunksize=4))
@@ -401,6 +406,10 @@ def parse_args(argv=None):
     parser.add_argument("--outside", default=str(OUTSIDE_DIR), help="folder of outside cases ('' to skip)")
     parser.add_argument("--workers", type=int, default=2, help="processes (default 2)")
     parser.add_argument("--json", metavar="FILE", help="also write the results as JSON")
+    parser.add_argument(
+        "--param", action="append", default=[], metavar="NAME=VALUE",
+        help="a GLAC parameter for the simulated cells (repeatable; the outside cases keep the defaults)",
+    )
     return parser.parse_args(argv)
 
 
@@ -410,7 +419,10 @@ def main(argv=None) -> int:
     conditions = _names(args.conditions, CONDITIONS, "condition")
     seeds = list(range(args.seeds))
     started = time.perf_counter()
-    cells, realistic_row = run_cells(layouts, conditions, seeds, args.workers, args.duration, not args.no_realistic)
+    params = st_parameters.parse("glac", [tuple(p.split("=", 1)) for p in args.param])
+    cells, realistic_row = run_cells(
+        layouts, conditions, seeds, args.workers, args.duration, not args.no_realistic, params
+    )
     outside_dir = Path(args.outside) if args.outside else None
     outside = []
     if outside_dir is not None and outside_dir.is_dir():

@@ -111,6 +111,11 @@ pub struct GlacParams {
     pub init_velocity_sigma_m_s: f64,
     /// Quick-stop threshold l_th on normalised likelihood.
     pub quick_stop: f64,
+    /// Temperature T ≥ 1 of the hypothesis weights in the reported
+    /// covariance (see [`mixture_covariance`]): the competitors count as if
+    /// the evidence against them were T times weaker. Selection and
+    /// pruning use the plain likelihoods.
+    pub weight_temperature: f64,
     /// Recovery gate, in sigmas (the paper's 3σ_v).
     pub gate_sigmas: f64,
     /// A hypothesis that gates this many readings in a row has lost lock.
@@ -161,6 +166,7 @@ impl Default for GlacParams {
             init_position_sigma_m: 0.01,
             init_velocity_sigma_m_s: 0.1,
             quick_stop: 1e-6,
+            weight_temperature: 3.0,
             gate_sigmas: 3.0,
             max_consecutive_outliers: 8,
             reinit_gap_s: 1.0,
@@ -208,6 +214,9 @@ impl GlacParams {
         }
         if !(self.phase_wander_rad >= 0.0 && self.phase_wander_rad.is_finite()) {
             return Err(Error::Parameter { name: "phase_wander_rad".into(), reason: "must be zero or positive".into() });
+        }
+        if !(self.weight_temperature >= 1.0 && self.weight_temperature.is_finite()) {
+            return Err(Error::Parameter { name: "weight_temperature".into(), reason: "must be at least 1".into() });
         }
         if !(0.0..1.0).contains(&self.quick_stop) {
             return Err(Error::Parameter { name: "quick_stop".into(), reason: "must be in [0, 1)".into() });
@@ -829,7 +838,7 @@ impl Glac {
         let h = &self.hypotheses;
         let best = h.best()?;
         let (x, own) = h.state(best);
-        let mut p = if h.len() == 1 { own } else { mixture_covariance(h, &x) };
+        let mut p = if h.len() == 1 { own } else { mixture_covariance(h, &x, self.params.weight_temperature) };
         self.add_bias_covariance(&mut p, &x);
         let velocity =
             if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
@@ -911,15 +920,23 @@ impl Glac {
 }
 
 /// Second moment of the hypothesis mixture about `centre`:
-/// `Σᵢ wᵢ (Pᵢ + (xᵢ − c)(xᵢ − c)ᵀ)`, wᵢ = exp(log-likelihood) (normalised).
+/// `Σᵢ wᵢ (Pᵢ + (xᵢ − c)(xᵢ − c)ᵀ)`, with tempered weights
+/// wᵢ ∝ exp(ℓᵢ / T) (ℓᵢ the log-likelihoods, T = `temperature` ≥ 1).
 /// About the reported state rather than the mixture mean because that is
 /// what a user's error is measured from: the truth lies in some hypothesis,
 /// and its distance from the reported one must show in the sigma.
-/// Hypotheses whose weight is below 1e-12 change nothing and are skipped.
-fn mixture_covariance(h: &Hypotheses, centre: &StateVector) -> StateMatrix {
+/// Tempering, because the log-likelihood ratios between hypotheses add up
+/// every read as if the errors were independent, while real phase errors
+/// are correlated (and the likelihood is only as right as its noise
+/// model): T divides the evidence before it sets how much the competitors
+/// count. T = 1 is the plain posterior. Weights below 1e-12 are skipped.
+fn mixture_covariance(h: &Hypotheses, centre: &StateVector, temperature: f64) -> StateMatrix {
+    let max = h.log_likelihood.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let weights: Vec<f64> = h.log_likelihood.iter().map(|l| ((l - max) / temperature).exp()).collect();
+    let total: f64 = weights.iter().sum();
     let mut sum = StateMatrix::zeros();
-    for i in 0..h.len() {
-        let w = h.log_likelihood[i].exp();
+    for (i, w) in weights.iter().enumerate() {
+        let w = w / total;
         if w < 1e-12 {
             continue;
         }
@@ -1303,14 +1320,19 @@ mod tests {
         let b = StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]);
         h.push(a, p, 0.5f64.ln());
         h.push(b, p, 0.5f64.ln());
-        let sigma = mixture_covariance(&h, &a);
+        let sigma = mixture_covariance(&h, &a, 1.0);
         assert!((sigma[(0, 0)] - (1e-6 + 0.5 * 0.04)).abs() < 1e-12);
         assert!((sigma[(1, 1)] - 1e-6).abs() < 1e-15);
         // The truth at either hypothesis lies within 3 sigma of the report.
         assert!(0.2 < 3.0 * sigma[(0, 0)].sqrt());
         // One hypothesis with all the weight: its own covariance.
         h.log_likelihood = vec![0.0, -1e3];
-        assert!((mixture_covariance(&h, &a) - p).norm() < 1e-15);
+        assert!((mixture_covariance(&h, &a, 1.0) - p).norm() < 1e-15);
+        // Tempered: a hypothesis 6 nats behind counts as one 2 nats behind.
+        h.log_likelihood = vec![0.0, -6.0];
+        let tempered = mixture_covariance(&h, &a, 3.0);
+        let w = (-2.0f64).exp() / (1.0 + (-2.0f64).exp());
+        assert!((tempered[(0, 0)] - (1e-6 + w * 0.04)).abs() < 1e-12);
     }
 
     /// The unmodelled bias adds σ_b² (λ/4π)² (JᵀJ)⁻¹: with antennas on the

@@ -154,6 +154,14 @@ pub fn glac_table() -> Table<GlacParams> {
                 |p, v| p.quick_stop = v,
             ),
             float(
+                "weight_temperature",
+                Range::at_least(1.0),
+                "-",
+                "temperature T of the hypothesis weights in the reported covariance: competitors count as if the evidence against them were T times weaker (correlated phase errors overcount it); 1 = the plain posterior",
+                |p| p.weight_temperature,
+                |p, v| p.weight_temperature = v,
+            ),
+            float(
                 "gate_sigmas",
                 Range::POSITIVE,
                 "sigma",
