@@ -150,10 +150,31 @@ fn bad_options_are_errors() {
 #[test]
 fn shift_vectors_are_bounded_and_distinct() {
     let v = shift_vectors(4, 2);
+    // The zero vector, 3⁴ − 1 vectors in {−1, 0, 1}, ±2 on each antenna and on all.
     assert_eq!(v.len(), 1 + 80 + 10);
+    assert_eq!(v[0], vec![0; 4]);
     let mut sorted = v.clone();
     sorted.sort();
     sorted.dedup();
     assert_eq!(sorted.len(), v.len());
     assert!(shift_vectors(8, 2).len() < 200);
+}
+
+/// Cost figures for the report (`cargo test --release -- --ignored --nocapture timing`); no assertion on speed.
+#[test]
+#[ignore]
+fn timing() {
+    let s = scene(3, &PAPER, Some(PAPER_REGION), &[]);
+    let t = std::time::Instant::now();
+    let report = analyse_scene(&s, &[], &AmbiguityOptions::default()).unwrap();
+    println!("analyse_scene with remedies: {:?}", t.elapsed());
+    let shifts: Vec<Vec<i32>> = report.families.iter().filter(|f| f.exact).flat_map(|f| f.shifts.clone()).collect();
+    let full = twin_search(&s, &[], &AmbiguityOptions::default()).unwrap();
+    let cheap = full.clone().with_shifts(shifts);
+    let points: Vec<Vector3<f64>> = (0..1000).map(|i| Vector3::new(0.1 + 0.0007 * i as f64, 0.2 + 0.0003 * i as f64, 0.4 + 0.0004 * i as f64)).collect();
+    for (name, search) in [("restricted", &cheap), ("full", &full)] {
+        let t = std::time::Instant::now();
+        let n: usize = points.iter().map(|p| search.twins(p).len()).sum();
+        println!("twins() {name} ({} shifts): {:.1} us per call, {n} twins", search.shifts().len(), t.elapsed().as_secs_f64() * 1e6 / points.len() as f64);
+    }
 }

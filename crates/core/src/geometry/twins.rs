@@ -116,7 +116,7 @@ pub fn shift_vectors(antennas: usize, max_single_shift: i32) -> Vec<Vec<i32>> {
     let full = antennas <= 5;
     let count = 3usize.pow(antennas.min(12) as u32);
     if full {
-        for code in 1..count {
+        for code in 0..count {
             let mut c = code;
             let v: Vec<i32> = (0..antennas)
                 .map(|_| {
@@ -160,8 +160,13 @@ pub fn shift_vectors(antennas: usize, max_single_shift: i32) -> Vec<Vec<i32>> {
             }
         }
     }
-    out.dedup();
-    out
+    let mut unique: Vec<Vec<i32>> = Vec::with_capacity(out.len());
+    for v in out {
+        if !unique.contains(&v) {
+            unique.push(v);
+        }
+    }
+    unique
 }
 
 impl TwinSearch {
