@@ -375,10 +375,10 @@ pub fn twin_search(scene: &Scene, frequencies_hz: &[f64], options: &AmbiguityOpt
 
 /// Every twin of the tag position `position` (m) in the region, nearest
 /// first, with the full set of shift vectors: a convenience for one-off
-/// use (about 0.5 ms for 4 antennas). A tracker calling it every step
+/// use (about 2.5 ms for 4 antennas). A tracker calling it every step
 /// should build [`twin_search`] once and restrict it with
 /// [`TwinSearch::with_shifts`] to the shifts [`analyse_scene`] found
-/// (about 25 µs per call on the paper layout).
+/// (about 75 µs per call on the paper layout).
 pub fn twin_positions(scene: &Scene, position: &Vector3<f64>, frequencies_hz: &[f64], options: &AmbiguityOptions) -> Result<Vec<Twin>> {
     Ok(twin_search(scene, frequencies_hz, options)?.twins(position))
 }
@@ -435,22 +435,27 @@ fn families(search: &TwinSearch, samples: &[Vector3<f64>], options: &AmbiguityOp
         let mut nearest: Vec<(Vec<usize>, f64)> = Vec::new();
         for twin in search.twins(p) {
             let free: Vec<usize> = (0..twin.shift.len()).filter(|&a| twin.shift[a] != 0).collect();
-            if nearest.iter().any(|(f, _)| *f == free) || !persists(search, p, &twin, options.persistence_step_m, dims) {
+            let slot = groups.iter().position(|(f, _)| *f == free);
+            let known_shift = slot.is_some_and(|i| groups[i].1.shifts.contains(&twin.shift));
+            let seen_here = nearest.iter().any(|(f, _)| *f == free);
+            // Twins come nearest first: the first persistent one of a family
+            // at this sample gives its distance; later ones only add shifts.
+            if (seen_here && known_shift) || !persists(search, p, &twin, options.persistence_step_m, dims) {
                 continue;
             }
-            let distance = (twin.position - p).norm();
-            nearest.push((free.clone(), distance));
-            let slot = match groups.iter().position(|(f, _)| *f == free) {
-                Some(i) => i,
-                None => {
-                    groups.push((free, Occurrence { shifts: Vec::new(), samples: Vec::new(), nearest_m: Vec::new(), residual_sigma: Vec::new() }));
-                    groups.len() - 1
-                }
-            };
+            let slot = slot.unwrap_or_else(|| {
+                groups.push((free.clone(), Occurrence { shifts: Vec::new(), samples: Vec::new(), nearest_m: Vec::new(), residual_sigma: Vec::new() }));
+                groups.len() - 1
+            });
             let group = &mut groups[slot].1;
             if !group.shifts.contains(&twin.shift) {
                 group.shifts.push(twin.shift.clone());
             }
+            if seen_here {
+                continue;
+            }
+            let distance = (twin.position - p).norm();
+            nearest.push((free, distance));
             group.samples.push(index);
             group.nearest_m.push(distance);
             group.residual_sigma.push(search.residual_sigma(&twin));
@@ -506,7 +511,7 @@ fn perpendicular(axis: &Vector3<f64>, towards: &Vector3<f64>) -> Vector3<f64> {
 
 /// The layout's structure and its twin families on the channels
 /// `frequencies_hz` (Hz, see [`joint_frequencies`]; empty: the default
-/// channel). Pure and deterministic; about 0.2–1 s for 4 antennas with the
+/// channel). Pure and deterministic; about 1–1.5 s for 4 antennas with the
 /// remedies (they re-run the search for moved antennas and for hopping).
 pub fn analyse_scene(scene: &Scene, frequencies_hz: &[f64], options: &AmbiguityOptions) -> Result<AmbiguityReport> {
     if options.grid_points == 0 || !(options.layout_tolerance_m >= 0.0) || !(options.persistence_step_m > 0.0) {
