@@ -2,6 +2,7 @@
 //! nothing else. Type stubs: `python/scattertrack/_core.pyi`.
 
 mod dsp;
+mod geometry;
 mod lora;
 
 use nalgebra::Vector3;
@@ -778,6 +779,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(default_params, m)?)?;
     dsp::register(m)?;
     lora::register(m)?;
+    geometry::register(m)?;
     Ok(())
 }
 
