@@ -10,7 +10,7 @@ name the antennas by their scene ids, the size of the ambiguity in cm and the
 remedy.
 
 Warnings are exact twin families (layout degeneracies: no amount of reads on
-these channels resolves them) and approximate families over 10% or more of
+these channels resolves them) and approximate families over half or more of
 the region; notes are weak spots (approximate twins over a small share of
 the region, which motion through the rest resolves) and layout facts
 (collinear / coplanar / coincident antennas) that no warning explains.

@@ -167,7 +167,7 @@ pub const EXACT_RESIDUAL_SIGMA: f64 = 1e-3;
 
 /// Share of the region from which an approximate family is a warning
 /// rather than a weak spot (motion through the rest resolves it).
-pub const WEAK_SPOT_SHARE: f64 = 0.10;
+pub const WEAK_SPOT_SHARE: f64 = 0.5;
 
 impl TwinFamily {
     /// Whether to warn: exact families always, approximate ones (within
