@@ -343,3 +343,39 @@ def lora_clock_error(
 ) -> dict[str, Any]:
     """Tags' clock error eps from peaks at rest (observations, 4) Hz: ``clock_error``,
     ``sigma`` (None with one observation), ``timing_hz``, ``observations``."""
+
+# --- scene geometry check (python/src/geometry.rs) ---------------------------
+
+def analyse_scene(
+    dimensions: int,
+    plane_z: float,
+    phase_sign: float,
+    phase_period: float,
+    phase_noise_rad: float,
+    antenna_positions: np.ndarray,
+    antenna_offsets: np.ndarray,
+    region: tuple[np.ndarray, np.ndarray] | None,
+    channel_frequencies: np.ndarray,
+    channel_offsets: np.ndarray,
+    read_frequencies: list[float],
+    evidence_reads: float | None = None,
+    remedies: bool = True,
+) -> dict:
+    """Layout findings and twin families (dict of lists of dicts; antenna indices, metres)."""
+
+def twin_positions(
+    dimensions: int,
+    plane_z: float,
+    phase_sign: float,
+    phase_period: float,
+    phase_noise_rad: float,
+    antenna_positions: np.ndarray,
+    antenna_offsets: np.ndarray,
+    region: tuple[np.ndarray, np.ndarray] | None,
+    channel_frequencies: np.ndarray,
+    channel_offsets: np.ndarray,
+    position: list[float],
+    frequencies: list[float],
+    evidence_reads: float | None = None,
+) -> list[tuple[list[float], list[int], float]]:
+    """Twins of one position: (position m, shift per antenna, chi-square), nearest first."""

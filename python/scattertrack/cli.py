@@ -7,6 +7,7 @@ Subcommands::
     scattertrack methods
     scattertrack track --scene S --reads R|--frames F|--sigmf R [--calibration C] [--method glac] --out T [--param name=value ...]
     scattertrack stream --scene S --sigmf R [--calibration C] [--method turbotrack] --out T [--speed X | --fast]
+    scattertrack check-scene SCENE [--reads R]
     scattertrack eval --truth T --track K [--out DIR] [--json FILE] [--threshold-m 0.02]
     scattertrack demo [--out DIR] [--scenario NAME] [--seed N]
 
@@ -445,6 +446,7 @@ def command_track(args) -> int:
     reads = io.read_reads(args.reads, scene)
     say(f"read {plural(len(reads), 'read')} of {plural(len(reads.epcs()), 'tag')} from {args.reads}")
     say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
+    warn_about_geometry(scene, reads)
     result, wall_s = run_tracker(args.method, scene, reads, params, show_progress(args))
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -453,6 +455,36 @@ def command_track(args) -> int:
     if not len(result):
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
     print_tracker_summary(result, reads, wall_s)
+    return 0
+
+
+def warn_about_geometry(scene, reads) -> None:
+    """Before tracking a COTS scene: the geometry check's ``warning:`` lines
+    (twin positions the layout cannot tell apart on the channels read);
+    nothing on a layout that fixes the position. Never stops the tracking."""
+    if scene.reader.kind != "cots":
+        return
+    from scattertrack import check
+
+    try:
+        result = check.check_scene(scene, reads)
+    except ValueError as error:
+        say(f"  geometry check skipped: {error}")
+        return
+    for finding in result.warnings:
+        say(finding.line())
+
+
+def command_check_scene(args) -> int:
+    """``check-scene``: every finding of the geometry check, then whether the layout fixes the position."""
+    from scattertrack import check, io
+
+    scene = io.read_scene(args.scene)
+    if scene.reader.kind != "cots":
+        raise UsageError(f"check-scene checks monostatic reader scenes ([reader] kind = \"cots\"), not {scene.reader.kind!r}")
+    reads = io.read_reads(args.reads, scene) if args.reads else None
+    for line in check.check_scene(scene, reads).lines():
+        say(line)
     return 0
 
 
@@ -822,6 +854,17 @@ def build_parser() -> argparse.ArgumentParser:
     stream.add_argument("--ema-alpha", type=float, help="EMA factor across each tag's channels (default: off)")
     stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
     stream.set_defaults(run=command_stream)
+
+    check_scene = commands.add_parser(
+        "check-scene",
+        help="check that a COTS scene's antenna layout fixes a tag's position",
+        description="Search the region for twin positions that fit every phase a monostatic reader reports "
+        "(three antennas on one line, all antennas in one plane, ...) and print one 'warning:' line per "
+        "ambiguity (antennas, size in cm, remedy) and 'note:' lines for weaker findings; exit 0 either way.",
+    )
+    check_scene.add_argument("scene", help="scene.toml")
+    check_scene.add_argument("--reads", help="reads.csv: analyse the channels it reads (calibrated hopping removes integer shifts)")
+    check_scene.set_defaults(run=command_check_scene)
 
     evaluate = commands.add_parser(
         "eval",

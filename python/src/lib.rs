@@ -2,6 +2,7 @@
 //! nothing else. Type stubs: `python/scattertrack/_core.pyi`.
 
 mod dsp;
+mod geometry;
 mod lora;
 mod params;
 
@@ -563,6 +564,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     params::register(m)?;
     dsp::register(m)?;
     lora::register(m)?;
+    geometry::register(m)?;
     Ok(())
 }
 
