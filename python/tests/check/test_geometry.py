@@ -105,13 +105,19 @@ def test_track_prints_the_warning_and_still_tracks(capsys, tmp_path):
     code, out = run(capsys, "track", "--scene", out_dir / "scene.toml", "--reads", out_dir / "reads.csv", "--out", tmp_path / "t.csv", "--no-progress")
     assert code == 0
     warnings = [line for line in out if line.startswith("warning:")]
-    assert len(warnings) == 1 and "antenna 4 is free" in warnings[0], out
+    geometry = [line for line in warnings if "antenna 4 is free" in line]
+    # Besides the layout's warning, only the tracker's own: the twins leave
+    # the track unresolved at its end.
+    assert len(geometry) == 1, out
+    assert all(line in geometry or "did not resolve" in line for line in warnings), out
     assert any(line.startswith("tracked with glac") for line in out)
 
 
 def test_track_on_a_fixing_layout_prints_no_warning(capsys, tmp_path):
     out_dir = tmp_path / "sim"
-    assert main(["simulate", "--scenario", "glac-3d-arm", "--out", str(out_dir), "--duration", "2"]) == 0
+    # Long enough for the candidates to resolve (glac-3d-arm's flat layout
+    # takes 1-2 s of motion): then a clean recording prints no warning.
+    assert main(["simulate", "--scenario", "glac-3d-arm", "--out", str(out_dir), "--duration", "8"]) == 0
     capsys.readouterr()
     code, out = run(capsys, "track", "--scene", out_dir / "scene.toml", "--reads", out_dir / "reads.csv", "--out", tmp_path / "t.csv", "--no-progress")
     assert code == 0
