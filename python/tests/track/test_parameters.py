@@ -11,6 +11,8 @@ from scattertrack.track import REGISTRY, default_params, make, methods, paramete
 # Every name and default before the tables existed (GlacParams /
 # TurboTrackParams / MarvelParams / SENSING_DEFAULTS at that commit): they
 # must all still be accepted with the same default. New rows may be added.
+# Changed on purpose since: init_max_hypotheses 2000 -> 6000 (mod-pi readers
+# need about 8x the initial set; docs/notes/glac-noise-adaptation.md).
 PREVIOUS_DEFAULTS = {
     "glac": {
         "q": 0.02, "motion": "constant-velocity", "inference": "fast", "likelihood": "innovation",
@@ -19,7 +21,7 @@ PREVIOUS_DEFAULTS = {
         "max_consecutive_outliers": 8, "reinit_gap_s": 1.0, "region_margin_m": 0.05, "merge_distance_m": 0.002,
         "max_hypotheses": 200000, "manoeuvre_q": 1.0, "model_switch_probability": 0.05, "max_branching_hypotheses": 16,
         "perimeter_threshold_m": 0.06, "residual_threshold_m": 0.015, "interpolation_sigma_m": 0.004,
-        "init_max_hypotheses": 2000, "init_max_speed_m_s": 0.6, "init_max_pair_gap_s": 0.3, "phase_noise_rad": None,
+        "init_max_hypotheses": 6000, "init_max_speed_m_s": 0.6, "init_max_pair_gap_s": 0.3, "phase_noise_rad": None,
     },
     "turbotrack": {
         "particles": 100, "transition_sigma_m": 0.005, "reference_interval_s": 1.0 / 300.0, "resample_threshold": 0.5,

@@ -122,6 +122,14 @@ pub struct GlacParams {
     pub max_consecutive_outliers: u32,
     /// Start over when a tag has not been read for this long, seconds.
     pub reinit_gap_s: f64,
+    /// Re-seeding, seconds between searches (0 disables): while the track
+    /// is unresolved (competing hypotheses leave a sigma above 4 cm) or the
+    /// reported hypothesis gated reads since the last search, the initial
+    /// search runs again on the last `init_max_window_s` of reads and its
+    /// candidates that no hypothesis already follows join at a small
+    /// weight ([`RESEED_WEIGHT`]). A true trajectory that the first search
+    /// missed, or that was pruned, can so come back.
+    pub reseed_interval_s: f64,
     /// Fastest the tag can move, m/s: after a restart (a read gap, or lost
     /// lock) the new search keeps only candidates within
     /// `max_speed_m_s · gap + 3σ` of the last estimate, and until it
@@ -171,6 +179,7 @@ impl Default for GlacParams {
             max_consecutive_outliers: 8,
             reinit_gap_s: 1.0,
             max_speed_m_s: 1.0,
+            reseed_interval_s: 1.0,
             region_margin_m: 0.05,
             merge_distance_m: 0.002,
             max_hypotheses: 200_000,
@@ -214,6 +223,9 @@ impl GlacParams {
         }
         if !(self.phase_wander_rad >= 0.0 && self.phase_wander_rad.is_finite()) {
             return Err(Error::Parameter { name: "phase_wander_rad".into(), reason: "must be zero or positive".into() });
+        }
+        if !(self.reseed_interval_s >= 0.0 && self.reseed_interval_s.is_finite()) {
+            return Err(Error::Parameter { name: "reseed_interval_s".into(), reason: "must be zero or positive".into() });
         }
         if !(self.weight_temperature >= 1.0 && self.weight_temperature.is_finite()) {
             return Err(Error::Parameter { name: "weight_temperature".into(), reason: "must be at least 1".into() });
@@ -264,6 +276,19 @@ struct Hypotheses {
     bias: Vec<[f64; MAX_BIASES]>,
     bias_variance: Vec<[f64; MAX_BIASES]>,
 }
+
+/// Total weight of the candidates a re-seeding search adds (the live
+/// hypotheses keep the rest): small, so that a wrong newcomer dies in a few
+/// reads and a true one must earn its place.
+pub const RESEED_WEIGHT: f64 = 1e-3;
+/// At most this many candidates per re-seeding search (best first).
+const RESEED_MAX_CANDIDATES: usize = 300;
+/// A re-seeded candidate this close to a live hypothesis (m) is the same
+/// trajectory and is not added.
+const RESEED_DISTANCE_M: f64 = 0.01;
+/// Re-seed while competing hypotheses leave a sigma above this (m): a
+/// quarter of the λ/2 candidate spacing.
+const RESEED_SIGMA_M: f64 = 0.04;
 
 /// Antennas (by index) that get a bias state; further ones count their
 /// bias as white noise. Fixed-size so a hypothesis allocates nothing.
@@ -394,6 +419,14 @@ pub struct Glac {
     /// Per antenna: time the hypotheses' bias states were last
     /// propagated to, seconds (−∞: not yet, the next read starts it).
     bias_time_s: Vec<f64>,
+    /// Reads of the last `init_max_window_s` while tracking (re-seeding).
+    recent: std::collections::VecDeque<PhaseRead>,
+    /// Time of the last (re-)seeding search, seconds.
+    seeded_s: f64,
+    /// Reads the reported hypothesis gated since then.
+    gated_since_seed: u32,
+    /// Largest position sigma of the latest estimate, metres.
+    last_sigma_m: f64,
     /// The latest estimate (time s, position m, its 3×3 covariance m²):
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
@@ -422,6 +455,10 @@ impl Glac {
             last_frequency_hz: f64::NAN,
             bias_time_s: vec![f64::NEG_INFINITY; n_antennas],
             last_good: None,
+            recent: std::collections::VecDeque::new(),
+            seeded_s: f64::NEG_INFINITY,
+            gated_since_seed: 0,
+            last_sigma_m: 0.0,
             stats: TrackerStats::default(),
         })
     }
@@ -526,6 +563,10 @@ impl Glac {
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
         self.bias_time_s.fill(f64::NEG_INFINITY);
+        self.seeded_s = last;
+        self.gated_since_seed = 0;
+        self.recent.clear();
+        self.recent.extend(self.buffer.iter().copied());
         self.group_antennas = counts.iter().map(|&c| c >= 2).collect();
         self.group.clear();
         self.phase = Phase::Tracking;
@@ -561,6 +602,76 @@ impl Glac {
         } else {
             near
         }
+    }
+
+    /// Re-seeding (see `reseed_interval_s`): the initial search over the
+    /// recent reads; its candidates are brought to the current time by
+    /// replaying those reads through them alone, and the ones no live
+    /// hypothesis follows (none within `RESEED_DISTANCE_M`) join with a
+    /// total weight of [`RESEED_WEIGHT`], split by their own likelihoods.
+    /// The live hypotheses are untouched. Causal: only reads up to now.
+    fn reseed(&mut self, now_s: f64) {
+        self.seeded_s = now_s;
+        self.gated_since_seed = 0;
+        self.stats.reseeds += 1;
+        let reads: Vec<PhaseRead> = self.recent.iter().copied().collect();
+        let Some(first) = reads.first() else { return };
+        let f = first.frequency_hz;
+        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
+        let bias = self.params.bias_sigma_rad * to_range;
+        let range_sigma = (self.range_variance(f) + bias * bias).sqrt();
+        let with_velocity = self.params.motion.has_velocity();
+        // The likeliest few only: the search runs while tracking, and its
+        // replay costs a filter update per candidate and read.
+        let settings = InitialState { max_hypotheses: self.params.initial.max_hypotheses.min(RESEED_MAX_CANDIDATES), ..self.params.initial.clone() };
+        let Some((t_x, initial)) = initial_hypotheses(&self.scene, &reads, &settings, range_sigma, with_velocity) else {
+            return;
+        };
+        let v_sigma = if with_velocity { self.params.init_velocity_sigma_m_s } else { 0.0 };
+        let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
+        let mut fresh = Hypotheses::default();
+        for h in &initial {
+            let mut x = h.state;
+            if self.axes == 2 {
+                x[2] = self.scene.plane_z;
+                x[5] = 0.0;
+            }
+            fresh.push(x, p0, h.log_likelihood);
+        }
+        fresh.normalise();
+        // Replay the reads after t_x through the candidates alone, with
+        // their own clocks; then put the live hypotheses back.
+        let live = std::mem::replace(&mut self.hypotheses, fresh);
+        let (time_s, bias_time_s) = (self.time_s, self.bias_time_s.clone());
+        self.time_s = t_x;
+        self.bias_time_s.fill(f64::NEG_INFINITY);
+        for m in reads.iter().filter(|m| m.time_s > t_x) {
+            if self.hypotheses.len() == 0 {
+                break;
+            }
+            self.step_fast(m);
+        }
+        let fresh = std::mem::replace(&mut self.hypotheses, live);
+        self.time_s = time_s;
+        self.bias_time_s = bias_time_s;
+        let followed = |x: &StateVector, h: &Hypotheses| {
+            (0..h.len()).any(|j| (h.x[j][0] - x).fixed_rows::<3>(0).norm() < RESEED_DISTANCE_M)
+        };
+        let joining: Vec<usize> = (0..fresh.len()).filter(|&i| !followed(&fresh.x[i][0], &self.hypotheses)).collect();
+        if joining.is_empty() {
+            return;
+        }
+        let log_share = RESEED_WEIGHT.ln();
+        for &i in &joining {
+            self.hypotheses.x.push(fresh.x[i]);
+            self.hypotheses.p.push(fresh.p[i]);
+            self.hypotheses.mu.push(fresh.mu[i]);
+            self.hypotheses.log_likelihood.push(log_share + fresh.log_likelihood[i]);
+            self.hypotheses.outliers.push(fresh.outliers[i]);
+            self.hypotheses.bias.push(fresh.bias[i]);
+            self.hypotheses.bias_variance.push(fresh.bias_variance[i]);
+        }
+        self.prune();
     }
 
     /// One reading through every hypothesis (fast or naive inference), or
@@ -1170,6 +1281,18 @@ impl Glac {
         }
         if self.params.inference != Inference::Naive && self.best_gated_last() {
             self.stats.outliers += 1;
+            self.gated_since_seed += 1;
+        }
+        if self.params.inference == Inference::Fast && self.params.reseed_interval_s > 0.0 {
+            self.recent.push_back(*m);
+            let keep_from = m.time_s - self.params.init_max_window_s;
+            while self.recent.front().is_some_and(|r| r.time_s < keep_from) {
+                self.recent.pop_front();
+            }
+            let unresolved = self.hypotheses.len() > 1 && self.last_sigma_m > RESEED_SIGMA_M;
+            if m.time_s - self.seeded_s >= self.params.reseed_interval_s && (unresolved || self.gated_since_seed >= 2) {
+                self.reseed(m.time_s);
+            }
         }
         if self.params.inference == Inference::Synchronous && !self.group.is_empty() {
             return None; // no new estimate until the group completes
@@ -1180,6 +1303,7 @@ impl Glac {
     /// Keeps `estimate` as the last good state (for re-acquisition).
     fn remember(&mut self, estimate: Option<Estimate>) -> Option<Estimate> {
         if let Some(e) = &estimate {
+            self.last_sigma_m = e.position_sigma().iter().fold(0.0f64, |m, s| m.max(*s));
             let c = &e.covariance;
             let covariance = Matrix3::from_fn(|r, k| c[r * 6 + k]);
             self.last_good = Some((e.time_s, Vector3::from(e.position), covariance));
@@ -1479,6 +1603,43 @@ mod tests {
         };
         let (with, without) = (error(true), error(false));
         assert!(with < 0.8 * without, "mean error with bias states {with} m, without {without} m");
+    }
+
+    /// Re-seeding brings back a true trajectory the hypotheses lost: with
+    /// only a wrong hypothesis left (the truth shifted 8 cm), a search over
+    /// the recent reads adds the truth at the re-seeding weight, and the
+    /// reads that follow make it win.
+    #[test]
+    fn reseeding_recovers_a_lost_true_trajectory() {
+        let scene = scene();
+        let all = reads(&scene, 240);
+        let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        let truth = |t: f64| Vector3::new(0.6 + 0.1 * t, 0.3 + 0.05 * t, 0.0);
+        let split = 90; // 3 s
+        for m in &all[..split] {
+            tracker.step(&Measurement::Phase(*m));
+        }
+        // Keep one hypothesis and move it off the truth.
+        let keep = tracker.hypotheses.best().unwrap();
+        tracker.hypotheses.retain(|i| i == keep);
+        tracker.hypotheses.x[0][0][0] += 0.08;
+        tracker.hypotheses.x[0][1][0] += 0.08;
+        tracker.hypotheses.log_likelihood[0] = 0.0;
+        let now = all[split - 1].time_s;
+        let before = tracker.stats().reseeds;
+        tracker.reseed(now);
+        assert_eq!(tracker.stats().reseeds, before + 1);
+        let t = |i: usize| Vector3::new(tracker.hypotheses.x[i][0][0], tracker.hypotheses.x[i][0][1], 0.0);
+        let near: Vec<usize> = (0..tracker.hypotheses.len()).filter(|&i| (t(i) - truth(now)).norm() < 0.01).collect();
+        assert!(!near.is_empty(), "the search over the recent reads finds the truth again");
+        let weight: f64 = near.iter().map(|&i| tracker.hypotheses.log_likelihood[i].exp()).sum();
+        assert!(weight < 10.0 * RESEED_WEIGHT, "a newcomer joins at a small weight, got {weight}");
+        let mut last = None;
+        for m in &all[split..] {
+            last = tracker.step(&Measurement::Phase(*m)).map(|e| (m.time_s, e));
+        }
+        let (t_end, e) = last.unwrap();
+        assert!((Vector3::from(e.position) - truth(t_end)).norm() < 0.01, "the true trajectory wins back");
     }
 
     #[test]

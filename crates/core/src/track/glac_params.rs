@@ -180,6 +180,14 @@ pub fn glac_table() -> Table<GlacParams> {
             ),
             float("reinit_gap_s", Range::POSITIVE, "s", "start over when a tag has not been read for this long", |p| p.reinit_gap_s, |p, v| p.reinit_gap_s = v),
             float(
+                "reseed_interval_s",
+                Range::NON_NEGATIVE,
+                "s",
+                "re-seeding: while the track is unresolved or its reported hypothesis gates reads, rerun the initial search this often on the last init_max_window_s of reads and add the candidates nobody follows at a small weight; 0 = off",
+                |p| p.reseed_interval_s,
+                |p, v| p.reseed_interval_s = v,
+            ),
+            float(
                 "max_speed_m_s",
                 Range::POSITIVE,
                 "m/s",

@@ -178,6 +178,8 @@ pub struct TrackerStats {
     pub max_hypotheses: u64,
     /// EKF updates performed (all hypotheses), a measure of work.
     pub filter_updates: u64,
+    /// Re-seeding searches run while tracking (GLAC).
+    pub reseeds: u64,
 }
 
 impl TrackerStats {
