@@ -34,6 +34,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::candidates::nearest_candidate;
+use super::bias::{BiasPrediction, BiasStep};
 use super::initial::{initial_covariance, initial_hypotheses, InitialState};
 use super::{Estimate, Measurement, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
@@ -718,7 +719,7 @@ impl Glac {
         let mut branches: Vec<(usize, f64, BiasPrediction, f64, f64)> = Vec::new();
         for i in 0..n {
             let (range, variance) = step.predict(h, i);
-            let b = bias.predict(h, i);
+            let b = predict_bias(&bias, h, i);
             // The reading predicts range + bias, with both uncertainties.
             let (predicted, variance) = (range + b.mean, variance + b.variance);
             let z = nearest_candidate(step.residue, step.spacing, predicted);
@@ -730,11 +731,11 @@ impl Glac {
                 }
             }
             step.update(h, i, z - b.mean, b.variance);
-            bias.update(h, i, &b, z - predicted, variance);
+            update_bias(&bias, h, i, &b, z - predicted, variance);
         }
         for &(j, z, b, predicted, variance) in &branches {
             step.update(h, j, z - b.mean, b.variance);
-            bias.update(h, j, &b, z - predicted, variance);
+            update_bias(&bias, h, j, &b, z - predicted, variance);
         }
         let models = if step.manoeuvre.is_some() { 2 } else { 1 };
         self.stats.filter_updates += (h.len() * models) as u64;
@@ -1013,14 +1014,13 @@ impl Glac {
     /// moved to its time.
     fn bias_step(&mut self, m: &PhaseRead) -> BiasStep {
         if !self.params.bias_state || m.antenna >= MAX_BIASES || self.params.bias_sigma_rad == 0.0 {
-            return BiasStep { antenna: None, rho: 0.0, drive: 0.0 };
+            return BiasStep::NONE;
         }
-        let dt = m.time_s - self.bias_time_s[m.antenna];
+        let interval_s = m.time_s - self.bias_time_s[m.antenna];
         self.bias_time_s[m.antenna] = m.time_s;
-        let rho = if dt.is_finite() { (-dt.max(0.0) / self.params.bias_time_s).exp() } else { 0.0 };
         let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * m.frequency_hz);
         let stationary = (self.params.bias_sigma_rad * to_range).powi(2);
-        BiasStep { antenna: Some(m.antenna), rho, drive: stationary * (1.0 - rho * rho) }
+        BiasStep::new(m.antenna, interval_s, stationary, self.params.bias_time_s)
     }
 
     /// Whether the reported hypothesis gated the latest reading.
@@ -1058,51 +1058,21 @@ fn mixture_covariance(h: &Hypotheses, centre: &StateVector, temperature: f64) ->
     sum
 }
 
-/// One antenna's AR(1) bias prediction for one hypothesis: mean (m) and
-/// variance (m²) at the reading's time.
-#[derive(Debug, Clone, Copy, Default)]
-struct BiasPrediction {
-    mean: f64,
-    variance: f64,
+/// [`BiasStep`] applied to hypothesis `i`'s state of the step's antenna.
+fn predict_bias(step: &BiasStep, h: &Hypotheses, i: usize) -> BiasPrediction {
+    match step.antenna {
+        Some(a) => step.predict(h.bias[i][a], h.bias_variance[i][a]),
+        None => BiasPrediction::default(),
+    }
 }
 
-/// What one reading means for the hypotheses' bias states of its antenna:
-/// `b ← ρ b`, `V ← ρ² V + σ_b² (1 − ρ²)` with ρ = exp(−Δt/τ_b) since the
-/// antenna's previous read (ρ = 0 on its first: the stationary prior), and
-/// after the state update the bias takes its share of the innovation,
-/// `b ← b + V/S · ν`, `V ← V − V²/S` (S the innovation variance of range
-/// plus bias). The cross-covariance of bias and state that an exact joint
-/// filter would carry is dropped (a decoupled, per-antenna scalar filter):
-/// that overstates the next innovation's variance a little (conservative)
-/// and keeps the step O(1) in the number of antennas.
-struct BiasStep {
-    /// Antenna index, if it has a bias state.
-    antenna: Option<usize>,
-    rho: f64,
-    /// σ_b² (1 − ρ²), m².
-    drive: f64,
-}
-
-impl BiasStep {
-    fn predict(&self, h: &Hypotheses, i: usize) -> BiasPrediction {
-        let Some(a) = self.antenna else { return BiasPrediction::default() };
-        BiasPrediction { mean: self.rho * h.bias[i][a], variance: self.rho * self.rho * h.bias_variance[i][a] + self.drive }
-    }
-
-    /// `innovation` (m) of the reading against range + bias, `variance`
-    /// its S (m²). A gated reading (the hypothesis' outlier count rose)
-    /// leaves the bias at its prediction.
-    fn update(&self, h: &mut Hypotheses, i: usize, b: &BiasPrediction, innovation: f64, variance: f64) {
-        let Some(a) = self.antenna else { return };
-        if h.outliers[i] == 0 && variance > 0.0 {
-            let gain = b.variance / variance;
-            h.bias[i][a] = b.mean + gain * innovation;
-            h.bias_variance[i][a] = b.variance * (1.0 - gain);
-        } else {
-            h.bias[i][a] = b.mean;
-            h.bias_variance[i][a] = b.variance;
-        }
-    }
+/// The bias update of hypothesis `i` after its state update: a gated
+/// reading (its outlier count rose) leaves the bias at its prediction.
+fn update_bias(step: &BiasStep, h: &mut Hypotheses, i: usize, b: &BiasPrediction, innovation: f64, variance: f64) {
+    let Some(a) = step.antenna else { return };
+    let (mean, var) = if h.outliers[i] == 0 { b.update(innovation, variance) } else { (b.mean, b.variance) };
+    h.bias[i][a] = mean;
+    h.bias_variance[i][a] = var;
 }
 
 /// Everything one reading means for every hypothesis (fast inference).

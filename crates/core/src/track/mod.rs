@@ -12,6 +12,7 @@
 //! [`make`], and its tests. Parameters: [`glac_params`], [`turbotrack_params`].
 
 pub mod bistatic;
+mod bias;
 mod candidates;
 mod ellipse_intersection;
 mod glac;
