@@ -24,7 +24,7 @@ class FormatError(ValueError):
     ``path``, ``line`` (1-based, ``None`` when the whole file is at fault) and
     ``column`` (the column name for CSV, the key for TOML, ``None`` if not
     applicable) locate the fault; ``str(error)`` reads
-    ``"reads.csv:12: column 'phase_rad': not a finite number: 'nan'"``.
+    ``"reads.csv:12: line 12, column 'phase_rad': not a finite number: 'nan'"``.
     """
 
     def __init__(self, path, line: int | None, column: str | None, message: str):
@@ -32,16 +32,18 @@ class FormatError(ValueError):
         self.line = line
         self.column = column
         self.message = message
-        where = self.path if line is None else f"{self.path}:{line}"
-        col = f" column '{column}':" if column is not None else ""
-        super().__init__(f"{where}:{col} {message}")
+        # "file:N:" for editors and tools that jump to a location, and the
+        # words for people: "reads.csv:12: line 12, column 'phase_rad': ...".
+        where = self.path if line is None else f"{self.path}:{line}: line {line}"
+        col = (", " if line is not None else ": ") + f"column '{column}'" if column is not None else ""
+        super().__init__(f"{where}{col}: {message}")
 
 
 class InputWarning(UserWarning):
     """Valid but suspicious input (a clock jump, an implausible prior...), issued with :func:`warnings.warn`.
 
-    The text reads like a :class:`FormatError`'s, ``"reads.csv:12: column
-    'time_s': clock jumps back by 10 s ..."``; the command line prints it as
+    The text reads like a :class:`FormatError`'s, ``"reads.csv:12: line 12,
+    column 'time_s': clock jumps back by 10 s ..."``; the command line prints it as
     a line starting ``warning:``. ``path``, ``line`` and ``column`` locate it.
     """
 

@@ -94,7 +94,7 @@ def test_clock_jump_is_a_warning_line_and_tracking_goes_on(capsys, tmp_path):
     code, out, err = track(capsys, tmp_path, rows)
     assert code == 0, err
     warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
-    assert len(warnings) == 1 and f"{tmp_path / 'reads.csv'}:22: column 'time_s': clock jumps back" in warnings[0]
+    assert len(warnings) == 1 and f"{tmp_path / 'reads.csv'}:22: line 22, column 'time_s': clock jumps back" in warnings[0]
     assert "read 40 reads" in out
 
 
@@ -150,7 +150,7 @@ def test_eval_warns_for_sparse_truth(capsys, tmp_path):
     track_file.write_text("time_s,epc,x,y,z,vx,vy,vz\n0.5,E200,0,0,0,nan,nan,nan\n")
     code, out, err = run(capsys, "eval", "--truth", truth, "--track", track_file, "--out", tmp_path)
     assert code == 0, err
-    assert err.startswith(f"warning: {truth}:2: column 'time_s': truth of tag 'E200' is sampled at 10 Hz")
+    assert err.startswith(f"warning: {truth}:2: line 2, column 'time_s': truth of tag 'E200' is sampled at 10 Hz")
 
 
 @pytest.mark.parametrize(

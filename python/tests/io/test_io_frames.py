@@ -243,7 +243,7 @@ def test_bad_value(write_file, scene, row, column, fragment):
     error = error_for(write_file, text, scene)
     assert (error.line, error.column) == (4, column), str(error)
     assert fragment in error.message
-    assert str(error).startswith(f"{error.path}:4: column '{column}':")
+    assert str(error).startswith(f"{error.path}:4: line 4, column '{column}':")
 
 
 def test_first_bad_line_is_reported(write_file, scene):

@@ -54,7 +54,7 @@ def test_ascii_numbers_with_line_and_column(write_file, reader, header, row, _, 
     path = write_file("data.csv", header + row + "\n" + ",".join(bad) + "\n")
     error = error_of(reader, path)
     assert (error.line, error.column) == (3, "time_s")
-    assert str(error).startswith(f"{path}:3: column 'time_s': ")
+    assert str(error).startswith(f"{path}:3: line 3, column 'time_s': ")
 
 
 @pytest.mark.parametrize("reader, header, row, _", FORMATS, ids=IDS)
@@ -130,7 +130,10 @@ def test_clock_jump_back_warns_in_every_time_series(write_file, reader, header, 
     path = write_file("data.csv", header + "".join(f"{t}{row}\n" for t in (30.0, 30.1, 12.0, 30.2)))
     with pytest.warns(InputWarning, match="clock jumps back by 18.1 s") as caught:
         reader(path)
-    assert [(w.message.line, w.message.column) for w in caught] == [(4, "time_s")]
+    # Only the input's warnings: a ResourceWarning of an earlier test's
+    # garbage can land here too.
+    found = [(w.message.line, w.message.column) for w in caught if isinstance(w.message, InputWarning)]
+    assert found == [(4, "time_s")]
 
 
 # --- truth sampling -------------------------------------------------------------------

@@ -243,7 +243,7 @@ def test_backward_jump_beyond_one_second_warns(write_file):
     (warning,) = input_warnings(path)
     assert (warning.path, warning.line, warning.column) == (str(path), 5, "time_s")
     assert "clock jumps back by 10.2 s" in warning.message and "1 such jump" in warning.message
-    assert str(warning).startswith(f"{path}:5: column 'time_s': ")
+    assert str(warning).startswith(f"{path}:5: line 5, column 'time_s': ")
     with pytest.warns(InputWarning):
         reads = read_reads(path)
     assert reads.time_s.tolist() == sorted(reads.time_s.tolist())  # still sorted, nothing dropped

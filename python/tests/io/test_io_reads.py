@@ -206,7 +206,7 @@ def test_missing_column(write_file):
 def test_nan_value(write_file):
     error = error_for(write_file, GOOD.replace("4.319690", "nan"))
     assert (error.line, error.column) == (3, "phase_rad")
-    assert str(error) == f"{error.path}:3: column 'phase_rad': not a finite number: 'nan'"
+    assert str(error) == f"{error.path}:3: line 3, column 'phase_rad': not a finite number: 'nan'"
 
 
 def test_nan_in_optional_column(write_file):

@@ -156,7 +156,7 @@ def test_helper_scene_without_antennas(write_file):
 def test_dimensions_2_without_plane_z(write_file):
     error = error_for(write_file, GOOD.replace("dimensions = 3", "dimensions = 2"))
     assert (error.line, error.column) == (2, "plane_z")
-    assert str(error).startswith(f"{error.path}:2: column 'plane_z': required when dimensions = 2")
+    assert str(error).startswith(f"{error.path}:2: line 2, column 'plane_z': required when dimensions = 2")
 
 
 def test_dimensions_2_with_plane_z(write_file):
