@@ -24,6 +24,7 @@ import numpy as np
 
 from scattertrack import _core
 from scattertrack.io.types import Reads, Scene
+from scattertrack.track.scene_arguments import scene_arguments
 
 AXES = "xyz"
 
@@ -59,30 +60,6 @@ class GeometryCheck:
 
     def lines(self) -> list[str]:
         return [f.line() for f in self.findings] + [self.summary]
-
-
-def _scene_arrays(scene: Scene) -> tuple:
-    positions = np.array([a.position for a in scene.antennas], dtype=float).reshape(-1, 3)
-    offsets = np.array([a.phase_offset_rad for a in scene.antennas], dtype=float)
-    region = None
-    if scene.region is not None:
-        region = (np.asarray(scene.region.min, dtype=float), np.asarray(scene.region.max, dtype=float))
-    frequencies = np.array([c.frequency_hz for c in scene.channel_offsets], dtype=float)
-    channel_offsets = np.array([c.phase_offset_rad for c in scene.channel_offsets], dtype=float)
-    noise = scene.reader.phase_noise_rad if scene.reader.phase_noise_rad else 0.1
-    plane_z = scene.plane_z if scene.plane_z is not None else 0.0
-    return (
-        int(scene.dimensions),
-        float(plane_z),
-        float(scene.reader.phase_sign),
-        float(scene.reader.period_rad),
-        float(noise),
-        positions,
-        offsets,
-        region,
-        frequencies,
-        channel_offsets,
-    )
 
 
 def _read_channels(scene: Scene, reads: Reads | None) -> tuple[list[float], float | None]:
@@ -267,7 +244,7 @@ def check_scene(scene: Scene, reads: Reads | None = None, *, remedies: bool = Tr
     if scene.reader.kind != "cots":
         raise ValueError(f"the geometry check is for monostatic reader scenes (kind = 'cots'), not {scene.reader.kind!r}")
     frequencies, evidence = _read_channels(scene, reads)
-    report = _core.analyse_scene(*_scene_arrays(scene), frequencies, evidence, remedies)
+    report = _core.analyse_scene(*scene_arguments(scene), frequencies, evidence, remedies)
     families = report["families"]
     findings = []
     for family in families:
@@ -302,7 +279,7 @@ def twin_positions(scene: Scene, position, frequencies=None, evidence_reads: flo
     """Twins of one tag ``position`` (m): ``[(position, shift per antenna, chi_square)]``,
     nearest first, on ``frequencies`` (Hz, analysed jointly; default one channel)."""
     twins = _core.twin_positions(
-        *_scene_arrays(scene),
+        *scene_arguments(scene),
         [float(v) for v in np.asarray(position, dtype=float).reshape(3)],
         [float(f) for f in (frequencies or [])],
         evidence_reads,

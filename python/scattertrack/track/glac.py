@@ -15,6 +15,7 @@ from scattertrack import _core
 from scattertrack.io.types import Reads, Scene, SkipReport, Track
 from scattertrack.track import methods as registry
 from scattertrack.track import parameters
+from scattertrack.track.scene_arguments import scene_arguments
 
 METHODS: list[str] = list(registry.METHODS)
 """Every registered method (the registry in the Rust core)."""
@@ -53,28 +54,10 @@ def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
         raise ValueError(f"method '{method}' is the drone pipeline: use scattertrack.track.marvel (imu + features or a recording)")
     if scene.reader.kind != "cots":
         raise ValueError(f"method '{method}' needs a monostatic reader scene (kind = 'cots'), got '{scene.reader.kind}'")
-    positions = np.array([a.position for a in scene.antennas], dtype=float).reshape(-1, 3)
-    offsets = np.array([a.phase_offset_rad for a in scene.antennas], dtype=float)
-    region = None
-    if scene.region is not None:
-        region = (np.asarray(scene.region.min, dtype=float), np.asarray(scene.region.max, dtype=float))
-    frequencies = np.array([c.frequency_hz for c in scene.channel_offsets], dtype=float)
-    channel_offsets = np.array([c.phase_offset_rad for c in scene.channel_offsets], dtype=float)
-    noise = scene.reader.phase_noise_rad if scene.reader.phase_noise_rad else 0.1
-    plane_z = scene.plane_z if scene.plane_z is not None else 0.0
     # Parameters cross as one dict; the core's table checks every one
     # (ValueError naming the parameter).
     return _core.Engine(
-        scene.dimensions,
-        float(plane_z),
-        float(scene.reader.phase_sign),
-        float(scene.reader.period_rad),
-        float(noise),
-        positions,
-        offsets,
-        region,
-        frequencies,
-        channel_offsets,
+        *scene_arguments(scene),
         method,
         dict(params),
     )
