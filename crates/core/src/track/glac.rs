@@ -36,6 +36,7 @@ use nalgebra::{Matrix3, Vector3};
 use super::candidates::nearest_candidate;
 use super::bias::{BiasPrediction, BiasStep};
 use super::initial::{initial_covariance, initial_hypotheses, InitialState};
+use super::line_twins::{line_layout, line_twins, LineLayout};
 use super::{Estimate, Measurement, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
 use crate::filter::{apply_scalar, imm, innovation, log_gaussian, predict, update_position};
@@ -278,6 +279,9 @@ struct Hypotheses {
     bias_variance: Vec<[f64; MAX_BIASES]>,
 }
 
+/// Twins up to this many candidate spacings away count in the covariance.
+const MAX_TWIN_SHIFT: i32 = 3;
+
 /// Total weight of the candidates a re-seeding search adds (the live
 /// hypotheses keep the rest): small, so that a wrong newcomer dies in a few
 /// reads and a true one must earn its place.
@@ -417,6 +421,14 @@ pub struct Glac {
     antenna_interval_s: Vec<f64>,
     /// Carrier of the latest read, Hz (NaN before any).
     last_frequency_hz: f64,
+    /// Carrier of the first read, Hz, and whether any read was on another
+    /// channel since (then twins of one channel no longer fit, provided
+    /// the scene's channel offsets are calibrated).
+    first_frequency_hz: f64,
+    hopped: bool,
+    /// Three or more antennas on a line and one off it (3D): the free
+    /// antenna's integer cannot be fixed on one channel (`line_twins`).
+    line_layout: Option<LineLayout>,
     /// Per antenna: time the hypotheses' bias states were last
     /// propagated to, seconds (−∞: not yet, the next read starts it).
     bias_time_s: Vec<f64>,
@@ -438,6 +450,8 @@ impl Glac {
     pub fn new(scene: Scene, params: GlacParams) -> Result<Self> {
         params.validate()?;
         let axes = scene.dimensions;
+        let positions: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
+        let line_layout = if axes == 3 { line_layout(&positions) } else { None };
         let n_antennas = scene.antennas.len();
         Ok(Self {
             scene,
@@ -454,6 +468,9 @@ impl Glac {
             antenna_read_s: vec![f64::NEG_INFINITY; n_antennas],
             antenna_interval_s: vec![f64::INFINITY; n_antennas],
             last_frequency_hz: f64::NAN,
+            first_frequency_hz: f64::NAN,
+            hopped: false,
+            line_layout,
             bias_time_s: vec![f64::NEG_INFINITY; n_antennas],
             last_good: None,
             recent: std::collections::VecDeque::new(),
@@ -952,6 +969,7 @@ impl Glac {
         let (x, own) = h.state(best);
         let mut p = if h.len() == 1 { own } else { mixture_covariance(h, &x, self.params.weight_temperature) };
         self.add_bias_covariance(&mut p, &x);
+        self.add_twin_covariance(&mut p, &x);
         let velocity =
             if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
         Some(Estimate {
@@ -1021,6 +1039,38 @@ impl Glac {
         let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * m.frequency_hz);
         let stationary = (self.params.bias_sigma_rad * to_range).powi(2);
         BiasStep::new(m.antenna, interval_s, stationary, self.params.bias_time_s)
+    }
+
+    /// Three antennas on a line (one off it, one channel): the twins of the
+    /// reported position (the free antenna's range shifted by 1–3
+    /// candidate spacings, inside the region) fit every phase as well as it
+    /// does, so they count as equally likely: `Σ_t d_t d_tᵀ / (K + 1)` is
+    /// added to the position covariance, d_t the offset of twin t (the
+    /// second moment of the K + 1 equally weighted points about the
+    /// reported one). Hopping over calibrated channels breaks the twins,
+    /// and then nothing is added.
+    fn add_twin_covariance(&self, p: &mut StateMatrix, x: &StateVector) {
+        let Some(layout) = &self.line_layout else { return };
+        if !self.last_frequency_hz.is_finite() || (self.hopped && !self.scene.channel_offsets.is_empty()) {
+            return;
+        }
+        let position = Vector3::new(x[0], x[1], x[2]);
+        let spacing = self.scene.candidate_spacing(self.last_frequency_hz);
+        let margin = self.params.region_margin_m;
+        let region = self.scene.region.as_ref();
+        let twins = line_twins(layout, &position, spacing, MAX_TWIN_SHIFT, |q| region.is_none_or(|r| r.contains(q, margin, 3)));
+        if twins.is_empty() {
+            return;
+        }
+        let weight = 1.0 / (twins.len() + 1) as f64;
+        for q in &twins {
+            let d = q - position;
+            for r in 0..3 {
+                for c in 0..3 {
+                    p[(r, c)] += weight * d[r] * d[c];
+                }
+            }
+        }
     }
 
     /// Whether the reported hypothesis gated the latest reading.
@@ -1231,6 +1281,11 @@ impl Glac {
         }
         self.last_time_s = m.time_s;
         self.last_frequency_hz = m.frequency_hz;
+        if !self.first_frequency_hz.is_finite() {
+            self.first_frequency_hz = m.frequency_hz;
+        } else if (m.frequency_hz - self.first_frequency_hz).abs() > 1e3 {
+            self.hopped = true;
+        }
         self.antenna_interval_s[m.antenna] = m.time_s - self.antenna_read_s[m.antenna];
         self.antenna_read_s[m.antenna] = m.time_s;
         if self.phase == Phase::Initialising {
@@ -1341,6 +1396,8 @@ impl Tracker for Glac {
         self.antenna_read_s.fill(f64::NEG_INFINITY);
         self.antenna_interval_s.fill(f64::INFINITY);
         self.last_good = None;
+        self.first_frequency_hz = f64::NAN;
+        self.hopped = false;
         self.bias_time_s.fill(f64::NEG_INFINITY);
     }
 }
@@ -1610,6 +1667,37 @@ mod tests {
         }
         let (t_end, e) = last.unwrap();
         assert!((Vector3::from(e.position) - truth(t_end)).norm() < 0.01, "the true trajectory wins back");
+    }
+
+    /// On the paper's layout, even a tracker holding only a twin of the
+    /// truth reports a covariance that covers the truth (within 3 sigma on
+    /// every axis); hopping over calibrated channels takes the twins away.
+    #[test]
+    fn twins_of_three_antennas_on_a_line_widen_the_sigma() {
+        let pos = [[0.0, 0.0, 0.0], [0.0, 0.3, 0.0], [0.0, 0.8, 0.0], [0.8, 0.8, 0.0]];
+        let antennas = pos
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], p[2]), phase_offset_rad: 0.0, role: Default::default() })
+            .collect();
+        let region = Region { min: Vector3::new(-0.5, -0.5, 0.05), max: Vector3::new(1.5, 1.5, 2.0) };
+        let channel = vec![crate::scene::ChannelOffset { frequency_hz: 915e6, phase_offset_rad: 0.0 }];
+        let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), channel).unwrap();
+        let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        let truth = Vector3::new(0.45, 0.35, 0.7);
+        let layout = tracker.line_layout.clone().expect("the paper's layout has a line");
+        let twin = line_twins(&layout, &truth, scene.candidate_spacing(915e6), 1, |q| q.z > 0.05)[0];
+        tracker.last_frequency_hz = 915e6;
+        tracker.first_frequency_hz = 915e6;
+        let x = StateVector::from_iterator([twin.x, twin.y, twin.z, 0.0, 0.0, 0.0]);
+        tracker.hypotheses.push(x, StateMatrix::identity() * 1e-6, 0.0);
+        let e = tracker.best_estimate(1.0).unwrap();
+        let sigma = e.position_sigma();
+        for k in 0..3 {
+            assert!((truth[k] - twin[k]).abs() <= 3.0 * sigma[k], "axis {k}: {} vs sigma {}", truth[k] - twin[k], sigma[k]);
+        }
+        tracker.hopped = true;
+        assert!(tracker.best_estimate(1.0).unwrap().position_sigma()[0] < 0.01, "calibrated hopping fixes the integer");
     }
 
     #[test]

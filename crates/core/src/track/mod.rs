@@ -18,6 +18,7 @@ mod ellipse_intersection;
 mod glac;
 pub mod glac_params;
 mod initial;
+mod line_twins;
 pub mod registry;
 mod rfind;
 mod turbotrack;
