@@ -59,6 +59,26 @@ OPTION_RANGES = {
 before it runs, so a bad value never reaches a scenario file or the Rust core."""
 
 
+def ascii_float(text: str) -> float:
+    """An option's number, ASCII decimal only (as in the files: ``float()``
+    alone would take ``1_0`` or a full-width ``１``)."""
+    from scattertrack.io.cells import INFINITY_WORD, NAN_WORD, NUMBER
+
+    # nan / inf pass here so that check_options names the option's range.
+    if not (NUMBER.fullmatch(text) or NAN_WORD.fullmatch(text) or INFINITY_WORD.fullmatch(text)):
+        raise argparse.ArgumentTypeError(f"not an ASCII decimal number: {text!r}")
+    return float(text)
+
+
+def ascii_int(text: str) -> int:
+    """An option's integer, ASCII digits only."""
+    from scattertrack.io.cells import INTEGER
+
+    if not INTEGER.fullmatch(text):
+        raise argparse.ArgumentTypeError(f"not an ASCII integer: {text!r}")
+    return int(text)
+
+
 def check_options(args) -> None:
     """Refuse a numeric option outside its range, or a non-finite one (UsageError naming the option)."""
     for name, (allowed, description) in OPTION_RANGES.items():
@@ -753,8 +773,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     simulate.add_argument("--scenario", required=True, help="a named scenario (see 'scattertrack scenarios') or a TOML file")
     simulate.add_argument("--out", required=True, help="output folder")
-    simulate.add_argument("--seed", type=int, help="random seed (default: the scenario's own)")
-    simulate.add_argument("--duration", type=float, metavar="S", help="override the scenario's duration, seconds")
+    simulate.add_argument("--seed", type=ascii_int, help="random seed (default: the scenario's own)")
+    simulate.add_argument("--duration", type=ascii_float, metavar="S", help="override the scenario's duration, seconds")
     simulate.add_argument(
         "--pipeline",
         choices=("glac", "turbotrack", "marvel"),
@@ -835,7 +855,7 @@ def build_parser() -> argparse.ArgumentParser:
     stream.add_argument("--method", default="turbotrack", help="tracking method (default turbotrack)")
     stream.add_argument("--out", required=True, help="track.csv to write")
     pace = stream.add_mutually_exclusive_group()
-    pace.add_argument("--speed", type=float, help="replay at this multiple of the recorded timing (default 1: live)")
+    pace.add_argument("--speed", type=ascii_float, help="replay at this multiple of the recorded timing (default 1: live)")
     pace.add_argument("--fast", action="store_true", help="as fast as possible (throughput; latency then includes queueing)")
     stream.add_argument(
         "--layout", choices=("team", "per-antenna", "shared"), default="team",
@@ -843,15 +863,15 @@ def build_parser() -> argparse.ArgumentParser:
         "fuses and tracks it), per-antenna (the thesis's pools and a fusion thread), shared (one pool, a fusion thread)",
     )
     stream.add_argument(
-        "--workers", type=int,
+        "--workers", type=ascii_int,
         help="threads: in all for team and shared (default one per core), per antenna for per-antenna (default 1)",
     )
     stream.add_argument(
-        "--prewake-us", type=float, default=1000.0,
+        "--prewake-us", type=ascii_float, default=1000.0,
         help="team at a paced speed: wake the idle workers this long before a reply is due to poll for it "
         "(default 1000; 0: they sleep until it arrives)",
     )
-    stream.add_argument("--ema-alpha", type=float, help="EMA factor across each tag's channels (default: off)")
+    stream.add_argument("--ema-alpha", type=ascii_float, help="EMA factor across each tag's channels (default: off)")
     stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
     stream.set_defaults(run=command_stream)
 
@@ -878,7 +898,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.add_argument("--json", help="also write the report as JSON to this file")
     evaluate.add_argument(
         "--threshold-m",
-        type=float,
+        type=ascii_float,
         default=0.02,
         help="convergence threshold on the 3D error, metres (default 0.02)",
     )
@@ -893,10 +913,10 @@ def build_parser() -> argparse.ArgumentParser:
     )
     demo.add_argument("--out", default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
     demo.add_argument("--scenario", default=DEMO_SCENARIO, help=f"scenario (default {DEMO_SCENARIO})")
-    demo.add_argument("--seed", type=int, help="random seed (default: the scenario's own)")
+    demo.add_argument("--seed", type=ascii_int, help="random seed (default: the scenario's own)")
     demo.add_argument("--no-progress", action="store_true", help="no progress bar")
     # For tests: a short run. Hidden so that the demo stays a one-liner.
-    demo.add_argument("--duration", type=float, help=argparse.SUPPRESS)
+    demo.add_argument("--duration", type=ascii_float, help=argparse.SUPPRESS)
     demo.set_defaults(run=command_demo)
     return parser
 
