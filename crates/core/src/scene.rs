@@ -159,6 +159,14 @@ impl Scene {
             .map_or(0.0, |c| c.phase_offset_rad)
     }
 
+    /// Range per radian of round-trip phase, λ/4π (m/rad): σ_d = σ_φ λ/4π
+    /// turns a phase error into a range error (the phase turns 4π per
+    /// wavelength of range).
+    #[inline]
+    pub fn range_per_radian(frequency_hz: f64) -> f64 {
+        SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * frequency_hz)
+    }
+
     /// Distance ambiguity step `s = P λ / 4π` (m): λ/2 for 2π readers,
     /// λ/4 for mod-π readers. Round trip: phase advances 4π per λ of range.
     #[inline]

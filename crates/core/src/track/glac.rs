@@ -42,7 +42,7 @@ use crate::error::{Error, Result};
 use crate::filter::{apply_scalar, imm, innovation, log_gaussian, predict, update_position};
 use crate::geometry::multilaterate;
 use crate::model::{range, MotionModel, StateMatrix, StateVector, Transition};
-use crate::scene::{Scene, SPEED_OF_LIGHT};
+use crate::scene::Scene;
 
 /// How hypotheses are expanded per reading.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -337,6 +337,17 @@ impl Hypotheses {
         self.bias_variance.push(self.bias_variance[i]);
     }
 
+    /// Appends hypothesis `i` of `other` with log-likelihood `log_likelihood`.
+    fn append_from(&mut self, other: &Hypotheses, i: usize, log_likelihood: f64) {
+        self.x.push(other.x[i]);
+        self.p.push(other.p[i]);
+        self.mu.push(other.mu[i]);
+        self.log_likelihood.push(log_likelihood);
+        self.outliers.push(other.outliers[i]);
+        self.bias.push(other.bias[i]);
+        self.bias_variance.push(other.bias_variance[i]);
+    }
+
     /// The reported state of hypothesis `i`: the IMM combination (which
     /// is slot 0 itself for single-model trackers, where μ = [1, 0]).
     fn state(&self, i: usize) -> (StateVector, StateMatrix) {
@@ -438,8 +449,6 @@ pub struct Glac {
     seeded_s: f64,
     /// Reads the reported hypothesis gated since then.
     gated_since_seed: u32,
-    /// Largest position sigma of the latest estimate, metres.
-    last_sigma_m: f64,
     /// The latest estimate (time s, position m, its 3×3 covariance m²):
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
@@ -476,7 +485,6 @@ impl Glac {
             recent: std::collections::VecDeque::new(),
             seeded_s: f64::NEG_INFINITY,
             gated_since_seed: 0,
-            last_sigma_m: 0.0,
             stats: TrackerStats::default(),
         })
     }
@@ -508,7 +516,7 @@ impl Glac {
             let rho = (-interval_s / self.params.phase_wander_s).exp();
             phase_variance += wander * wander * correlated_variance_factor(rho);
         }
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * frequency_hz);
+        let to_range = Scene::range_per_radian(frequency_hz);
         phase_variance * to_range * to_range
     }
 
@@ -551,11 +559,7 @@ impl Glac {
         if !all_twice && span < self.params.init_max_window_s {
             return false;
         }
-        let f = self.buffer[0].frequency_hz;
-        // The bias is part of each initial range's error too.
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
-        let bias = self.params.bias_sigma_rad * to_range;
-        let range_sigma = (self.range_variance(f) + bias * bias).sqrt();
+        let range_sigma = self.initial_range_sigma(self.buffer[0].frequency_hz);
         let with_velocity = self.params.motion.has_velocity();
         let Some((t_x, initial)) =
             initial_hypotheses(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity)
@@ -565,19 +569,8 @@ impl Glac {
             self.buffer.retain(|m| m.time_s >= keep_from);
             return false;
         };
-        let v_sigma = if with_velocity { self.params.init_velocity_sigma_m_s } else { 0.0 };
-        let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
-        self.hypotheses.clear();
         let initial = self.reachable(initial, t_x);
-        for h in &initial {
-            let mut x = h.state;
-            if self.axes == 2 {
-                x[2] = self.scene.plane_z;
-                x[5] = 0.0;
-            }
-            self.hypotheses.push(x, p0, h.log_likelihood);
-        }
-        self.hypotheses.normalise();
+        self.hypotheses = self.hypotheses_from(&initial);
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
         self.bias_time_s.fill(f64::NEG_INFINITY);
@@ -601,6 +594,32 @@ impl Glac {
         true
     }
 
+    /// Range sigma (m) of the initial search on carrier `frequency_hz`: the
+    /// reads' noise at the typical interval, and the bias, which is part
+    /// of each initial range's error too.
+    fn initial_range_sigma(&self, frequency_hz: f64) -> f64 {
+        let bias = self.params.bias_sigma_rad * Scene::range_per_radian(frequency_hz);
+        (self.range_variance(frequency_hz) + bias * bias).sqrt()
+    }
+
+    /// Hypotheses (normalised) started from initial candidates, with the
+    /// initial covariance; in 2D pinned to the tag's plane.
+    fn hypotheses_from(&self, initial: &[super::initial::InitialHypothesis]) -> Hypotheses {
+        let v_sigma = if self.params.motion.has_velocity() { self.params.init_velocity_sigma_m_s } else { 0.0 };
+        let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
+        let mut hypotheses = Hypotheses::default();
+        for h in initial {
+            let mut x = h.state;
+            if self.axes == 2 {
+                x[2] = self.scene.plane_z;
+                x[5] = 0.0;
+            }
+            hypotheses.push(x, p0, h.log_likelihood);
+        }
+        hypotheses.normalise();
+        hypotheses
+    }
+
     /// Re-acquisition: of the initial candidates, those the tag can have
     /// reached from the last good state (within `max_speed_m_s` · Δt + 3σ
     /// of it, σ its largest position sigma). All of them when there is no
@@ -608,8 +627,7 @@ impl Glac {
     /// was moved faster; searching everywhere beats losing it).
     fn reachable(&self, initial: Vec<super::initial::InitialHypothesis>, t_x: f64) -> Vec<super::initial::InitialHypothesis> {
         let Some((t, position, covariance)) = self.last_good else { return initial };
-        let sigma = covariance.diagonal().iter().fold(0.0f64, |m, v| m.max(*v)).sqrt();
-        let radius = self.params.max_speed_m_s * (t_x - t).max(0.0) + 3.0 * sigma;
+        let radius = self.params.max_speed_m_s * (t_x - t).max(0.0) + 3.0 * largest_sigma(&covariance);
         let near: Vec<_> = initial
             .iter()
             .filter(|h| (Vector3::new(h.state[0], h.state[1], h.state[2]) - position).norm() <= radius)
@@ -634,10 +652,7 @@ impl Glac {
         self.stats.reseeds += 1;
         let reads: Vec<PhaseRead> = self.recent.iter().copied().collect();
         let Some(first) = reads.first() else { return };
-        let f = first.frequency_hz;
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
-        let bias = self.params.bias_sigma_rad * to_range;
-        let range_sigma = (self.range_variance(f) + bias * bias).sqrt();
+        let range_sigma = self.initial_range_sigma(first.frequency_hz);
         let with_velocity = self.params.motion.has_velocity();
         // The likeliest few only: the search runs while tracking, and its
         // replay costs a filter update per candidate and read.
@@ -645,18 +660,7 @@ impl Glac {
         let Some((t_x, initial)) = initial_hypotheses(&self.scene, &reads, &settings, range_sigma, with_velocity) else {
             return;
         };
-        let v_sigma = if with_velocity { self.params.init_velocity_sigma_m_s } else { 0.0 };
-        let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
-        let mut fresh = Hypotheses::default();
-        for h in &initial {
-            let mut x = h.state;
-            if self.axes == 2 {
-                x[2] = self.scene.plane_z;
-                x[5] = 0.0;
-            }
-            fresh.push(x, p0, h.log_likelihood);
-        }
-        fresh.normalise();
+        let fresh = self.hypotheses_from(&initial);
         // Replay the reads after t_x through the candidates alone, with
         // their own clocks; then put the live hypotheses back.
         let live = std::mem::replace(&mut self.hypotheses, fresh);
@@ -681,13 +685,7 @@ impl Glac {
         }
         let log_share = RESEED_WEIGHT.ln();
         for &i in &joining {
-            self.hypotheses.x.push(fresh.x[i]);
-            self.hypotheses.p.push(fresh.p[i]);
-            self.hypotheses.mu.push(fresh.mu[i]);
-            self.hypotheses.log_likelihood.push(log_share + fresh.log_likelihood[i]);
-            self.hypotheses.outliers.push(fresh.outliers[i]);
-            self.hypotheses.bias.push(fresh.bias[i]);
-            self.hypotheses.bias_variance.push(fresh.bias_variance[i]);
+            self.hypotheses.append_from(&fresh, i, log_share + fresh.log_likelihood[i]);
         }
         self.prune();
     }
@@ -1018,7 +1016,7 @@ impl Glac {
         if !inverse.iter().all(|v| v.is_finite()) {
             return;
         }
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * self.last_frequency_hz);
+        let to_range = Scene::range_per_radian(self.last_frequency_hz);
         let variance = sigma_b * sigma_b * to_range * to_range;
         let axes = self.axes;
         for r in 0..axes {
@@ -1036,7 +1034,7 @@ impl Glac {
         }
         let interval_s = m.time_s - self.bias_time_s[m.antenna];
         self.bias_time_s[m.antenna] = m.time_s;
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * m.frequency_hz);
+        let to_range = Scene::range_per_radian(m.frequency_hz);
         let stationary = (self.params.bias_sigma_rad * to_range).powi(2);
         BiasStep::new(m.antenna, interval_s, stationary, self.params.bias_time_s)
     }
@@ -1063,13 +1061,10 @@ impl Glac {
             return;
         }
         let weight = 1.0 / (twins.len() + 1) as f64;
+        let mut block = p.fixed_view_mut::<3, 3>(0, 0);
         for q in &twins {
             let d = q - position;
-            for r in 0..3 {
-                for c in 0..3 {
-                    p[(r, c)] += weight * d[r] * d[c];
-                }
-            }
+            block += (d * weight) * d.transpose();
         }
     }
 
@@ -1106,6 +1101,11 @@ fn mixture_covariance(h: &Hypotheses, centre: &StateVector, temperature: f64) ->
         sum += (p + d * d.transpose()) * w;
     }
     sum
+}
+
+/// Largest per-axis 1-sigma of a position covariance, metres.
+fn largest_sigma(covariance: &Matrix3<f64>) -> f64 {
+    covariance.diagonal().iter().fold(0.0f64, |m, v| m.max(*v)).sqrt()
 }
 
 /// [`BiasStep`] applied to hypothesis `i`'s state of the step's antenna.
@@ -1314,7 +1314,8 @@ impl Glac {
             while self.recent.front().is_some_and(|r| r.time_s < keep_from) {
                 self.recent.pop_front();
             }
-            let unresolved = self.hypotheses.len() > 1 && self.last_sigma_m > RESEED_SIGMA_M;
+            let last_sigma = self.last_good.map_or(0.0, |(_, _, c)| largest_sigma(&c));
+            let unresolved = self.hypotheses.len() > 1 && last_sigma > RESEED_SIGMA_M;
             if m.time_s - self.seeded_s >= self.params.reseed_interval_s && (unresolved || self.gated_since_seed >= 2) {
                 self.reseed(m.time_s);
             }
@@ -1328,7 +1329,6 @@ impl Glac {
     /// Keeps `estimate` as the last good state (for re-acquisition).
     fn remember(&mut self, estimate: Option<Estimate>) -> Option<Estimate> {
         if let Some(e) = &estimate {
-            self.last_sigma_m = e.position_sigma().iter().fold(0.0f64, |m, s| m.max(*s));
             let c = &e.covariance;
             let covariance = Matrix3::from_fn(|r, k| c[r * 6 + k]);
             self.last_good = Some((e.time_s, Vector3::from(e.position), covariance));
@@ -1507,7 +1507,7 @@ mod tests {
         tracker.last_frequency_hz = 915e6;
         tracker.antenna_read_s = vec![0.0; 3];
         tracker.add_bias_covariance(&mut p, &x);
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * 915e6);
+        let to_range = Scene::range_per_radian(915e6);
         let expected = (0.1 * to_range).powi(2);
         for k in 0..3 {
             assert!((p[(k, k)] - expected).abs() < 1e-15);
@@ -1584,7 +1584,7 @@ mod tests {
         let scene = scene();
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
         let read = |t: f64| PhaseRead { time_s: t, antenna: 1, frequency_hz: 915e6, phase_rad: 0.0 };
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * 915e6);
+        let to_range = Scene::range_per_radian(915e6);
         let stationary = (0.07 * to_range).powi(2);
         let first = tracker.bias_step(&read(1.0));
         assert_eq!((first.antenna, first.rho), (Some(1), 0.0));
@@ -1775,7 +1775,7 @@ mod tests {
         let params = GlacParams { phase_noise_rad: Some(0.015), phase_wander_rad: 0.12, ..GlacParams::default() };
         let wander = Glac::new(scene(), params).unwrap();
         let f = 915.25e6;
-        let to_range = SPEED_OF_LIGHT / (4.0 * std::f64::consts::PI * f);
+        let to_range = Scene::range_per_radian(f);
         // No wander: the scene's white noise, whatever the interval.
         for dt in [0.01, 0.13, f64::INFINITY] {
             assert!((white.range_variance_after(f, dt) - (0.1 * to_range).powi(2)).abs() < 1e-15);
