@@ -211,16 +211,25 @@ def unresolved_warnings(result) -> list[str]:
     of the track was; a tag that resolved says nothing."""
     if result.sigma is None or len(result) == 0:
         return []
-    lines = []
     largest = np.nanmax(result.sigma, axis=1)
-    for epc in dict.fromkeys(result.epc.tolist()):
-        rows = np.flatnonzero(result.epc == epc)
-        unresolved = largest[rows] > UNRESOLVED_SIGMA_M
-        if unresolved[-1]:
+    unresolved = largest > UNRESOLVED_SIGMA_M
+    # Per tag in one pass over the rows (a recording may hold thousands of
+    # tags): its last row, its share of unresolved rows and its widest sigma.
+    epcs, tag = np.unique(result.epc.astype(str), return_inverse=True)
+    rows = np.arange(len(result))
+    first, last = np.full(len(epcs), len(result)), np.zeros(len(epcs), dtype=int)
+    np.minimum.at(first, tag, rows)
+    np.maximum.at(last, tag, rows)
+    widest = np.full(len(epcs), -np.inf)
+    np.maximum.at(widest, tag, largest)
+    share = np.bincount(tag, weights=unresolved, minlength=len(epcs)) / np.bincount(tag, minlength=len(epcs))
+    lines = []
+    for k in np.argsort(first, kind="stable"):  # in order of first appearance
+        if unresolved[last[k]]:
             lines.append(
-                f"warning: tag {epc}: the reads did not resolve its position: "
-                f"{unresolved.mean() * 100:.0f} % of its rows, the last included, have a sigma above "
-                f"{UNRESOLVED_SIGMA_M * 100:.0f} cm (up to {largest[rows].max() * 100:.0f} cm); "
+                f"warning: tag {epcs[k]}: the reads did not resolve its position: "
+                f"{share[k] * 100:.0f} % of its rows, the last included, have a sigma above "
+                f"{UNRESOLVED_SIGMA_M * 100:.0f} cm (up to {widest[k] * 100:.0f} cm); "
                 "the sigmas cover the competing candidates, the position is the likeliest of them"
             )
     return lines
