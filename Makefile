@@ -15,7 +15,7 @@ export CARGO_TERM_COLOR ?= never
 RUST_TARGET_CPU ?= native
 export RUSTFLAGS ?= -C target-cpu=$(RUST_TARGET_CPU)
 
-.PHONY: setup demo test test-rust test-python bench clean
+.PHONY: setup demo demo-live test test-rust test-python bench clean
 
 # One shared set-up: a virtualenv with pinned dependencies, the Rust
 # extension built in release mode and the package installed (editable), so
@@ -32,6 +32,20 @@ $(VENV)/.deps-installed: requirements-dev.txt
 
 demo: setup
 	$(VENV)/bin/scattertrack demo --out out/demo
+
+# The live path (docs/live.md): the reader emulator on loopback serves a
+# simulated session over LLRP, with a forced disconnect at 8 s; `live`
+# journals and tracks it for 21 s; the journal is then tracked offline.
+demo-live: setup
+	mkdir -p out/live
+	$(VENV)/bin/scattertrack simulate --scenario glac-3d-walls --out out/live/session
+	rm -f out/live/reads.csv out/live/track.csv
+	$(VENV)/bin/scattertrack emulate-reader --scenario glac-3d-walls --port 15084 --drop-after 8 --linger 5 > out/live/emulator.log 2>&1 & \
+	  emulator=$$!; sleep 2; \
+	  $(VENV)/bin/scattertrack live --scene out/live/session/scene.toml --llrp 127.0.0.1:15084 \
+	    --out out/live/track.csv --journal out/live/reads.csv --duration 21 --no-progress; \
+	  status=$$?; kill $$emulator 2>/dev/null; cat out/live/emulator.log; exit $$status
+	$(VENV)/bin/scattertrack track --scene out/live/session/scene.toml --reads out/live/reads.csv --out out/live/offline.csv --no-progress
 
 test: setup test-rust test-python
 
@@ -50,6 +64,7 @@ bench: setup
 	$(PY) bench/glac_robustness.py --seeds 100 --json out/bench/glac_robustness.json
 	$(PY) bench/turbotrack.py
 	$(PY) bench/marvel.py
+	$(PY) bench/live.py
 
 clean:
 	rm -rf target out $(VENV) python/scattertrack/*.so

@@ -10,6 +10,8 @@ Subcommands::
     scattertrack check-scene SCENE [--reads R]
     scattertrack eval --truth T --track K [--out DIR] [--json FILE] [--threshold-m 0.02]
     scattertrack demo [--out DIR] [--scenario NAME] [--seed N]
+    scattertrack live --scene S --llrp HOST[:PORT] --out T --journal R [--duration S] [reader settings]
+    scattertrack emulate-reader --scenario NAME [--port P] [--speed X] [--drop-after S]
 
 Bad input never ends in a traceback: a malformed file, an unknown method or
 parameter, or a missing file prints ``scattertrack: error: <message>`` on
@@ -29,6 +31,9 @@ import warnings
 from pathlib import Path
 
 import numpy as np
+
+from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
+from scattertrack import live_command
 
 DEMO_SCENARIO = "glac-3d-arm"
 """The scenario ``scattertrack demo`` (and so ``make demo``) runs by default."""
@@ -57,26 +62,7 @@ OPTION_RANGES = {
 }
 """Allowed values of the numeric options, by argparse destination: checked for every command
 before it runs, so a bad value never reaches a scenario file or the Rust core."""
-
-
-def ascii_float(text: str) -> float:
-    """An option's number, ASCII decimal only (as in the files: ``float()``
-    alone would take ``1_0`` or a full-width ``１``)."""
-    from scattertrack.io.cells import INFINITY_WORD, NAN_WORD, NUMBER
-
-    # nan / inf pass here so that check_options names the option's range.
-    if not (NUMBER.fullmatch(text) or NAN_WORD.fullmatch(text) or INFINITY_WORD.fullmatch(text)):
-        raise argparse.ArgumentTypeError(f"not an ASCII decimal number: {text!r}")
-    return float(text)
-
-
-def ascii_int(text: str) -> int:
-    """An option's integer, ASCII digits only."""
-    from scattertrack.io.cells import INTEGER
-
-    if not INTEGER.fullmatch(text):
-        raise argparse.ArgumentTypeError(f"not an ASCII integer: {text!r}")
-    return int(text)
+OPTION_RANGES.update(live_command.OPTION_RANGES)
 
 
 def check_options(args) -> None:
@@ -103,19 +89,9 @@ def print_warning(message, category, filename, lineno, file=None, line=None) -> 
 # --- small helpers -------------------------------------------------------------
 
 
-def say(text: str = "") -> None:
-    """Print one line of the command's report on stdout."""
-    print(text, flush=True)
-
-
 def show_progress(args) -> bool:
     """Progress bars only on a terminal: they would clutter logs and captured output."""
     return not getattr(args, "no_progress", False) and sys.stderr.isatty()
-
-
-def plural(count: int, word: str) -> str:
-    """'1 tag', '3 tags'."""
-    return f"{count} {word}" if count == 1 else f"{count} {word}s"
 
 
 def format_duration(seconds: float) -> str:
@@ -137,24 +113,6 @@ def format_nanoseconds(nanoseconds: float) -> str:
 def format_millimetres(metres: float) -> str:
     """A distance in mm, or 'n/a' for nan (no rows evaluated)."""
     return f"{metres * 1e3:.1f} mm" if math.isfinite(metres) else "n/a"
-
-
-def parse_parameter(text: str) -> tuple[str, str]:
-    """One ``--param name=value`` as (name, text); the method's parameter
-    table reads the text (:func:`tracker_parameters`), once the method is known."""
-    name, equals, value = text.partition("=")
-    name = name.strip()
-    if not equals or not name:
-        raise argparse.ArgumentTypeError(f"expected name=value, got {text!r}")
-    return name, value.strip()
-
-
-def tracker_parameters(method: str, pairs) -> dict:
-    """``--param`` pairs read by ``method``'s table: typed values, or a ValueError naming the
-    parameter and what it must be (an unknown name lists the close matches)."""
-    from scattertrack.track import parameters
-
-    return parameters.parse(method, pairs or [])
 
 
 def check_parameters(method: str, scene, params: dict) -> None:
@@ -913,6 +871,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     evaluate.add_argument("--tag", help="the tag (epc) drawn in track.png (default: the first)")
     evaluate.set_defaults(run=command_eval)
+
+    live_command.add_parsers(commands)
 
     demo = commands.add_parser(
         "demo",
