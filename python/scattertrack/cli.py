@@ -12,6 +12,7 @@ Subcommands::
     scattertrack demo [--out DIR] [--scenario NAME] [--seed N]
     scattertrack live --scene S --llrp HOST[:PORT] --out T --journal R [--duration S] [reader settings]
     scattertrack emulate-reader --scenario NAME [--port P] [--speed X] [--drop-after S]
+    scattertrack calibrate --scene S --reads R --reference EPC=x,y,z [...] [--truth T] --out C
 
 Bad input never ends in a traceback: a malformed file, an unknown method or
 parameter, or a missing file prints ``scattertrack: error: <message>`` on
@@ -33,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
-from scattertrack import live_command
+from scattertrack import calibrate_command, live_command
 
 DEMO_SCENARIO = "glac-3d-arm"
 """The scenario ``scattertrack demo`` (and so ``make demo``) runs by default."""
@@ -873,6 +874,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluate.set_defaults(run=command_eval)
 
     live_command.add_parsers(commands)
+    calibrate_command.add_parser(commands)
 
     demo = commands.add_parser(
         "demo",

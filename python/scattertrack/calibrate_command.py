@@ -1,0 +1,100 @@
+"""``scattertrack calibrate``: offsets, sign, period, hop table and path loss from reference tags.
+
+    scattertrack calibrate --scene S --reads R --reference EPC=x,y,z [EPC=x,y,z ...]
+                           [--truth truth.csv] --out calibrated.toml
+
+Prints what it estimated and how well the calibrated model explains the
+references (docs/calibration.md says how to read it), writes the
+calibrated scene, and a ``warning:`` line for what the references could
+not decide (phase unusable in this room, a barely decided sign, channel
+indices a neighbouring carrier fits as well).
+"""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from scattertrack.arguments import ascii_float, plural, say
+
+
+def reference(text: str) -> tuple[str, np.ndarray]:
+    """``EPC=x,y,z`` (metres)."""
+    epc, equals, position = text.partition("=")
+    parts = position.split(",")
+    if not equals or not epc.strip() or len(parts) != 3:
+        raise argparse.ArgumentTypeError(f"expected EPC=x,y,z (metres), got {text!r}")
+    try:
+        values = np.array([ascii_float(p.strip()) for p in parts])
+    except argparse.ArgumentTypeError as error:
+        raise argparse.ArgumentTypeError(f"{text!r}: {error}") from None
+    if not np.all(np.isfinite(values)):
+        raise argparse.ArgumentTypeError(f"{text!r}: the position must be finite")
+    return epc.strip(), values
+
+
+def add_parser(commands) -> None:
+    calibrate = commands.add_parser(
+        "calibrate",
+        help="estimate phase offsets, sign, period, hop table and RSSI path loss from reference tags",
+        description="Calibrate a scene from reads of reference tags at known positions (--reference) or on a "
+        "known trajectory (--truth): per-antenna and per-channel phase offsets (identifiable only as sums), the "
+        "phase sign, a mod-pi reader, the hop table when the reads carry channel indices and the scene has none, "
+        "and per-antenna RSSI path loss. Prints residuals and the phase coherence; writes the calibrated scene.",
+    )
+    calibrate.add_argument("--scene", required=True, help="scene.toml (positions are used; its offsets and sign are not)")
+    calibrate.add_argument("--reads", required=True, help="reads.csv with the reference tags' reads")
+    calibrate.add_argument("--reference", action="extend", nargs="+", type=reference, default=[], metavar="EPC=x,y,z", help="a static reference tag and its position, m (several after one flag, or the flag repeated)")
+    calibrate.add_argument("--truth", help="truth.csv: reference tags moved along known trajectories")
+    calibrate.add_argument("--out", required=True, help="calibrated scene.toml to write")
+    calibrate.set_defaults(run=command_calibrate)
+
+
+def command_calibrate(args) -> int:
+    from scattertrack import io
+    from scattertrack.calibrate import calibrate
+
+    if not args.reference and not args.truth:
+        raise ValueError("give the reference tags: --reference EPC=x,y,z ... or --truth truth.csv")
+    references = dict(args.reference)
+    if len(references) < len(args.reference):
+        raise ValueError("a reference EPC is given twice")
+    scene = io.read_scene(args.scene)
+    if scene.reader.kind != "cots":
+        raise ValueError(f"calibrate calibrates monostatic reader scenes ([reader] kind = \"cots\"), not {scene.reader.kind!r}")
+    reads = io.read_reads(args.reads, scene)
+    truth = io.read_truth(args.truth) if args.truth else None
+    missing = [epc for epc in references if not np.any(np.asarray(reads.epc).astype(str) == epc)]
+    if missing:
+        warnings.warn(io.InputWarning(args.reads, None, "epc", f"no reads of reference {', '.join(missing)}"), stacklevel=1)
+    result = calibrate(scene, reads, references, truth)
+    report(result)
+    for message in result.warnings:
+        warnings.warn(io.InputWarning(args.reads, None, None, message), stacklevel=1)
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    result.scene().save(out)
+    say(f"wrote the calibrated scene to {out}")
+    return 0
+
+
+def report(result) -> None:
+    """The calibration's figures, for a person to read."""
+    say(f"calibrated from {plural(result.reads, 'read')} of {plural(len(result.references), 'reference tag')}: {', '.join(result.references[:6])}")
+    say(f"  phase period: {'pi (the reader reports phase mod pi)' if result.phase_period == 'pi' else '2pi'}")
+    say(f"  phase sign: {result.phase_sign:+d} (coherence {result.coherence:.3f}; the other sign {result.other_sign_coherence:.3f})")
+    usable = "usable" if result.phase_usable else "NOT usable"
+    say(f"  phase coherence {result.coherence:.3f} against {result.chance:.3f} for random phases: phase is {usable} here")
+    say("  residual phase RMS per antenna: " + ", ".join(f"{a}: {r:.3f} rad" for a, r in sorted(result.residual_rad.items())))
+    if len(result.channel_residual_rad) > 1:
+        worst = sorted(result.channel_residual_rad.items(), key=lambda item: -item[1])[:3]
+        say(f"  {plural(len(result.channel_residual_rad), 'channel')} calibrated; worst residuals: " + ", ".join(f"{f / 1e6:.2f} MHz {r:.3f} rad" for f, r in worst))
+    if result.hop_table_hz:
+        clear = sum(1 for v in result.hop_table_margin.values() if v > 0)
+        say(f"  hop table: {plural(len(result.hop_table_hz), 'channel index')} assigned to the US plan, {clear} clearly")
+    for antenna, loss in sorted(result.path_loss.items()):
+        exponent = f"exponent {loss.exponent:.2f}" if loss.fitted_exponent else f"exponent {loss.exponent:.1f} (free space: the references' ranges do not spread enough to fit it)"
+        say(f"  RSSI antenna {antenna}: {loss.reference_dbm:.1f} dBm at 1 m, {exponent}, spread {loss.sigma_db:.2f} dB")
