@@ -13,6 +13,7 @@ Subcommands::
     scattertrack live --scene S --llrp HOST[:PORT] --out T --journal R [--duration S] [reader settings]
     scattertrack emulate-reader --scenario NAME [--port P] [--speed X] [--drop-after S]
     scattertrack calibrate --scene S --reads R --reference EPC=x,y,z [...] [--truth T] --out C
+    scattertrack locate --scene S --reads R --out positions.csv
 
 Bad input never ends in a traceback: a malformed file, an unknown method or
 parameter, or a missing file prints ``scattertrack: error: <message>`` on
@@ -34,7 +35,7 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
-from scattertrack import calibrate_command, live_command
+from scattertrack import calibrate_command, live_command, locate_command
 
 DEMO_SCENARIO = "glac-3d-arm"
 """The scenario ``scattertrack demo`` (and so ``make demo``) runs by default."""
@@ -875,6 +876,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     live_command.add_parsers(commands)
     calibrate_command.add_parser(commands)
+    locate_command.add_parser(commands)
 
     demo = commands.add_parser(
         "demo",
