@@ -63,7 +63,8 @@ def read_features(path) -> Features:
                 parts[name].append(column)
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
-    warn_clock_jumps(path, columns["time_s"], np.concatenate(lines))
+    columns["line"] = np.concatenate(lines)
+    warn_clock_jumps(path, columns["time_s"], columns["line"])
     columns, reordered = sort_by_time(columns)
     return Features(**columns, reordered=reordered)
 

@@ -61,3 +61,33 @@ def warn_clock_jumps(path, time_s: np.ndarray, lines: np.ndarray, column: str = 
 def _count(n: int, what: str) -> str:
     """'1 such jump', '3 such jumps'."""
     return f"{n} {what}" if n == 1 else f"{n} {what}s"
+
+
+def warn_outside_span(path, time_s: np.ndarray, lines: np.ndarray | None, span_path, span_time_s: np.ndarray,
+                      what: str, column: str = "time_s") -> None:
+    """Warn (:class:`InputWarning`) when rows of ``path`` lie before the first or after the last
+    time of another file on the same clock (``span_path``: features against the IMU).
+
+    ``time_s``: the rows' times, seconds, any order; ``lines``: their 1-based
+    file lines (or None); ``span_time_s``: the other file's times, sorted;
+    ``what``: its rows' name ("IMU sample"). One warning per side, at the
+    row furthest outside, with the count: rows outside have no inertial data
+    to be fused with, so a fusion declines them; a whole file outside
+    means two clocks (FORMATS.md 7: features share the IMU's clock).
+    """
+    if not len(time_s) or not len(span_time_s):
+        return
+    first, last = float(span_time_s[0]), float(span_time_s[-1])
+    for outside, side, edge in ((time_s < first, "before the first", first), (time_s > last, "after the last", last)):
+        count = int(np.count_nonzero(outside))
+        if not count:
+            continue
+        far = int(np.argmax(np.abs(time_s - edge) * outside))
+        line = int(lines[far]) if lines is not None and len(lines) == len(time_s) else None
+        clocks = "; every row is outside: are the two files on one clock?" if count == len(time_s) else ""
+        warn_input(
+            path, line, column,
+            f"{count} of {_count(len(time_s), 'row')} lie {side} {what} of {span_path} ({edge:.6f} s; this row "
+            f"at {time_s[far]:.6f} s is {abs(time_s[far] - edge):.6g} s {side.split()[0]} it): there is no "
+            f"inertial data to fuse them with{clocks}",
+        )
