@@ -543,6 +543,12 @@ def track_marvel(args, scene, params: dict) -> int:
     say(summary.imu_line(imu, args.imu))
     start = time.perf_counter()
     if args.sigmf:
+        from scattertrack.io.sigmf_lora import open_lora_sigmf
+
+        # Validated before the long run: a broken recording fails at once, naming its key.
+        epochs = open_lora_sigmf(args.sigmf).epoch_time_s
+        timeline.warn_outside_span(args.sigmf, epochs, None, args.imu, imu.time_s, "IMU sample",
+                                   column="captures.scattertrack:time_s", noun="epoch")
         result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
         epochs = int(result.stats.get("drone", {}).get("epochs", len(result)))
         source = args.sigmf

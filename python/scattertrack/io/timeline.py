@@ -64,13 +64,14 @@ def _count(n: int, what: str) -> str:
 
 
 def warn_outside_span(path, time_s: np.ndarray, lines: np.ndarray | None, span_path, span_time_s: np.ndarray,
-                      what: str, column: str = "time_s") -> None:
+                      what: str, column: str = "time_s", noun: str = "row") -> None:
     """Warn (:class:`InputWarning`) when rows of ``path`` lie before the first or after the last
     time of another file on the same clock (``span_path``: features against the IMU).
 
     ``time_s``: the rows' times, seconds, any order; ``lines``: their 1-based
     file lines (or None); ``span_time_s``: the other file's times, sorted;
-    ``what``: its rows' name ("IMU sample"). One warning per side, at the
+    ``what``: its rows' name ("IMU sample"); ``noun``: the name of ours
+    ("row", "epoch"). One warning per side, at the
     row furthest outside, with the count: rows outside have no inertial data
     to be fused with, so a fusion declines them; a whole file outside
     means two clocks (FORMATS.md 7: features share the IMU's clock).
@@ -87,7 +88,7 @@ def warn_outside_span(path, time_s: np.ndarray, lines: np.ndarray | None, span_p
         clocks = "; every row is outside: are the two files on one clock?" if count == len(time_s) else ""
         warn_input(
             path, line, column,
-            f"{count} of {_count(len(time_s), 'row')} lie {side} {what} of {span_path} ({edge:.6f} s; this row "
+            f"{count} of {_count(len(time_s), noun)} lie {side} {what} of {span_path} ({edge:.6f} s; this {noun} "
             f"at {time_s[far]:.6f} s is {abs(time_s[far] - edge):.6g} s {side.split()[0]} it): there is no "
             f"inertial data to fuse them with{clocks}",
         )

@@ -252,3 +252,172 @@ def test_quiet_drone_inputs_have_no_warning(capsys, tmp_path):
     code, out, err = track_drone(capsys, tmp_path, imu_rows(), features_rows())
     assert code == 0, err
     assert warning_lines(err) == [] and "wrote 30 rows" in out
+
+
+# --- helper: SigMF recordings -----------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def recorded(tmp_path_factory):
+    """A short simulated helper recording, its calibration and scene.toml (as simulate --iq writes them)."""
+    import numpy as np
+
+    from scattertrack.io import read_scene
+    from scattertrack.sim import iq
+
+    folder = tmp_path_factory.mktemp("recorded")
+    (folder / "scene.toml").write_text(HELPER_SCENE)
+    sim = iq.simulate_iq(read_scene(folder / "scene.toml"), {"E1": {"kind": "static", "position": [0.55, 0.3, 0.6]}},
+                         seed=2, duration_s=0.014)
+    out = iq.write_iq_simulation(sim, folder / "run")
+    assert np.isfinite(sim.recording.data).all()
+    return out
+
+
+@pytest.fixture
+def recording(recorded, tmp_path):
+    """Fresh copies of the recorded files in ``tmp_path``."""
+    import shutil
+
+    for path in recorded.iterdir():
+        shutil.copy(path, tmp_path / path.name)
+    return tmp_path
+
+
+def track_sigmf(capsys, folder, *extra):
+    return run(capsys, "track", "--method", "turbotrack", "--scene", folder / "scene.toml",
+               "--sigmf", folder / "recording.sigmf-meta", "--out", folder / "track.csv", "--no-progress", *extra)
+
+
+def edit_global(meta, change):
+    import json
+
+    document = json.loads(meta.read_text())
+    change(document)
+    meta.write_text(json.dumps(document))
+
+
+def test_a_good_recording_tracks_quietly(capsys, recording):
+    code, out, err = track_sigmf(capsys, recording)
+    assert code == 0, err
+    assert warning_lines(out + err) == [] and "read 4 frames of 1 tag" in out
+
+
+@pytest.mark.parametrize(
+    "change, column, fragment",
+    [
+        (lambda d: d["global"].pop("scattertrack:blf_hz"), "global.scattertrack:blf_hz", "missing required key"),
+        (lambda d: d["global"].__setitem__("core:datatype", "ci8"), "global.core:datatype", "unsupported datatype"),
+        (lambda d: d["captures"][1].pop("scattertrack:time_s"), "captures[1].scattertrack:time_s", "not a finite number"),
+        (lambda d: d["captures"][2].__setitem__("core:sample_start", 10), "captures[2].core:sample_start",
+         "increasing samples"),
+        (lambda d: d["global"]["scattertrack:antennas"][2].__setitem__("role", "tx"),
+         "global.scattertrack:antennas[2].role", "listed as 'tx'"),
+    ],
+    ids=["missing-key", "datatype", "capture-time", "capture-start", "tx-as-rx"],
+)
+def test_broken_recordings_exit_2_naming_the_key(capsys, recording, change, column, fragment):
+    edit_global(recording / "recording.sigmf-meta", change)
+    code, out, err = track_sigmf(capsys, recording)
+    assert_rejected(code, out, err, f"{recording / 'recording.sigmf-meta'}: column '{column}'", fragment)
+
+
+def test_a_data_file_not_whole_samples_exits_2(capsys, recording):
+    data = recording / "recording.sigmf-data"
+    with open(data, "r+b") as handle:
+        handle.truncate(data.stat().st_size - 6)
+    code, out, err = track_sigmf(capsys, recording)
+    assert_rejected(code, out, err, f"{data}: ", "is not a whole number of samples (16 bytes each: 4 channels x ci16_le)")
+
+
+def test_a_missing_data_file_exits_2(capsys, recording):
+    (recording / "recording.sigmf-data").unlink()
+    code, out, err = track_sigmf(capsys, recording)
+    assert_rejected(code, out, err, f"{recording / 'recording.sigmf-data'}: data file not found")
+
+
+def test_a_missing_calibration_recording_exits_2(capsys, recording):
+    code, out, err = track_sigmf(capsys, recording, "--calibration", recording / "nothere.sigmf-meta")
+    assert_rejected(code, out, err, f"{recording / 'nothere.sigmf-meta'}: metadata file not found")
+    (recording / "calibration.sigmf-meta").unlink()
+    code, out, err = track_sigmf(capsys, recording)
+    assert_rejected(code, out, err, "give --calibration")
+
+
+def test_a_calibration_missing_its_data_exits_2(capsys, recording):
+    (recording / "calibration.sigmf-data").unlink()
+    code, out, err = track_sigmf(capsys, recording)
+    assert_rejected(code, out, err, f"{recording / 'calibration.sigmf-data'}: data file not found")
+
+
+def test_a_scene_beyond_5_cm_of_the_recording_warns_and_tracks(capsys, recording):
+    scene = recording / "scene.toml"
+    scene.write_text(scene.read_text().replace("position = [0.8, 0.4, 0.0]", "position = [0.8, 0.5, 0.0]"))
+    code, out, err = track_sigmf(capsys, recording)
+    assert code == 0, err
+    found = warning_lines(err)
+    assert len(found) == 2  # the recording and its calibration each list the antenna
+    for line, name in zip(found, ("recording", "calibration")):
+        assert line.startswith(f"warning: {recording / (name + '.sigmf-meta')}: column 'global.scattertrack:antennas[2]"
+                               ".position': antenna 2 is at (0.800, 0.400, 0.000) m in the recording but at "
+                               "(0.800, 0.500, 0.000) m in scene 'helper', 10.0 cm apart")
+
+
+# --- drone: LoRa SigMF recordings ---------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def lora_recorded(tmp_path_factory):
+    """A 3-epoch LoRa recording (0.3 s) with scene.toml, read-only."""
+    import numpy as np
+
+    from scattertrack.io.sigmf_lora import write_lora_sigmf
+    from scattertrack.sim import lora
+
+    def hover(t):
+        t = np.asarray(t, dtype=float)
+        position = np.stack([1.0 + 0.5 * t, 15.0 + 0 * t, 2.0 + 0 * t], axis=1)
+        return position, np.stack([np.cos(0.15 + 0 * t), 0 * t, 0 * t, np.sin(0.15 + 0 * t)], axis=1)
+
+    folder = tmp_path_factory.mktemp("lora")
+    recording = lora.simulate_lora_iq(hover, {"position": [0.0, 0.0, 1.0], "walls": 0}, None, 0.3, seed=11)
+    write_lora_sigmf(folder / "recording", recording)
+    (folder / "scene.toml").write_text(DRONE_SCENE)
+    return folder
+
+
+@pytest.fixture
+def lora_copy(lora_recorded, tmp_path):
+    import shutil
+
+    for path in lora_recorded.iterdir():
+        shutil.copy(path, tmp_path / path.name)
+    return tmp_path
+
+
+def track_lora(capsys, folder, imu: list[str]):
+    (folder / "imu.csv").write_text("\n".join([IMU, *imu]) + "\n")
+    return run(capsys, "track", "--method", "marvel", "--scene", folder / "scene.toml", "--imu", folder / "imu.csv",
+               "--sigmf", folder / "recording.sigmf-meta", "--out", folder / "track.csv", "--no-progress")
+
+
+def test_a_broken_lora_capture_exits_2_naming_the_key(capsys, lora_copy):
+    edit_global(lora_copy / "recording.sigmf-meta", lambda d: d["captures"][3].pop("scattertrack:epoch"))
+    code, out, err = track_lora(capsys, lora_copy, imu_rows(100))
+    assert_rejected(code, out, err, f"{lora_copy / 'recording.sigmf-meta'}: column 'captures[3].scattertrack:epoch'")
+
+
+def test_a_lora_data_file_of_another_size_exits_2(capsys, lora_copy):
+    data = lora_copy / "recording.sigmf-data"
+    with open(data, "ab") as handle:
+        handle.write(b"\0" * 48)  # one more sample of 12 ci16 channels
+    code, out, err = track_lora(capsys, lora_copy, imu_rows(100))
+    assert_rejected(code, out, err, f"{data}: size does not match the captures")
+
+
+def test_lora_epochs_after_the_imu_warn(capsys, lora_copy):
+    code, out, err = track_lora(capsys, lora_copy, imu_rows(10))  # IMU to 0.09 s, epochs to 0.2 s
+    assert code == 0, err
+    (line,) = warning_lines(err)
+    assert line.startswith(f"warning: {lora_copy / 'recording.sigmf-meta'}: column 'captures.scattertrack:time_s': ")
+    assert "epochs lie after the last IMU sample" in line
