@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 
+from scattertrack.io import units
 from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, sort_by_time, write_columns
 from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Imu, SkipReport
@@ -43,16 +44,19 @@ def read_imu(path) -> Imu:
     Rows out of time order are sorted (``Imu.reordered``); repeated times
     are declined (``Imu.skipped``). Raises :class:`FormatError` (file, line,
     column) for a missing column, a non-numeric or non-finite cell (``nan``
-    included; an empty ``baro_z`` is allowed and reads as nan) or a file
-    without data rows; warns (:class:`InputWarning`) at a clock jump
+    included; an empty ``baro_z`` is allowed and reads as nan), a specific
+    force beyond 2000 m/s^2 or a rate beyond 100 rad/s (no sensor's: a unit
+    mistake, :mod:`scattertrack.io.units`) or a file without data rows; warns (:class:`InputWarning`) at a clock jump
     (:mod:`scattertrack.io.timeline`).
     """
     parts: dict[str, list] = {"time_s": [], "accel": [], "gyro": [], "baro_z": [], "line": []}
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:
         for chunk in reader.chunks():
             parts["time_s"].append(chunk.floats("time_s"))
-            parts["accel"].append(np.column_stack([chunk.floats(name) for name in ACCEL]))
-            parts["gyro"].append(np.column_stack([chunk.floats(name) for name in GYRO]))
+            parts["accel"].append(np.column_stack([_checked(chunk, name, units.ACCEL_MAX_M_S2, units.accel_message)
+                                                   for name in ACCEL]))
+            parts["gyro"].append(np.column_stack([_checked(chunk, name, units.GYRO_MAX_RAD_S, units.gyro_message)
+                                                  for name in GYRO]))
             if chunk.has("baro_z"):
                 parts["baro_z"].append(chunk.floats("baro_z", allow_empty=True))
             else:
@@ -73,6 +77,13 @@ def read_imu(path) -> Imu:
         gaps=count_gaps(time),
         reordered=reordered,
     )
+
+
+def _checked(chunk, name: str, limit: float, describe) -> np.ndarray:
+    """One inertial column, a value beyond ``limit`` in magnitude recorded as a problem (no sensor's)."""
+    values = chunk.floats(name)
+    chunk.flag_values(name, values, np.abs(values) > limit, describe)
+    return values
 
 
 def _first_of_each_time(time: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, SkipReport]:

@@ -44,7 +44,7 @@ def warn_clock_jumps(path, time_s: np.ndarray, lines: np.ndarray, column: str = 
         row = int(np.argmax(back)) + 1
         warn_input(
             path, int(lines[row]), column,
-            f"clock jumps back by {-step[row - 1]:.6g} s (to {time_s[row]:.6f} s after {latest[row - 1]:.6f} s); "
+            f"clock jumps back by {-step[row - 1]:.6g} s (to {_seconds(time_s[row])} s after {_seconds(latest[row - 1])} s); "
             f"rows are sorted by time, but a reorder beyond {BACKWARD_JUMP_S:g} s suggests a clock reset "
             f"or joined logs ({_count(jumps, 'such jump')} in the file)",
         )
@@ -52,10 +52,15 @@ def warn_clock_jumps(path, time_s: np.ndarray, lines: np.ndarray, column: str = 
         row = int(np.argmax(forward)) + 1
         warn_input(
             path, int(lines[row]), column,
-            f"clock jumps forward by {step[row - 1]:.6g} s (from {latest[row - 1]:.6f} s to {time_s[row]:.6f} s) "
+            f"clock jumps forward by {step[row - 1]:.6g} s (from {_seconds(latest[row - 1])} s to {_seconds(time_s[row])} s) "
             f"with no rows between: a clock jump or a paused log (gaps beyond {FORWARD_GAP_S:g} s are warned; "
             f"{_count(int(np.count_nonzero(forward)), 'such gap')} in the file)",
         )
+
+
+def _seconds(value: float) -> str:
+    """A time with microseconds ('12.345678'), or 6 significant digits when huge (garbage, not a clock)."""
+    return f"{value:.6f}" if abs(value) < 1e12 else f"{value:.6g}"
 
 
 def _count(n: int, what: str) -> str:
@@ -88,7 +93,7 @@ def warn_outside_span(path, time_s: np.ndarray, lines: np.ndarray | None, span_p
         clocks = "; every row is outside: are the two files on one clock?" if count == len(time_s) else ""
         warn_input(
             path, line, column,
-            f"{count} of {_count(len(time_s), noun)} lie {side} {what} of {span_path} ({edge:.6f} s; this {noun} "
-            f"at {time_s[far]:.6f} s is {abs(time_s[far] - edge):.6g} s {side.split()[0]} it): there is no "
+            f"{count} of {_count(len(time_s), noun)} lie {side} {what} of {span_path} ({_seconds(edge)} s; this {noun} "
+            f"at {_seconds(time_s[far])} s is {abs(time_s[far] - edge):.6g} s {side.split()[0]} it): there is no "
             f"inertial data to fuse them with{clocks}",
         )

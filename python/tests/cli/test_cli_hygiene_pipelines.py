@@ -421,3 +421,30 @@ def test_lora_epochs_after_the_imu_warn(capsys, lora_copy):
     (line,) = warning_lines(err)
     assert line.startswith(f"warning: {lora_copy / 'recording.sigmf-meta'}: column 'captures.scattertrack:time_s': ")
     assert "epochs lie after the last IMU sample" in line
+
+
+# --- the shared examples (written by another program) -----------------------------------------
+
+from pathlib import Path  # noqa: E402
+
+EXAMPLES = Path(__file__).resolve().parents[3].parent / "shared" / "examples"
+
+
+@pytest.mark.skipif(not (EXAMPLES / "helper-3d-arm").is_dir(), reason="shared examples not found")
+def test_the_shared_helper_example_tracks_with_its_layout_warning(capsys, tmp_path):
+    case = EXAMPLES / "helper-3d-arm"
+    code, out, err = run(capsys, "track", "--method", "turbotrack", "--scene", case / "scene.toml", "--frames",
+                         case / "frames.csv", "--out", tmp_path / "track.csv", "--no-progress")
+    assert code == 0, err
+    assert "declined" not in out and warning_lines(err) == []
+    (line,) = warning_lines(out)
+    assert "receive antennas 1, 2 and 3 lie on one line with the transmitter 0 (along x)" in line
+
+
+@pytest.mark.skipif(not (EXAMPLES / "lora-hover-circle").is_dir(), reason="shared examples not found")
+def test_the_shared_drone_example_tracks_quietly(capsys, tmp_path):
+    case = EXAMPLES / "lora-hover-circle"
+    code, out, err = run(capsys, "track", "--method", "marvel", "--scene", case / "scene.toml", "--imu", case / "imu.csv",
+                         "--features", case / "features.csv", "--out", tmp_path / "track.csv", "--no-progress")
+    assert code == 0, err
+    assert warning_lines(out + err) == [] and "none declined" in out and "wrote 115 rows" in out

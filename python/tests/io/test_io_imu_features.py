@@ -272,3 +272,28 @@ def test_writers_refuse_what_readers_would_reject(tmp_path):
     features.range_m[1] = math.inf
     with pytest.raises(ValueError):
         write_features(tmp_path / "features.csv", features)
+
+
+@pytest.mark.parametrize(
+    "row, column, fragment",
+    [
+        ("0.00,0,0,9810,0,0,0,0\n", "az", "if this is milli-g (about 1000 at rest), multiply by 9.80665e-3"),
+        ("0.00,-2500.5,0,9.81,0,0,0,0\n", "ax", "specific force -2500.5 is beyond 2000 m/s^2"),
+        ("0.00,0,0,9.81,0,180,0,0\n", "gy", "looks like degrees per second: multiply by pi/180"),
+        ("0.00,0,0,9.81,1e300,0,0,0\n", "gx", "angular rate 1e300 is beyond 100 rad/s"),
+    ],
+)
+def test_imu_values_no_sensor_measures_are_rejected_with_the_unit(write_file, row, column, fragment):
+    expect_error(write_file("imu.csv", IMU_HEADER + "".join(imu_rows(2)) + row), read_imu, 4, column, fragment)
+
+
+def test_features_range_beyond_100_km_is_rejected(write_file):
+    path = write_file("features.csv", FEATURES_HEADER + "0.05,1e300,1,0.1,,0.6,0.05,\n")
+    expect_error(path, read_features, 2, "range_m", "beyond 100 km")
+
+
+@pytest.mark.parametrize("cells, column", [("1e300,0.05,0.2", "range_sigma_m"), ("0.6,7,0.2", "angle_sigma_rad"),
+                                           ("0.6,0.05,1e300", "yaw_sigma_rad")])
+def test_features_sigmas_beyond_meaning_are_rejected(write_file, cells, column):
+    path = write_file("features.csv", FEATURES_HEADER + f"0.05,10,1,0.1,0.3,{cells}\n")
+    expect_error(path, read_features, 2, column, "carries no information")
