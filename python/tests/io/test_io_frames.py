@@ -328,3 +328,19 @@ def test_huge_channels_are_declined_and_counted(write_file, scene):
     assert frames.skipped.counts == {"channel beyond 1e100": 2}
     assert frames.skipped.examples == {"channel beyond 1e100": [5, 8]}
     assert np.abs(frames.h).max() < 1.0
+
+
+def test_helper_table_carrier_unit_and_unknown_keys(write_file):
+    import warnings
+
+    from scattertrack.io import InputWarning
+
+    table = "\n[helper]\ncentre_frequency_hz = 915.0\nbandwidth_hz = 100e6\n"
+    error = scene_error(write_file, HELPER_SCENE + table)
+    assert error.column == "helper.centre_frequency_hz" and "looks like MHz: multiply by 1e6" in error.message
+    typo = "\n[helper]\ncentre_frequency_hz = 915e6\nbandwith_hz = 100e6\n"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read_scene(write_file("scene.toml", HELPER_SCENE + typo))
+    (warning,) = [w.message for w in caught if issubclass(w.category, InputWarning)]
+    assert warning.column == "helper.bandwith_hz" and "unknown key" in warning.message
