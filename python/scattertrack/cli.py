@@ -157,7 +157,7 @@ def tracker_parameters(method: str, pairs) -> dict:
     return parameters.parse(method, pairs or [])
 
 
-def check_parameters(method: str, scene, params: dict) -> None:
+def check_parameters(method: str, scene, params: dict, scene_path=None) -> None:
     """Refuse parameters the tracker would refuse, before any input is read.
 
     ``params`` are already typed and in range (:func:`tracker_parameters`);
@@ -167,7 +167,13 @@ def check_parameters(method: str, scene, params: dict) -> None:
     """
     from scattertrack import track
 
-    track.make(method, scene, **params)
+    try:
+        track.make(method, scene, **params)
+    except ValueError as error:
+        # The core words what the scene lacks; the file it came from is ours to name.
+        if scene_path is not None and str(error).startswith("invalid scene:"):
+            raise ValueError(f"{scene_path}: {error}") from None
+        raise
 
 
 def print_tracker_summary(result, reads, wall_s: float) -> None:
@@ -464,7 +470,7 @@ def command_track(args) -> int:
     if args.revised_out:
         raise UsageError(f"--revised-out is an output of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
     # Before reading the input: a typo should not wait for a large file to load.
-    check_parameters(args.method, scene, params)
+    check_parameters(args.method, scene, params, args.scene)
     wideband = args.method in tracking.WIDEBAND_METHODS
     if wideband and args.reads:
         raise UsageError(f"method '{args.method}' tracks wideband frames: give --frames or --sigmf, not --reads")
@@ -659,7 +665,8 @@ def command_stream(args) -> int:
     scene = io.read_scene(args.scene)
     if args.method not in tracking.WIDEBAND_METHODS:
         raise UsageError(f"stream runs the localization-helper methods ({', '.join(tracking.WIDEBAND_METHODS)}), not '{args.method}'")
-    check_parameters(args.method, scene, params)
+    check_parameters(args.method, scene, params, args.scene)
+    warn_about_geometry(scene, None)
     calibration = calibration_for(args)
     speed = None if args.fast else (1.0 if args.speed is None else args.speed)
     result = stream_sigmf(

@@ -162,6 +162,13 @@ def test_helper_antennas_in_line_with_the_transmitter_warn(capsys, tmp_path):
     assert code == 0 and warning_lines(out) == [line]
 
 
+def test_a_scene_the_tracker_cannot_use_names_the_scene_file(capsys, tmp_path):
+    scene = HELPER_SCENE.replace('id = 4\nposition = [0.4, 0.8, 0.0]\nrole = "rx"\n', "")
+    scene = scene.replace('id = 3\nposition = [0.4, 0.0, 0.0]\nrole = "rx"\n', "").replace("[[antennas]]\n\n", "")
+    code, out, err = track_frames(capsys, tmp_path, [r for r in frames_rows() if ",1," in r or ",2," in r], scene=scene)
+    assert_rejected(code, out, err, f"{tmp_path / 'scene.toml'}: invalid scene: a wideband tracker needs")
+
+
 def test_the_cross_layout_tracks_without_a_warning(capsys, tmp_path):
     code, out, err = track_frames(capsys, tmp_path, frames_rows())
     assert code == 0, err
