@@ -46,8 +46,8 @@ def read_imu(path) -> Imu:
     column) for a missing column, a non-numeric or non-finite cell (``nan``
     included; an empty ``baro_z`` is allowed and reads as nan), a specific
     force beyond 2000 m/s^2 or a rate beyond 100 rad/s (no sensor's: a unit
-    mistake, :mod:`scattertrack.io.units`) or a file without data rows; warns (:class:`InputWarning`) at a clock jump
-    (:mod:`scattertrack.io.timeline`).
+    mistake, :mod:`scattertrack.io.units`) or a file without data rows;
+    warns (:class:`InputWarning`) at a clock jump (:mod:`scattertrack.io.timeline`).
     """
     parts: dict[str, list] = {"time_s": [], "accel": [], "gyro": [], "baro_z": [], "line": []}
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:
