@@ -117,7 +117,7 @@ def format_millimetres(metres: float) -> str:
     return f"{metres * 1e3:.1f} mm" if math.isfinite(metres) else "n/a"
 
 
-def check_parameters(method: str, scene, params: dict) -> None:
+def check_parameters(method: str, scene, params: dict, scene_path=None) -> None:
     """Refuse parameters the tracker would refuse, before any input is read.
 
     ``params`` are already typed and in range (:func:`tracker_parameters`);
@@ -127,7 +127,13 @@ def check_parameters(method: str, scene, params: dict) -> None:
     """
     from scattertrack import track
 
-    track.make(method, scene, **params)
+    try:
+        track.make(method, scene, **params)
+    except ValueError as error:
+        # The core words what the scene lacks; the file it came from is ours to name.
+        if scene_path is not None and str(error).startswith("invalid scene:"):
+            raise ValueError(f"{scene_path}: {error}") from None
+        raise
 
 
 def print_tracker_summary(result, reads, wall_s: float) -> None:
@@ -424,7 +430,7 @@ def command_track(args) -> int:
     if args.revised_out:
         raise UsageError(f"--revised-out is an output of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
     # Before reading the input: a typo should not wait for a large file to load.
-    check_parameters(args.method, scene, params)
+    check_parameters(args.method, scene, params, args.scene)
     wideband = args.method in tracking.WIDEBAND_METHODS
     if wideband and args.reads:
         raise UsageError(f"method '{args.method}' tracks wideband frames: give --frames or --sigmf, not --reads")
@@ -450,11 +456,16 @@ def command_track(args) -> int:
 def warn_about_geometry(scene, reads) -> None:
     """Before tracking a COTS scene: the geometry check's ``warning:`` lines
     (twin positions the layout cannot tell apart on the channels read);
-    nothing on a layout that fixes the position. Never stops the tracking."""
-    if scene.reader.kind != "cots":
-        return
+    for a helper scene those of the helper check (receivers in line with the
+    transmitter); nothing on a layout that fixes the position. Never stops the tracking."""
     from scattertrack import check
 
+    if scene.reader.kind == "sdr-helper":
+        for finding in check.check_helper_scene(scene).warnings:
+            say(finding.line())
+        return
+    if scene.reader.kind != "cots":
+        return
     try:
         result = check.check_scene(scene, reads)
     except ValueError as error:
@@ -469,8 +480,13 @@ def command_check_scene(args) -> int:
     from scattertrack import check, io
 
     scene = io.read_scene(args.scene)
+    if scene.reader.kind == "sdr-helper" and not args.reads:
+        for line in check.check_helper_scene(scene).lines():
+            say(line)
+        return 0
     if scene.reader.kind != "cots":
-        raise UsageError(f"check-scene checks monostatic reader scenes ([reader] kind = \"cots\"), not {scene.reader.kind!r}")
+        raise UsageError(f"check-scene checks reader scenes ([reader] kind = \"cots\", or \"sdr-helper\" without "
+                         f"--reads), not {scene.reader.kind!r}" + (" with --reads" if args.reads else ""))
     reads = io.read_reads(args.reads, scene) if args.reads else None
     for line in check.check_scene(scene, reads).lines():
         say(line)
@@ -480,9 +496,8 @@ def command_check_scene(args) -> int:
 def track_marvel(args, scene, params: dict) -> int:
     """``track`` for the drone pipeline: IMU plus features.csv (or a LoRa recording)."""
     from scattertrack import io
-    from scattertrack.track import marvel
-
-    from scattertrack.track import methods
+    from scattertrack.io import summary, timeline
+    from scattertrack.track import marvel, methods
 
     if args.reads or args.frames:
         raise UsageError(f"method '{args.method}' takes --imu with --features or --sigmf, not --reads or --frames")
@@ -491,9 +506,15 @@ def track_marvel(args, scene, params: dict) -> int:
     if scene.reader.kind != "lora-backscatter":
         raise UsageError(f"method '{args.method}' needs a scene with [reader] kind = \"lora-backscatter\", not {scene.reader.kind!r}")
     imu = io.read_imu(args.imu)
-    say(f"read {plural(len(imu), 'IMU sample')} from {args.imu}; {imu.skipped.summary() if imu.skipped.total else 'none skipped'}, {plural(imu.gaps, 'gap')}")
+    say(summary.imu_line(imu, args.imu))
     start = time.perf_counter()
     if args.sigmf:
+        from scattertrack.io.sigmf_lora import open_lora_sigmf
+
+        # Validated before the long run: a broken recording fails at once, naming its key.
+        epochs = open_lora_sigmf(args.sigmf).epoch_time_s
+        timeline.warn_outside_span(args.sigmf, epochs, None, args.imu, imu.time_s, "IMU sample",
+                                   column="captures.scattertrack:time_s", noun="epoch")
         result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
         epochs = int(result.stats.get("drone", {}).get("epochs", len(result)))
         source = args.sigmf
@@ -501,7 +522,8 @@ def track_marvel(args, scene, params: dict) -> int:
         if methods.method(args.method).input == "sigmf+imu":
             raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
         features = io.read_features(args.features)
-        say(f"read {plural(len(features), 'feature row')} from {args.features}; {features.reordered} out of time order (sorted)")
+        say(summary.features_line(features, args.features))
+        timeline.warn_outside_span(args.features, features.time_s, features.line, args.imu, imu.time_s, "IMU sample")
         result = marvel.run_features(args.method, scene, imu, features, progress=show_progress(args), **params)
         epochs = len(features)
         source = args.features
@@ -510,6 +532,8 @@ def track_marvel(args, scene, params: dict) -> int:
     out.parent.mkdir(parents=True, exist_ok=True)
     io.write_track(out, result)
     say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} to {out} (from {source})")
+    if not len(result):
+        say(f"  no estimates from {plural(epochs, 'epoch')}: what was declined, and why, is below")
     if args.revised_out:
         revised_out = Path(args.revised_out)
         revised_out.parent.mkdir(parents=True, exist_ok=True)
@@ -537,6 +561,7 @@ def track_frames(args, scene, params: dict) -> int:
     """``track`` for the localization helper: frames.csv or a SigMF recording."""
     from scattertrack import io
     from scattertrack import track as tracking
+    from scattertrack.io import summary
 
     if args.sigmf:
         from scattertrack.io import sigmf
@@ -547,8 +572,9 @@ def track_frames(args, scene, params: dict) -> int:
     else:
         frames = io.read_frames(args.frames, scene)
         source = args.frames
-    say(f"read {plural(frames.n_frames, 'frame')} of {plural(len(frames.epcs()), 'tag')} from {source}")
-    say(f"  {frames.reordered} rows out of time order (sorted, not dropped)")
+    for line in summary.frames_lines(frames, source):
+        say(line)
+    warn_about_geometry(scene, None)
     start = time.perf_counter()
     result = tracking.run(args.method, scene, frames, progress=show_progress(args), **params)
     wall_s = time.perf_counter() - start
@@ -599,7 +625,8 @@ def command_stream(args) -> int:
     scene = io.read_scene(args.scene)
     if args.method not in tracking.WIDEBAND_METHODS:
         raise UsageError(f"stream runs the localization-helper methods ({', '.join(tracking.WIDEBAND_METHODS)}), not '{args.method}'")
-    check_parameters(args.method, scene, params)
+    check_parameters(args.method, scene, params, args.scene)
+    warn_about_geometry(scene, None)
     calibration = calibration_for(args)
     speed = None if args.fast else (1.0 if args.speed is None else args.speed)
     result = stream_sigmf(
@@ -846,10 +873,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     check_scene = commands.add_parser(
         "check-scene",
-        help="check that a COTS scene's antenna layout fixes a tag's position",
+        help="check that a COTS or helper scene's antenna layout fixes a tag's position",
         description="Search the region for twin positions that fit every phase a monostatic reader reports "
         "(three antennas on one line, all antennas in one plane, ...) and print one 'warning:' line per "
-        "ambiguity (antennas, size in cm, remedy) and 'note:' lines for weaker findings; exit 0 either way.",
+        "ambiguity (antennas, size in cm, remedy) and 'note:' lines for weaker findings; for a localization "
+        "helper, warn about receive antennas in line with the transmitter; exit 0 either way.",
     )
     check_scene.add_argument("scene", help="scene.toml")
     check_scene.add_argument("--reads", help="reads.csv: analyse the channels it reads (calibrated hopping removes integer shifts)")

@@ -9,8 +9,9 @@ world frame, radians) and optionally ``yaw_rad`` (heading of body x about
 empty cell means "none for this row" (nan in :class:`Features`); a written
 ``nan`` is an error like any other non-finite number.
 
-Checks: ``range_m`` and the sigmas must be positive and ``elevation_rad``
-within [-pi/2, pi/2]. Rows out of time order are sorted (stably) and counted
+Checks: ``range_m`` and the sigmas must be positive, ``range_m`` and
+``range_sigma_m`` at most 100 km, the angle sigmas at most 2 pi and
+``elevation_rad`` within [-pi/2, pi/2]. Rows out of time order are sorted (stably) and counted
 in ``Features.reordered``.
 """
 
@@ -20,6 +21,7 @@ import math
 
 import numpy as np
 
+from scattertrack.io import units
 from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, sort_by_time, write_columns
 from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Features
@@ -27,6 +29,14 @@ from scattertrack.io.types import Features
 REQUIRED = ["time_s", "range_m", "azimuth_rad", "elevation_rad"]
 OPTIONAL = ["yaw_rad", "range_sigma_m", "angle_sigma_rad", "yaw_sigma_rad"]
 SIGMAS = ["range_sigma_m", "angle_sigma_rad", "yaw_sigma_rad"]
+
+SIGMA_MAX = {
+    "range_sigma_m": (units.RANGE_MAX_M, "100 km"),
+    "angle_sigma_rad": (2.0 * math.pi, "2*pi rad"),
+    "yaw_sigma_rad": (2.0 * math.pi, "2*pi rad"),
+}
+"""Largest meaningful sigma of each column (limit, as the message words it): a range sigma beyond
+any link's range, an angle sigma beyond a full turn."""
 
 ELEVATION_TOLERANCE_RAD = 1e-9
 """Rounding allowance beyond +-pi/2 for the elevation, radians."""
@@ -52,18 +62,26 @@ def read_features(path) -> Features:
                     values[name] = np.full(len(chunk), math.nan)
             chunk.flag("range_m", ~(values["range_m"] > 0.0) & np.isfinite(values["range_m"]),
                        "range must be positive: {value}")
+            chunk.flag("range_m", values["range_m"] > units.RANGE_MAX_M,
+                       f"range {{value}} m is beyond {units.RANGE_MAX_M / 1e3:g} km: no backscatter link reaches it "
+                       "(ranges are in metres)")
             limit = math.pi / 2.0 + ELEVATION_TOLERANCE_RAD
             chunk.flag("elevation_rad", np.abs(values["elevation_rad"]) > limit,
                        "elevation outside [-pi/2, pi/2]: {value}")
             for name in SIGMAS:
                 if chunk.has(name):
                     chunk.flag(name, values[name] <= 0.0, "sigma must be positive: {value}")
+                    limit, unit = SIGMA_MAX[name]
+                    chunk.flag(name, values[name] > limit,
+                               f"sigma {{value}} is beyond {unit}: that wide a 1-sigma carries no information (and its "
+                               "square overflows); write a plausible one or leave the cell empty")
             chunk.raise_first_problem()
             for name, column in values.items():
                 parts[name].append(column)
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate(chunks) for name, chunks in parts.items()}
-    warn_clock_jumps(path, columns["time_s"], np.concatenate(lines))
+    columns["line"] = np.concatenate(lines)
+    warn_clock_jumps(path, columns["time_s"], columns["line"])
     columns, reordered = sort_by_time(columns)
     return Features(**columns, reordered=reordered)
 

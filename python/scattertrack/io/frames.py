@@ -43,6 +43,15 @@ KEY_COLUMNS = ("time_s", "epc", "rx", "frequency_hz")
 DUPLICATE = "duplicate row"
 """The SkipReport reason for a row whose (time_s, epc, rx, frequency_hz) came earlier in the file."""
 
+HUGE_CHANNEL = 1e100
+"""A channel component beyond this (dimensionless) is declined: a calibrated tag channel is a
+path loss, far below 1, and the power |h|^2 of a larger one leaves float64 too little headroom
+(max 1.8e308) for the sums over a frame's rows that every tracker forms, which then overflow
+to inf and silently yield no estimate."""
+
+HUGE = "channel beyond 1e100"
+"""The SkipReport reason for a row with a :data:`HUGE_CHANNEL` component."""
+
 CHANNEL_FORMAT = "%.8e"
 """How ``h_re`` and ``h_im`` are written: 9 significant digits, a relative
 rounding of 5e-9, far below any channel estimate's noise."""
@@ -178,8 +187,10 @@ def read_frames(path, scene: Scene | None = None) -> Frames:
     With a ``scene``, ``tx`` must be the id of an antenna with ``role = "tx"``
     and ``rx`` one with ``role = "rx"``. Rows repeating an earlier row's
     ``(time_s, epc, rx, frequency_hz)`` are skipped and counted under
-    ``"duplicate row"`` (the first in the file is kept); rows out of time
-    order are counted in ``reordered`` and sorted. Raises
+    ``"duplicate row"`` (the first in the file is kept), rows with a channel
+    component beyond :data:`HUGE_CHANNEL` under ``"channel beyond 1e100"``
+    (what is left of their frame is the tracker's to use or decline); rows
+    out of time order are counted in ``reordered`` and sorted. Raises
     :class:`FormatError` (file, line, column) for a missing column, a
     non-numeric or non-finite value, a frequency outside 100 MHz to 10 GHz, an antenna
     that is not in the scene or has the wrong role, or an empty file.
@@ -240,7 +251,7 @@ def _parse_chunk(chunk, roles: dict | None, epcs: TextTable) -> dict:
 
 
 def _finish(columns: dict, lines: np.ndarray) -> Frames:
-    """Count out-of-order rows, sort by the key, skip duplicates (first in the file kept)."""
+    """Count out-of-order rows, sort by the key, skip duplicates (first in the file kept) and huge channels."""
     time = columns["time_s"]
     # A row is out of order when an earlier row of the file has a later time.
     latest_before = np.maximum.accumulate(time)
@@ -254,11 +265,15 @@ def _finish(columns: dict, lines: np.ndarray) -> Frames:
         values = columns[name]
         same_as_previous &= values[1:] == values[:-1]
     duplicate = np.concatenate([[False], same_as_previous])
+    h = columns["h"]
+    huge = ~duplicate & (np.maximum(np.abs(h.real), np.abs(h.imag)) > HUGE_CHANNEL)
     skipped = SkipReport()
-    for line in np.sort(lines[duplicate]).tolist():
-        skipped.add(DUPLICATE, int(line))
-    if duplicate.any():
-        columns = {name: values[~duplicate] for name, values in columns.items()}
+    for reason, mask in ((DUPLICATE, duplicate), (HUGE, huge)):
+        for line in np.sort(lines[mask]).tolist():
+            skipped.add(reason, int(line))
+    declined = duplicate | huge
+    if declined.any():
+        columns = {name: values[~declined] for name, values in columns.items()}
     frames = Frames(
         time_s=columns["time_s"],
         epc=columns["epc"],

@@ -6,12 +6,14 @@ Columns: ``time_s`` (seconds, the features' clock), ``ax``, ``ay``, ``az``
 optionally ``baro_z`` (barometric height, metres; an empty cell is no
 reading).
 
-An IMU stream must move forward in time: a sample whose time equals an
-earlier one (``"duplicate time"``) or is before it (``"non-monotonic
-time"``) is declined and counted in ``Imu.skipped`` with its line, never
-silently dropped and never re-sorted (an integrator would otherwise
-integrate across it). Gaps longer than 3 nominal periods (the median
-spacing) are counted in ``Imu.gaps``.
+Rows may arrive out of time order (a logger that flushes several buffers);
+they are sorted stably by time and counted in ``Imu.reordered``, as reads
+and features are. After sorting, a sample whose time equals an earlier
+one's is declined (``"duplicate time"``: an integrator cannot step by zero)
+and counted in ``Imu.skipped`` with its line; the first in the file is kept.
+Gaps longer than 3 nominal periods (the median spacing) are counted in
+``Imu.gaps``. A clock that jumps back by more than a second is also warned
+(:mod:`scattertrack.io.timeline`): sorting then mixes two sessions.
 """
 
 from __future__ import annotations
@@ -20,7 +22,8 @@ import math
 
 import numpy as np
 
-from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, write_columns
+from scattertrack.io import units
+from scattertrack.io.csvutil import CsvReader, format_fixed, require_finite, sort_by_time, write_columns
 from scattertrack.io.timeline import warn_clock_jumps
 from scattertrack.io.types import Imu, SkipReport
 
@@ -31,8 +34,6 @@ OPTIONAL = ["baro_z"]
 
 DUPLICATE = "duplicate time"
 """SkipReport reason: a sample at the same time as an earlier one."""
-BACKWARDS = "non-monotonic time"
-"""SkipReport reason: a sample earlier than one before it in the file."""
 GAP_PERIODS = 3.0
 """A spacing longer than this many nominal sample periods is a gap."""
 
@@ -40,56 +41,62 @@ GAP_PERIODS = 3.0
 def read_imu(path) -> Imu:
     """Read and validate an ``imu.csv``; returns samples in strictly increasing time.
 
-    Raises :class:`FormatError` (file, line, column) for a missing column, a
-    non-numeric or non-finite cell (``nan`` included; an empty ``baro_z`` is
-    allowed and reads as nan) or a file without data rows; warns
-    (:class:`InputWarning`) at a clock jump (:mod:`scattertrack.io.timeline`).
+    Rows out of time order are sorted (``Imu.reordered``); repeated times
+    are declined (``Imu.skipped``). Raises :class:`FormatError` (file, line,
+    column) for a missing column, a non-numeric or non-finite cell (``nan``
+    included; an empty ``baro_z`` is allowed and reads as nan), a specific
+    force beyond 2000 m/s^2 or a rate beyond 100 rad/s (no sensor's: a unit
+    mistake, :mod:`scattertrack.io.units`) or a file without data rows;
+    warns (:class:`InputWarning`) at a clock jump (:mod:`scattertrack.io.timeline`).
     """
-    times, accels, gyros, baros, lines = [], [], [], [], []
+    parts: dict[str, list] = {"time_s": [], "accel": [], "gyro": [], "baro_z": [], "line": []}
     with CsvReader(path, REQUIRED, OPTIONAL) as reader:
         for chunk in reader.chunks():
-            times.append(chunk.floats("time_s"))
-            accels.append(np.column_stack([chunk.floats(name) for name in ACCEL]))
-            gyros.append(np.column_stack([chunk.floats(name) for name in GYRO]))
+            parts["time_s"].append(chunk.floats("time_s"))
+            parts["accel"].append(np.column_stack([_checked(chunk, name, units.ACCEL_MAX_M_S2, units.accel_message)
+                                                   for name in ACCEL]))
+            parts["gyro"].append(np.column_stack([_checked(chunk, name, units.GYRO_MAX_RAD_S, units.gyro_message)
+                                                  for name in GYRO]))
             if chunk.has("baro_z"):
-                baros.append(chunk.floats("baro_z", allow_empty=True))
+                parts["baro_z"].append(chunk.floats("baro_z", allow_empty=True))
             else:
-                baros.append(np.full(len(chunk), math.nan))
+                parts["baro_z"].append(np.full(len(chunk), math.nan))
             chunk.raise_first_problem()
-            lines.append(chunk.line_numbers())
-    time = np.concatenate(times)
-    line = np.concatenate(lines)
-    warn_clock_jumps(path, time, line)
-    keep, skipped = _forward_in_time(time, line)
-    time = time[keep]
+            parts["line"].append(chunk.line_numbers())
+    columns = {name: np.concatenate(values) for name, values in parts.items()}
+    warn_clock_jumps(path, columns["time_s"], columns["line"])
+    columns, reordered = sort_by_time(columns)
+    keep, skipped = _first_of_each_time(columns["time_s"], columns["line"])
+    time = columns["time_s"][keep]
     return Imu(
         time_s=time,
-        accel=np.concatenate(accels)[keep],
-        gyro=np.concatenate(gyros)[keep],
-        baro_z=np.concatenate(baros)[keep],
+        accel=columns["accel"][keep],
+        gyro=columns["gyro"][keep],
+        baro_z=columns["baro_z"][keep],
         skipped=skipped,
         gaps=count_gaps(time),
+        reordered=reordered,
     )
 
 
-def _forward_in_time(time: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, SkipReport]:
-    """Mask of samples later than every earlier sample, and the report of the others.
+def _checked(chunk, name: str, limit: float, describe) -> np.ndarray:
+    """One inertial column, a value beyond ``limit`` in magnitude recorded as a problem (no sensor's)."""
+    values = chunk.floats(name)
+    chunk.flag_values(name, values, np.abs(values) > limit, describe)
+    return values
 
-    A declined sample is never later than the running maximum, so the
-    running maximum over all rows equals the one over the kept rows.
-    """
-    latest_before = np.concatenate([[-np.inf], np.maximum.accumulate(time)[:-1]])
-    duplicate = time == latest_before
-    backwards = time < latest_before
+
+def _first_of_each_time(time: np.ndarray, line: np.ndarray) -> tuple[np.ndarray, SkipReport]:
+    """Mask of the samples (sorted stably by time) whose time differs from the previous one's,
+    and the report of the others (``"duplicate time"``, with their file lines in file order)."""
+    duplicate = np.concatenate([[False], time[1:] == time[:-1]])
     skipped = SkipReport()
-    for reason, mask in ((DUPLICATE, duplicate), (BACKWARDS, backwards)):
-        rows = np.flatnonzero(mask)
-        if len(rows):
-            for row in rows[:5].tolist():
-                skipped.add(reason, int(line[row]))
-            if len(rows) > 5:
-                skipped.add(reason, None, n=len(rows) - 5)
-    return ~(duplicate | backwards), skipped
+    lines = np.sort(line[duplicate])
+    for number in lines[:5].tolist():
+        skipped.add(DUPLICATE, int(number))
+    if len(lines) > 5:
+        skipped.add(DUPLICATE, None, n=len(lines) - 5)
+    return ~duplicate, skipped
 
 
 def count_gaps(time_s: np.ndarray) -> int:

@@ -52,6 +52,7 @@ KNOWN_KEYS = {
     "antennas": ("id", "position", "phase_offset_rad", "role"),
     "region": ("min", "max"),
     "channel_offsets": ("frequency_hz", "phase_offset_rad"),
+    "helper": ("centre_frequency_hz", "bandwidth_hz", "n_subcarriers", "blf_hz"),
 }
 """Keys of the known tables; another key there is accepted with a warning (it is likely a typo
 whose setting would otherwise be lost without a word)."""
@@ -361,12 +362,18 @@ class _SceneChecker:
             raise self.fail("antennas", f"an 'sdr-helper' scene needs at least 2 antennas with role 'rx', found {n_rx}")
 
     def helper_table(self, table: dict) -> None:
-        """The optional ``[helper]`` table: positive frequencies (Hz) and a positive subcarrier count."""
+        """The optional ``[helper]`` table: positive frequencies (Hz), the carrier within 100 MHz to
+        10 GHz (with the likely unit), and a positive subcarrier count; other keys are warned."""
+        self.warn_unknown_keys(table, "helper")
         for key in HELPER_NUMBERS:
             if key in table:
                 value = self.number(table, key, f"helper.{key}")
                 if value <= 0.0:
                     raise self.fail(f"helper.{key}", f"must be positive, found {value!r}")
+        if "centre_frequency_hz" in table:
+            value = float(table["centre_frequency_hz"])
+            if units.frequency_outside(np.array([value]))[0]:
+                raise self.fail("helper.centre_frequency_hz", units.frequency_message(repr(table["centre_frequency_hz"]), value))
         if "n_subcarriers" in table:
             value = table["n_subcarriers"]
             if not isinstance(value, int) or isinstance(value, bool) or value < 1:

@@ -37,8 +37,11 @@ Contract: :func:`read_sigmf` validates everything and raises
 :class:`FormatError` naming the file (``.sigmf-meta`` or ``.sigmf-data``)
 and the field (``global.core:datatype``, ``captures[3].core:sample_start``)
 or the byte offset, for bad JSON, a schema violation, a missing or bad key,
-an unsupported datatype, a design that breaks ``N < B / (2 BLF)`` or a data
-file whose length does not match. :func:`read_sigmf_frames` runs the Rust
+an unsupported datatype, a design that breaks ``N < B / (2 BLF)``, an
+antenna list that contradicts ``tx_id`` or ``channels``, or a data file
+missing or whose length is not a whole number of samples. Tracked in a
+scene, a recording whose antenna positions differ from the scene's by more
+than 5 cm is warned (:mod:`scattertrack.io.sigmf_scene`). :func:`read_sigmf_frames` runs the Rust
 DSP (``scattertrack._core.OfdmDsp``) over every window and returns
 :class:`Frames` (FORMATS.md section 5); windows without a detectable
 preamble, all-NaN windows and failed receive antennas are skipped and
@@ -56,6 +59,7 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack.io.frames import Frames, make_frames
+from scattertrack.io.sigmf_scene import finite_vector, check_antennas, check_calibration, warn_scene_disagreement
 from scattertrack.io.types import FormatError, Scene, SkipReport
 
 NAMESPACE = "scattertrack"
@@ -309,6 +313,7 @@ def read_sigmf(path, verify_checksum: bool = False) -> Recording:
     if "core:dataset" in g or any("core:header_bytes" in c for c in meta["captures"]):
         raise FormatError(meta_path, None, "global.core:dataset", "non-conforming datasets are not supported")
     channels = _check_header(meta_path, g)
+    check_antennas(meta_path, g)
 
     if not data_path.is_file():
         raise FormatError(data_path, None, None, "data file not found")
@@ -367,6 +372,7 @@ def _load_meta(meta_path: Path) -> dict:
     for key, kind in (("global", dict), ("captures", list), ("annotations", list)):
         if not isinstance(meta.get(key), kind):
             raise FormatError(meta_path, None, key, f"missing or not a JSON {'object' if kind is dict else 'array'}")
+    _check_capture_order(meta_path, meta["captures"])
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")
@@ -375,6 +381,20 @@ def _load_meta(meta_path: Path) -> dict:
         where = ".".join(str(p) for p in error.absolute_path) or None
         raise FormatError(meta_path, None, where, f"violates the SigMF schema: {error.message}") from None
     return meta
+
+
+def _check_capture_order(meta_path: Path, captures: list) -> None:
+    """Name the first capture whose ``core:sample_start`` is not after the previous one's (the
+    SigMF schema check says only that the order is wrong, not where)."""
+    previous = None
+    for i, capture in enumerate(captures):
+        start = capture.get("core:sample_start") if isinstance(capture, dict) else None
+        if isinstance(start, bool) or not isinstance(start, int):
+            continue  # the schema names a missing or non-integer start
+        if previous is not None and start <= previous:
+            raise FormatError(meta_path, None, f"captures[{i}].core:sample_start",
+                              f"captures must start at increasing samples: {start} after {previous}")
+        previous = start
 
 
 def _check_header(meta_path: Path, g: dict) -> int:
@@ -521,8 +541,10 @@ def _dsp(recording: Recording, options: dict):
 
 
 def _positions(scene: Scene, recording: Recording) -> tuple[np.ndarray, np.ndarray]:
-    """tx position (3,) and rx positions (R, 3) from the scene, checking ids and roles."""
+    """tx position (3,) and rx positions (R, 3) from the scene, checking ids and roles; warns where
+    the scene disagrees with the recording's metadata (:mod:`scattertrack.io.sigmf_scene`)."""
     where = str(recording.path) if recording.path is not None else "<recording>"
+    warn_scene_disagreement(where, scene, recording.meta["global"])
     roles = {int(a.id): a for a in scene.antennas}
     tx = roles.get(recording.tx_id)
     if tx is None or tx.role != "tx":
@@ -554,9 +576,13 @@ def calibrate_sigmf(path, scene: Scene, tag_position=None, **options) -> SigmfCa
     recording = path if isinstance(path, Recording) else read_sigmf(path)
     if tag_position is None:
         recorded = recording.calibration
-        if not recorded or "tag_position" not in recorded:
-            raise FormatError(recording.path, None, f"global.{NAMESPACE}:calibration", "no tag_position: pass tag_position")
+        key = f"global.{NAMESPACE}:calibration.tag_position"
+        if not isinstance(recorded, dict) or "tag_position" not in recorded:
+            raise FormatError(recording.path, None, key, "missing: a calibration recording names the known position "
+                                                         "of its tag at rest (metres)")
         tag_position = recorded["tag_position"]
+        if not finite_vector(tag_position):
+            raise FormatError(recording.path, None, key, f"must be 3 finite numbers (metres), got {tag_position!r}")
     tag_position = np.asarray(tag_position, dtype=np.float64).reshape(3)
     tx, rx = _positions(scene, recording)
     dsp = _dsp(recording, options)
@@ -617,10 +643,7 @@ def estimate_sigmf(
     dsp = _dsp(recording, options)
     frequencies = dsp.subcarrier_frequencies()
     if calibration is not None:
-        if list(calibration.rx_ids) != recording.channels:
-            raise ValueError(f"calibration rx ids {calibration.rx_ids} differ from the recording's {recording.channels}")
-        if calibration.frequencies_hz.shape != frequencies.shape or not np.allclose(calibration.frequencies_hz, frequencies):
-            raise ValueError("calibration subcarriers differ from the recording's")
+        check_calibration(calibration, recording.channels, frequencies)
         if use_tx_index and calibration.timing_reference is not None:
             dsp.timing_reference = calibration.timing_reference
     n = recording.subcarriers

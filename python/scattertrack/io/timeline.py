@@ -44,7 +44,7 @@ def warn_clock_jumps(path, time_s: np.ndarray, lines: np.ndarray, column: str = 
         row = int(np.argmax(back)) + 1
         warn_input(
             path, int(lines[row]), column,
-            f"clock jumps back by {-step[row - 1]:.6g} s (to {time_s[row]:.6f} s after {latest[row - 1]:.6f} s); "
+            f"clock jumps back by {-step[row - 1]:.6g} s (to {_seconds(time_s[row])} s after {_seconds(latest[row - 1])} s); "
             f"rows are sorted by time, but a reorder beyond {BACKWARD_JUMP_S:g} s suggests a clock reset "
             f"or joined logs ({_count(jumps, 'such jump')} in the file)",
         )
@@ -52,12 +52,48 @@ def warn_clock_jumps(path, time_s: np.ndarray, lines: np.ndarray, column: str = 
         row = int(np.argmax(forward)) + 1
         warn_input(
             path, int(lines[row]), column,
-            f"clock jumps forward by {step[row - 1]:.6g} s (from {latest[row - 1]:.6f} s to {time_s[row]:.6f} s) "
+            f"clock jumps forward by {step[row - 1]:.6g} s (from {_seconds(latest[row - 1])} s to {_seconds(time_s[row])} s) "
             f"with no rows between: a clock jump or a paused log (gaps beyond {FORWARD_GAP_S:g} s are warned; "
             f"{_count(int(np.count_nonzero(forward)), 'such gap')} in the file)",
         )
 
 
+def _seconds(value: float) -> str:
+    """A time with microseconds ('12.345678'), or 6 significant digits when huge (garbage, not a clock)."""
+    return f"{value:.6f}" if abs(value) < 1e12 else f"{value:.6g}"
+
+
 def _count(n: int, what: str) -> str:
     """'1 such jump', '3 such jumps'."""
     return f"{n} {what}" if n == 1 else f"{n} {what}s"
+
+
+def warn_outside_span(path, time_s: np.ndarray, lines: np.ndarray | None, span_path, span_time_s: np.ndarray,
+                      what: str, column: str = "time_s", noun: str = "row") -> None:
+    """Warn (:class:`InputWarning`) when rows of ``path`` lie before the first or after the last
+    time of another file on the same clock (``span_path``: features against the IMU).
+
+    ``time_s``: the rows' times, seconds, any order; ``lines``: their 1-based
+    file lines (or None); ``span_time_s``: the other file's times, sorted;
+    ``what``: its rows' name ("IMU sample"); ``noun``: the name of ours
+    ("row", "epoch"). One warning per side, at the
+    row furthest outside, with the count: rows outside have no inertial data
+    to be fused with, so a fusion declines them; a whole file outside
+    means two clocks (FORMATS.md 7: features share the IMU's clock).
+    """
+    if not len(time_s) or not len(span_time_s):
+        return
+    first, last = float(span_time_s[0]), float(span_time_s[-1])
+    for outside, side, edge in ((time_s < first, "before the first", first), (time_s > last, "after the last", last)):
+        count = int(np.count_nonzero(outside))
+        if not count:
+            continue
+        far = int(np.argmax(np.abs(time_s - edge) * outside))
+        line = int(lines[far]) if lines is not None and len(lines) == len(time_s) else None
+        clocks = "; every row is outside: are the two files on one clock?" if count == len(time_s) else ""
+        warn_input(
+            path, line, column,
+            f"{count} of {_count(len(time_s), noun)} lie {side} {what} of {span_path} ({_seconds(edge)} s; this {noun} "
+            f"at {_seconds(time_s[far])} s is {abs(time_s[far] - edge):.6g} s {side.split()[0]} it): there is no "
+            f"inertial data to fuse them with{clocks}",
+        )

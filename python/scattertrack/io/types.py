@@ -273,9 +273,11 @@ class Imu:
     gyro: np.ndarray  # (n, 3) angular rate, body frame, rad/s
     baro_z: np.ndarray  # (n,) barometric height, metres; nan where absent
     skipped: SkipReport = field(default_factory=SkipReport)
-    """Samples declined on reading (duplicate or non-monotonic timestamps), by reason."""
+    """Samples declined on reading (a time repeated after sorting), by reason."""
     gaps: int = 0
     """Gaps longer than 3 nominal sample periods (counted and reported, not filled)."""
+    reordered: int = 0
+    """How many rows were out of time order in the file (sorted, not dropped)."""
 
     def __len__(self) -> int:
         return len(self.time_s)
@@ -300,6 +302,8 @@ class Features:
     yaw_sigma_rad: np.ndarray  # (n,) nan where absent
     skipped: SkipReport = field(default_factory=SkipReport)
     reordered: int = 0
+    line: np.ndarray | None = None
+    """1-based file line of each row (int64 (n,)), for messages; None when not read from a file."""
 
     def __len__(self) -> int:
         return len(self.time_s)

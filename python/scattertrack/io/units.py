@@ -64,3 +64,34 @@ def phase_message(text: str, value: float, column: np.ndarray, period_rad: float
     if value < 0.0 and smallest >= -math.pi - 1e-9 and period == "2*pi":
         return f"{message}: looks like (-pi, pi]: add 2*pi to negative phases"
     return message
+
+
+ACCEL_MAX_M_S2 = 2000.0
+"""Specific force beyond this, m/s^2 (about 200 g), is no IMU's reading: drone IMUs saturate at
+16 g and shock sensors at a few hundred; a larger value is a unit mistake (milli-g: 9810 at
+rest) or garbage, and integrating it overflows the estimator's state."""
+
+GYRO_MAX_RAD_S = 100.0
+"""An angular rate beyond this, rad/s (about 5700 deg/s), is no MEMS gyro's reading (they
+saturate at 35-70 rad/s): most likely degrees per second."""
+
+
+def accel_message(text: str, value: float) -> str:
+    """Why the specific force ``value`` (m/s^2, written as ``text``) is rejected, with the likely unit."""
+    message = f"specific force {text} is beyond {ACCEL_MAX_M_S2:g} m/s^2 (about 200 g): no IMU measures it"
+    if abs(value) <= 200 * 9810.0:
+        return f"{message}; accelerations are in m/s^2: if this is milli-g (about 1000 at rest), multiply by 9.80665e-3"
+    return message
+
+
+def gyro_message(text: str, value: float) -> str:
+    """Why the angular rate ``value`` (rad/s, written as ``text``) is rejected, with the likely unit."""
+    message = f"angular rate {text} is beyond {GYRO_MAX_RAD_S:g} rad/s: no MEMS gyro measures it"
+    if abs(value) <= GYRO_MAX_RAD_S * 180.0 / math.pi:
+        return f"{message}; rates are in rad/s: looks like degrees per second: multiply by pi/180"
+    return message
+
+
+RANGE_MAX_M = 100e3
+"""A controller-to-drone range beyond this, metres (100 km), is no backscatter link's (they
+reach a few kilometres): garbage, whose square overflows the estimator's solve."""

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from scattertrack.io.sigmf import SigmfCalibration, calibrate_sigmf, read_sigmf, Recording, _dsp, _positions
+from scattertrack.io.sigmf_scene import check_calibration
 from scattertrack.io.types import Scene, SkipReport, Track
 from scattertrack.track import wideband
 from scattertrack.track.glac import track_from_columns
@@ -118,12 +119,9 @@ def stream_sigmf(
         raise ValueError("streaming needs a calibration (a calibration recording of a tag at a known position)")
     if not isinstance(calibration, SigmfCalibration):
         calibration = calibrate_sigmf(calibration, scene, **options)
-    if list(calibration.rx_ids) != recording.channels:
-        raise ValueError(f"calibration rx ids {calibration.rx_ids} differ from the recording's {recording.channels}")
     dsp = _dsp(recording, options)
     frequencies = dsp.subcarrier_frequencies()
-    if calibration.frequencies_hz.shape != frequencies.shape or not np.allclose(calibration.frequencies_hz, frequencies):
-        raise ValueError("calibration subcarriers differ from the recording's")
+    check_calibration(calibration, recording.channels, frequencies)
 
     count = len(recording.windows)
     length = min((w.sample_count for w in recording.windows), default=0)

@@ -314,3 +314,33 @@ def test_helper_table(write_file):
     assert (error.line, error.column) == (30, "helper.n_subcarriers")
     error = scene_error(write_file, HELPER_SCENE + table.replace("blf_hz = 40e3", "blf_hz = -1"))
     assert (error.line, error.column) == (31, "helper.blf_hz")
+
+
+def test_huge_channels_are_declined_and_counted(write_file, scene):
+    rows = [HEADER]
+    for rx in (1, 2, 3):
+        for k, f in enumerate((915e6, 916e6)):
+            h_re = "1e101" if (rx, k) == (2, 1) else "0.25"
+            rows.append(f"0.5,E2,0,{rx},{f!r},{h_re},-0.1")
+    rows.append("0.6,E2,0,1,915e6,0.3,-1.5e300")
+    frames = read_frames(write_file("frames.csv", "\n".join(rows) + "\n"), scene)
+    assert len(frames) == 5 and frames.n_frames == 1
+    assert frames.skipped.counts == {"channel beyond 1e100": 2}
+    assert frames.skipped.examples == {"channel beyond 1e100": [5, 8]}
+    assert np.abs(frames.h).max() < 1.0
+
+
+def test_helper_table_carrier_unit_and_unknown_keys(write_file):
+    import warnings
+
+    from scattertrack.io import InputWarning
+
+    table = "\n[helper]\ncentre_frequency_hz = 915.0\nbandwidth_hz = 100e6\n"
+    error = scene_error(write_file, HELPER_SCENE + table)
+    assert error.column == "helper.centre_frequency_hz" and "looks like MHz: multiply by 1e6" in error.message
+    typo = "\n[helper]\ncentre_frequency_hz = 915e6\nbandwith_hz = 100e6\n"
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        read_scene(write_file("scene.toml", HELPER_SCENE + typo))
+    (warning,) = [w.message for w in caught if issubclass(w.category, InputWarning)]
+    assert warning.column == "helper.bandwith_hz" and "unknown key" in warning.message

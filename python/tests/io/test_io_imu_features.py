@@ -9,6 +9,7 @@ from scattertrack.io import (
     Features,
     FormatError,
     Imu,
+    InputWarning,
     Truth,
     read_features,
     read_imu,
@@ -143,17 +144,37 @@ def test_shared_lora_example_loads(examples):
 # --- IMU: declined samples and gaps ---------------------------------------------
 
 
-def test_imu_duplicates_and_backward_times_are_declined_with_their_lines(write_file):
+def test_imu_duplicates_are_declined_and_rows_out_of_order_sorted(write_file):
     rows = imu_rows(10)
     rows.insert(4, rows[3])  # line 6 repeats the time of line 5
-    rows.insert(8, "0.01,0,0,9.81,0,0,0,0\n")  # line 10 goes back in time
+    rows.insert(8, "0.015,0,0,9.81,0,0,0,0\n")  # line 10 goes back in time: sorted in
     path = write_file("imu.csv", IMU_HEADER + "".join(rows))
     imu = read_imu(path)
-    assert len(imu) == 10
-    assert np.all(np.diff(imu.time_s) > 0)
-    assert imu.skipped.counts == {"duplicate time": 1, "non-monotonic time": 1}
-    assert imu.skipped.examples == {"duplicate time": [6], "non-monotonic time": [10]}
+    assert len(imu) == 11
+    assert np.all(np.diff(imu.time_s) > 0) and 0.015 in imu.time_s
+    assert imu.reordered == 1
+    assert imu.skipped.counts == {"duplicate time": 1}
+    assert imu.skipped.examples == {"duplicate time": [6]}
     assert "line" in imu.skipped.summary() and "6" in imu.skipped.summary()
+
+
+def test_shuffled_imu_keeps_every_sample(write_file):
+    rows = imu_rows(1200)
+    order = np.random.default_rng(3).permutation(len(rows))
+    with pytest.warns(InputWarning, match="clock jumps back"):
+        imu = read_imu(write_file("imu.csv", IMU_HEADER + "".join(rows[i] for i in order)))
+    assert len(imu) == 1200 and imu.skipped.total == 0
+    np.testing.assert_allclose(imu.time_s, np.arange(1200) / 100)
+    # Each sample keeps its own values: baro_z was written as 0.01 x its index.
+    np.testing.assert_allclose(imu.baro_z, np.arange(1200) * 0.01, atol=1e-9)
+    assert imu.reordered > 500
+
+
+def test_a_time_repeated_after_sorting_keeps_the_first_in_the_file(write_file):
+    rows = ["0.02,1,0,9.81,0,0,0,\n", "0.01,2,0,9.81,0,0,0,\n", "0.02,3,0,9.81,0,0,0,\n"]
+    imu = read_imu(write_file("imu.csv", IMU_HEADER + "".join(rows)))
+    np.testing.assert_array_equal(imu.accel[:, 0], [2.0, 1.0])
+    assert imu.skipped.examples == {"duplicate time": [4]} and imu.reordered == 1
 
 
 def test_imu_gaps_are_counted(write_file):
@@ -251,3 +272,28 @@ def test_writers_refuse_what_readers_would_reject(tmp_path):
     features.range_m[1] = math.inf
     with pytest.raises(ValueError):
         write_features(tmp_path / "features.csv", features)
+
+
+@pytest.mark.parametrize(
+    "row, column, fragment",
+    [
+        ("0.00,0,0,9810,0,0,0,0\n", "az", "if this is milli-g (about 1000 at rest), multiply by 9.80665e-3"),
+        ("0.00,-2500.5,0,9.81,0,0,0,0\n", "ax", "specific force -2500.5 is beyond 2000 m/s^2"),
+        ("0.00,0,0,9.81,0,180,0,0\n", "gy", "looks like degrees per second: multiply by pi/180"),
+        ("0.00,0,0,9.81,1e300,0,0,0\n", "gx", "angular rate 1e300 is beyond 100 rad/s"),
+    ],
+)
+def test_imu_values_no_sensor_measures_are_rejected_with_the_unit(write_file, row, column, fragment):
+    expect_error(write_file("imu.csv", IMU_HEADER + "".join(imu_rows(2)) + row), read_imu, 4, column, fragment)
+
+
+def test_features_range_beyond_100_km_is_rejected(write_file):
+    path = write_file("features.csv", FEATURES_HEADER + "0.05,1e300,1,0.1,,0.6,0.05,\n")
+    expect_error(path, read_features, 2, "range_m", "beyond 100 km")
+
+
+@pytest.mark.parametrize("cells, column", [("1e300,0.05,0.2", "range_sigma_m"), ("0.6,7,0.2", "angle_sigma_rad"),
+                                           ("0.6,0.05,1e300", "yaw_sigma_rad")])
+def test_features_sigmas_beyond_meaning_are_rejected(write_file, cells, column):
+    path = write_file("features.csv", FEATURES_HEADER + f"0.05,10,1,0.1,0.3,{cells}\n")
+    expect_error(path, read_features, 2, column, "carries no information")
