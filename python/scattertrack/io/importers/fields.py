@@ -27,7 +27,6 @@ AUTO = "auto"
 """The unit of a bare ``timestamp``/``frequency``: decided from the file's first value."""
 
 TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6}
-TIME_WORDS = {"s": "seconds", "ms": "milliseconds since the epoch", "us": "microseconds since the epoch"}
 FREQUENCY_UNITS = {"Hz": 1.0, "kHz": 1e3, "MHz": 1e6}
 
 US_EPOCH_MIN = 1e14

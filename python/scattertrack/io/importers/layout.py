@@ -151,13 +151,12 @@ def csv_rows(path, required: tuple[str, ...], extra: dict[str, dict[str, str]]):
         raise
 
     def rows():
-        with_reader = reader
         try:
-            for chunk in with_reader.chunks():
+            for chunk in reader.chunks():
                 cells = {field: chunk.cells(name) for field, name in layout.column.items()}
                 for i, line in enumerate(chunk.line_numbers().tolist()):
                     yield line, (lambda field, i=i: cells[field][i] if field in cells else None)
         finally:
-            with_reader.__exit__(None, None, None)
+            reader.__exit__(None, None, None)
 
     return layout, rows()

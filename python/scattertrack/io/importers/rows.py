@@ -129,10 +129,11 @@ def _resolve_frequencies(columns, files, lines, scene: Scene, report: ImportRepo
     frequency = columns["frequency_hz"]
     index = columns["channel_index"]
     given = np.isfinite(frequency)
-    from_table = ~given & np.isfinite(hop_table.hop_table_hz(index, scene.hop_table))
-    frequency = np.where(from_table, hop_table.hop_table_hz(index, scene.hop_table), frequency)
-    from_plan = ~given & ~from_table & (index != hop_table.NO_CHANNEL) & np.isfinite(hop_table.us_channel_plan_hz(index))
-    frequency = np.where(from_plan, hop_table.us_channel_plan_hz(index), frequency)
+    table = hop_table.hop_table_hz(index, scene.hop_table)
+    plan = hop_table.us_channel_plan_hz(index)
+    from_table = ~given & np.isfinite(table)
+    from_plan = ~given & ~from_table & np.isfinite(plan)
+    frequency = np.select([from_table, from_plan], [table, plan], default=frequency)
     columns["frequency_hz"] = frequency
     outside = given & units.frequency_outside(frequency)
     resolved = (given & ~outside) | from_table | from_plan
