@@ -161,3 +161,21 @@ def test_not_utf8_is_a_clean_error(tmp_path, scene):
 def test_no_row_kept_is_an_error_with_the_summary(write_file, scene):
     with pytest.raises(ValueError, match="no reads kept.*1 antenna not in the scene"):
         imported(write_file, scene, HEADER + GOOD.replace(",1,-60", ",7,-60"))
+
+
+def test_row_frequency_disagreeing_with_the_hop_table_is_kept_and_warned(data, write_file):
+    text = (data / "import_scene.toml").read_text() + "\n[[hop_table]]\nchannel_index = 3\nfrequency_hz = 915.25e6\n"
+    scene = read_scene(write_file("scene.toml", text))
+    log = "time_s,antenna,epc,phase_angle,channel_index,frequency_hz\n1.0,1,E2,0,3,915.25e6\n2.0,1,E2,0,3,920.25e6\n"
+    (reads, report), found = imported(write_file, scene, log)
+    assert reads.frequency_hz.tolist() == [915.25e6, 920.25e6]
+    assert report.hop_table_disagreements == 1
+    assert [(w.line, w.column) for w in found] == [(3, "frequency_hz")]
+    assert any(line.startswith("hop table: 1 rows disagree") for line in report.lines())
+
+
+def test_phases_wrap_into_the_scene_period(data, write_file):
+    text = (data / "import_scene.toml").read_text().replace('kind = "cots"', 'kind = "cots"\nphase_period = "pi"')
+    scene = read_scene(write_file("scene.toml", text))
+    (reads, _), _ = imported(write_file, scene, "time_s,antenna,epc,phase_angle,channel_index\n1.0,1,E2,3072,1\n")
+    assert reads.phase_rad[0] == pytest.approx(math.pi / 2)
