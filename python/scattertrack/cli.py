@@ -8,6 +8,7 @@ Subcommands::
     scattertrack track --scene S --reads R|--frames F|--sigmf R [--calibration C] [--method glac] --out T [--param name=value ...]
     scattertrack stream --scene S --sigmf R [--calibration C] [--method turbotrack] --out T [--speed X | --fast]
     scattertrack check-scene SCENE [--reads R]
+    scattertrack import sllurp-csv|impinj-iot|iq-phasors FILE... --scene S --out R
     scattertrack eval --truth T --track K [--out DIR] [--json FILE] [--threshold-m 0.02]
     scattertrack demo [--out DIR] [--scenario NAME] [--seed N]
     scattertrack live --scene S --llrp HOST[:PORT] --out T --journal R [--duration S] [reader settings]
@@ -882,6 +883,10 @@ def build_parser() -> argparse.ArgumentParser:
     check_scene.add_argument("scene", help="scene.toml")
     check_scene.add_argument("--reads", help="reads.csv: analyse the channels it reads (calibrated hopping removes integer shifts)")
     check_scene.set_defaults(run=command_check_scene)
+
+    from scattertrack import import_command  # reader logs -> reads.csv, in its own module
+
+    import_command.add_parser(commands)
 
     evaluate = commands.add_parser(
         "eval",

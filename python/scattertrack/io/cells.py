@@ -109,18 +109,24 @@ def _number_problem(text: str, allow_nan: bool = False) -> str:
     return f"not a number: {text!r}"
 
 
-def integers(cells: list[str], plain: bool) -> tuple[np.ndarray, tuple[int, str] | None]:
+def integers(cells: list[str], plain: bool, empty: int | None = None) -> tuple[np.ndarray, tuple[int, str] | None]:
     """A column as int64 and its first problem as (row, message), or None.
 
     Values must fit in int64 (:data:`INT64_MIN` to :data:`INT64_MAX`).
+    ``empty``: the value an empty cell reads as (optional columns); None: an empty cell is a problem.
     """
     if plain or is_plain_ascii("".join(cells)):
         try:
-            return np.array(list(map(int, cells)), dtype=np.int64), None
+            if empty is None:
+                return np.array(list(map(int, cells)), dtype=np.int64), None
+            return np.array([int(c) if c.strip() else empty for c in cells], dtype=np.int64), None
         except (ValueError, OverflowError):
             pass
     values = np.zeros(len(cells), dtype=np.int64)
     for row, text in enumerate(cells):
+        if empty is not None and not text.strip():
+            values[row] = empty
+            continue
         if not INTEGER.fullmatch(text):
             if NUMBER.fullmatch(text):
                 return values, (row, f"not an integer: {text!r}")

@@ -111,9 +111,12 @@ class Chunk:
         self._add_cell_problem(name, problem)
         return values
 
-    def integers(self, name: str) -> np.ndarray:
-        """One column as int64: ASCII digits with an optional sign, within int64."""
-        values, problem = cells.integers(self.cells(name), self.plain)
+    def integers(self, name: str, empty: int | None = None) -> np.ndarray:
+        """One column as int64: ASCII digits with an optional sign, within int64.
+
+        ``empty``: the value an empty cell reads as (optional columns); None: an empty cell is a problem.
+        """
+        values, problem = cells.integers(self.cells(name), self.plain, empty)
         self._add_cell_problem(name, problem)
         return values
 

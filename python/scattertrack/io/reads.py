@@ -2,8 +2,9 @@
 
 One row per phase reading: ``time_s`` (seconds), ``epc`` (tag id),
 ``antenna`` (port id from the scene), ``frequency_hz`` (carrier, hertz),
-``phase_rad`` (radians in [0, P)), and optionally ``rssi_dbm`` (dBm) and
-``doppler_hz`` (hertz).
+``phase_rad`` (radians in [0, P)), and optionally ``rssi_dbm`` (dBm),
+``doppler_hz`` (hertz) and ``channel_index`` (the reader's own 1-based index
+into its hop table, LLRP's ``ChannelIndex``; an empty cell for none).
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ import re
 
 import numpy as np
 
-from scattertrack.io import units
+from scattertrack.io import hop_table, units
 from scattertrack.io.cells import TextTable
 from scattertrack.io.csvutil import (
     CsvReader,
@@ -29,6 +30,8 @@ from scattertrack.io.types import Reads, Scene, SkipReport, warn_input
 
 REQUIRED = ["time_s", "epc", "antenna", "frequency_hz", "phase_rad"]
 OPTIONAL = ["rssi_dbm", "doppler_hz"]
+CHANNEL_INDEX = "channel_index"
+"""The optional integer column: the reader's 1-based hop-table index (empty cell: none, -1 in :class:`Reads`)."""
 
 PHASE_TOLERANCE_RAD = 1e-9
 """Phases this far outside [0, P), radians, are rounding noise: accepted and wrapped."""
@@ -51,11 +54,15 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
     With a ``scene``, antenna ids must be ones it defines and phases must lie
     in [0, P) for its reader's period P (radians); without one, P = 2*pi.
     EPCs are hex of any length and case, kept exactly as written; frequencies
-    must lie in 100 MHz to 10 GHz. Exact duplicates of an earlier read are
+    must lie in 100 MHz to 10 GHz; channel indices are positive integers
+    (``Reads.channel_index`` is None when the file has no such column).
+    Exact duplicates of an earlier read are
     skipped and counted under ``"duplicate row"``; rows out of time order are
     counted in ``reordered``. Raises :class:`FormatError` (file, line, column)
     for a malformed file; issues an :class:`InputWarning` for a clock jump
-    (:mod:`scattertrack.io.timeline`) and for EPCs that differ only in case.
+    (:mod:`scattertrack.io.timeline`), for EPCs that differ only in case and
+    for rows whose frequency disagrees with the scene's hop table for their
+    channel index (kept; :mod:`scattertrack.io.hop_table`).
     """
     period = 2.0 * math.pi
     antenna_ids = None
@@ -65,7 +72,7 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
     parts = []
     lines = []
     epcs = TextTable()
-    with CsvReader(path, REQUIRED, OPTIONAL) as reader:
+    with CsvReader(path, REQUIRED, OPTIONAL + [CHANNEL_INDEX]) as reader:
         for chunk in reader.chunks():
             part = _parse_chunk(chunk, period, antenna_ids, epcs)
             chunk.raise_first_problem()
@@ -75,6 +82,8 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
     lines = np.concatenate(lines)
     warn_clock_jumps(path, columns["time_s"], lines)
     _warn_case_twins(path, epcs, columns["epc"], lines)
+    if scene is not None and CHANNEL_INDEX in columns:
+        hop_table.warn_disagreements(path, columns["frequency_hz"], columns[CHANNEL_INDEX], lines, scene.hop_table)
     return _finish(columns, lines, epcs.texts())
 
 
@@ -99,6 +108,12 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Tex
             optional[name] = chunk.floats(name, allow_empty=True)
         else:
             optional[name] = np.full(len(chunk), math.nan)
+    if chunk.has(CHANNEL_INDEX):
+        index = chunk.integers(CHANNEL_INDEX, empty=hop_table.NO_CHANNEL)
+        written = np.array([bool(c.strip()) for c in chunk.cells(CHANNEL_INDEX)])
+        chunk.flag(CHANNEL_INDEX, written & (index < 1),
+                   "channel index {value} is not positive (the reader's 1-based hop-table index; empty cell for none)")
+        optional[CHANNEL_INDEX] = index
     return {
         "time_s": time,
         "epc": epc,
@@ -141,7 +156,7 @@ def _finish(columns: dict, lines: np.ndarray, epc_table: np.ndarray) -> Reads:
     they become the shared strings (see :class:`scattertrack.io.cells.TextTable`).
     """
     skipped = SkipReport()
-    duplicate = _duplicates(columns)
+    duplicate = duplicate_rows(columns)
     for i in np.flatnonzero(duplicate).tolist():
         skipped.add(DUPLICATE, int(lines[i]))
     if duplicate.any():
@@ -157,10 +172,11 @@ def _finish(columns: dict, lines: np.ndarray, epc_table: np.ndarray) -> Reads:
         doppler_hz=columns["doppler_hz"],
         skipped=skipped,
         reordered=reordered,
+        channel_index=columns.get(CHANNEL_INDEX),
     )
 
 
-def _duplicates(columns: dict) -> np.ndarray:
+def duplicate_rows(columns: dict) -> np.ndarray:
     """Mask of rows equal to an earlier row in time, epc, antenna, frequency and phase.
 
     Duplicates share their time, and distinct reads rarely do, so only rows
@@ -175,7 +191,7 @@ def _duplicates(columns: dict) -> np.ndarray:
     duplicate = np.zeros(len(time), dtype=bool)
     seen = set()
     for i in np.flatnonzero(shares_time).tolist():  # in file order: the first copy is kept
-        key = tuple(columns[name][i].item() for name in KEY_COLUMNS)
+        key = tuple(_plain(columns[name][i]) for name in KEY_COLUMNS)
         if key in seen:
             duplicate[i] = True
         else:
@@ -183,12 +199,18 @@ def _duplicates(columns: dict) -> np.ndarray:
     return duplicate
 
 
+def _plain(value):
+    """A numpy scalar as a Python value (hashable, compared by value); other values as they are."""
+    return value.item() if isinstance(value, np.generic) else value
+
+
 def write_reads(path, reads: Reads) -> None:
     """Write ``reads`` as ``reads.csv``.
 
     Time (seconds) and phase (radians) with 6 decimals, frequency (hertz) in
     full, RSSI (dBm) and Doppler (hertz) with 2 decimals; the optional columns
-    only when some value is finite, with an empty cell for nan.
+    only when some value is finite, with an empty cell for nan; ``channel_index``
+    when some row has one (an empty cell for -1).
     """
     for name in ("time_s", "frequency_hz", "phase_rad"):
         require_finite(path, name, getattr(reads, name))
@@ -207,6 +229,15 @@ def write_reads(path, reads: Reads) -> None:
             require_finite(path, name, values[~np.isnan(values)])
             header.append(name)
             columns.append(format_fixed(values, 2, empty_nan=True))
+    if reads.channel_index is not None:
+        index = np.asarray(reads.channel_index, dtype=np.int64)
+        if (index != hop_table.NO_CHANNEL).any():
+            bad = (index != hop_table.NO_CHANNEL) & (index < 1)
+            if bad.any():
+                raise ValueError(f"{path}: cannot write channel_index[{int(np.argmax(bad))}] = "
+                                 f"{int(index[np.argmax(bad)])}: channel indices are positive (-1 for none)")
+            header.append(CHANNEL_INDEX)
+            columns.append(["" if i == hop_table.NO_CHANNEL else str(i) for i in index.tolist()])
     write_columns(path, header, columns)
 
 

@@ -2,8 +2,10 @@
 
 A scene describes the hardware: the reader (kind, phase sign and period),
 its antennas (ids, positions in metres, calibrated phase offsets in
-radians), an optional region where tags can be (metres) and optional
-per-channel phase offsets (hertz, radians).
+radians), an optional region where tags can be (metres), optional
+per-channel phase offsets (hertz, radians) and the reader's optional hop
+table (``[[hop_table]]``: 1-based ``channel_index`` -> ``frequency_hz``, hertz,
+what LLRP readers' channel indices in reads.csv stand for).
 
 A helper scene (``kind = "sdr-helper"``, FORMATS.md section 5) has exactly
 one antenna with ``role = "tx"`` and at least two with ``role = "rx"`` (no
@@ -53,6 +55,7 @@ KNOWN_KEYS = {
     "region": ("min", "max"),
     "channel_offsets": ("frequency_hz", "phase_offset_rad"),
     "helper": ("centre_frequency_hz", "bandwidth_hz", "n_subcarriers", "blf_hz"),
+    "hop_table": ("channel_index", "frequency_hz"),
 }
 """Keys of the known tables; another key there is accepted with a warning (it is likely a typo
 whose setting would otherwise be lost without a word)."""
@@ -68,6 +71,7 @@ KNOWN_TOP_LEVEL = (
     "antennas",
     "region",
     "channel_offsets",
+    "hop_table",
 )
 
 
@@ -278,6 +282,7 @@ class _SceneChecker:
         if "region" in document:
             region = self.region(self.table(document, "region"), dimensions, plane_z)
         channel_offsets = self.channel_offsets(document)
+        hop_table = self.hop_table(document)
         extra = {k: v for k, v in document.items() if k not in KNOWN_TOP_LEVEL}
         if reader.kind == "sdr-helper":
             self.helper_roles(antennas)
@@ -292,6 +297,7 @@ class _SceneChecker:
             region=region,
             channel_offsets=channel_offsets,
             extra=extra,
+            hop_table=hop_table,
         )
 
     def reader(self, table: dict) -> Reader:
@@ -425,6 +431,26 @@ class _SceneChecker:
             offsets.append(ChannelOffset(frequency, offset))
         return offsets
 
+    def hop_table(self, document: dict) -> dict[int, float]:
+        """The reader's hop table: 1-based channel index -> carrier, hertz (unique indices)."""
+        table = {}
+        for i, entry in enumerate(self.array_of_tables(document, "hop_table")):
+            where = f"hop_table[{i}]"
+            self.warn_unknown_keys(entry, "hop_table", where)
+            index = entry.get("channel_index")
+            if index is None:
+                raise self.fail(f"{where}.channel_index", "missing required key", near=where)
+            if not isinstance(index, int) or isinstance(index, bool) or not 1 <= index <= INT64_MAX:
+                raise self.fail(f"{where}.channel_index",
+                                f"expected a positive integer (the reader's 1-based channel index), found {index!r}")
+            if index in table:
+                raise self.fail(f"{where}.channel_index", f"channel index {index} is given twice")
+            frequency = self.number(entry, "frequency_hz", f"{where}.frequency_hz")
+            if units.frequency_outside(np.array([frequency]))[0]:
+                raise self.fail(f"{where}.frequency_hz", units.frequency_message(repr(entry["frequency_hz"]), frequency))
+            table[index] = frequency
+        return table
+
 
 # --- writing ----------------------------------------------------------------
 
@@ -517,6 +543,9 @@ def write_scene(path, scene: Scene) -> None:
         lines += ["", "[[channel_offsets]]"]
         lines.append(f"frequency_hz = {float(offset.frequency_hz)!r}")
         lines.append(f"phase_offset_rad = {float(offset.phase_offset_rad)!r}")
+
+    for index, frequency in sorted(scene.hop_table.items()):
+        lines += ["", "[[hop_table]]", f"channel_index = {int(index)}", f"frequency_hz = {float(frequency)!r}"]
 
     for key, table in extra_tables.items():
         lines += ["", f"[{_toml_key(key)}]"]

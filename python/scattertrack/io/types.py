@@ -120,6 +120,9 @@ class Scene:
     channel_offsets: list[ChannelOffset] = field(default_factory=list)
     extra: dict = field(default_factory=dict)
     """Unknown top-level tables/keys, kept so that a round trip loses nothing."""
+    hop_table: dict[int, float] = field(default_factory=dict)
+    """The reader's hop table (``[[hop_table]]``): its 1-based channel index -> carrier, hertz.
+    Empty when the scene gives none. LLRP readers report this index, not a frequency."""
 
     def antenna_index(self, antenna_id: int) -> int:
         """Index into ``antennas`` of the antenna with this port id (KeyError if none)."""
@@ -192,6 +195,9 @@ class Reads:
     skipped: SkipReport = field(default_factory=SkipReport)
     reordered: int = 0
     """How many rows were out of time order in the file (sorted, not dropped)."""
+    channel_index: np.ndarray | None = None
+    """int64: the reader's own 1-based channel index as reported (LLRP ``ChannelIndex``),
+    -1 where a row has none; None when the source has no such column."""
 
     def __len__(self) -> int:
         return len(self.time_s)
@@ -206,6 +212,7 @@ class Reads:
             self.phase_rad[mask_or_index],
             self.rssi_dbm[mask_or_index],
             self.doppler_hz[mask_or_index],
+            channel_index=None if self.channel_index is None else self.channel_index[mask_or_index],
         )
 
     def epcs(self) -> list[str]:
