@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import contextlib
 import logging
 import math
@@ -75,6 +76,7 @@ def add_parsers(commands) -> None:
     live.add_argument("--reader-mode", type=ascii_int, help="RF mode index (Impinj AutoSet modes are 1000 and up)")
     live.add_argument("--session", type=ascii_int, default=1, help="Gen2 session 0-3 (default 1)")
     live.add_argument("--search-mode", type=ascii_int, help="Impinj search mode (1 single, 2 dual target, 3 TagFocus)")
+    live.add_argument("--scene-out", help="the scene with the reader's hop table ([[hop_table]]) to write (default: beside the journal, JOURNAL.scene.toml)")
     live.add_argument("--no-progress", action="store_true", help="no progress line")
     live.set_defaults(run=command_live)
 
@@ -138,6 +140,11 @@ def command_live(args) -> int:
     say(f"live: {host}:{port}, journal {args.journal}, track {args.out}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
     summary = asyncio.run(_run_until_interrupted(session))
     print_live_summary(summary, args)
+    if summary.hop_table_hz:
+        # Offline runs of the journal (import, calibrate, locate) read the carriers from it.
+        scene_out = Path(args.scene_out) if args.scene_out else Path(args.journal).with_suffix(".scene.toml")
+        dataclasses.replace(scene, hop_table=dict(summary.hop_table_hz)).save(scene_out)
+        say(f"  wrote the scene with the reader's hop table ({plural(len(summary.hop_table_hz), 'channel')}) to {scene_out}")
     return 0
 
 

@@ -89,9 +89,8 @@ class Calibration:
         channels = [ChannelOffset(float(f), float(o)) for f, o in sorted(self.channel_offsets_rad.items())]
         extra = dict(base.extra)
         extra["calibration"] = self.table()
-        if self.hop_table_hz:
-            extra["hop_table"] = [{"channel_index": int(i), "frequency_hz": float(f)} for i, f in sorted(self.hop_table_hz.items())]
-        return dataclasses.replace(base, reader=reader, antennas=antennas, channel_offsets=channels, extra=extra)
+        hop_table = {int(i): float(f) for i, f in sorted(self.hop_table_hz.items())} if self.hop_table_hz else dict(base.hop_table)
+        return dataclasses.replace(base, reader=reader, antennas=antennas, channel_offsets=channels, extra=extra, hop_table=hop_table)
 
     def table(self) -> dict:
         """The ``[calibration]`` table of the calibrated scene (plain TOML values)."""
@@ -161,10 +160,8 @@ def calibrate(scene: Scene, reads: Reads, references: dict | None = None, truth:
     distance = np.linalg.norm(positions[ref] - anchor, axis=1)
     phase = np.asarray(reads.phase_rad, dtype=np.float64)[ref]
     frequency = np.asarray(reads.frequency_hz, dtype=np.float64)[ref]
-    channel_index = getattr(reads, "channel_index", None)
-    hop_known = dict(getattr(scene, "hop_table", {}) or {}) or {
-        int(e["channel_index"]): float(e["frequency_hz"]) for e in scene.extra.get("hop_table", []) if isinstance(e, dict)
-    }
+    channel_index = reads.channel_index
+    hop_known = dict(scene.hop_table)
     estimate_hops = channel_index is not None and np.all(np.asarray(channel_index)[ref] >= 0) and not hop_known
     if channel_index is not None and hop_known and np.all(np.asarray(channel_index)[ref] >= 0):
         frequency = np.array([hop_known.get(int(c), f) for c, f in zip(np.asarray(channel_index)[ref], frequency)])

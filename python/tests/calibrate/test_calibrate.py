@@ -67,18 +67,16 @@ def test_the_hop_table_is_recovered_from_references_spread_over_metres():
     index_of = {khz: i for i, khz in enumerate(table, start=1)}
     channel_index = np.array([index_of[round(f / 1e3)] for f in sim.reads.frequency_hz])
     # As an importer without the table writes them: the plan in index order.
-    reads = dataclasses.replace(sim.reads, frequency_hz=902.75e6 + 0.5e6 * (channel_index - 1))
-    reads.channel_index = channel_index
+    reads = dataclasses.replace(sim.reads, frequency_hz=902.75e6 + 0.5e6 * (channel_index - 1), channel_index=channel_index)
     result = calibrate(uncalibrated(sim.scene), reads, reference_epcs(FAR))
     assert {i: f for i, f in result.hop_table_hz.items()} == {i: 1e3 * table[i - 1] for i in range(1, 51)}
-    assert result.scene().extra["hop_table"][0] == {"channel_index": 1, "frequency_hz": 1e3 * table[0]}
+    assert result.scene().hop_table[1] == 1e3 * table[0]
 
 
 def test_references_bunched_together_leave_channels_open_and_say_so(near_room):
     sim = room(20.0, [[0.5, 0.5, 0.5], [0.7, 0.6, 0.6]], seed=9)
     channel_index = np.rint((sim.reads.frequency_hz - 902.75e6) / 0.5e6).astype(int) + 1
-    reads = dataclasses.replace(sim.reads)
-    reads.channel_index = channel_index
+    reads = dataclasses.replace(sim.reads, channel_index=channel_index)
     result = calibrate(uncalibrated(sim.scene), reads, reference_epcs([[0.5, 0.5, 0.5], [0.7, 0.6, 0.6]]))
     assert any("cannot tell" in w and "channel indices" in w for w in result.warnings)
 

@@ -12,7 +12,7 @@ from pathlib import Path
 import pytest
 
 from scattertrack.cli import main
-from scattertrack.io import read_reads, read_track
+from scattertrack.io import read_reads, read_scene, read_track
 
 
 def free_port() -> int:
@@ -67,6 +67,10 @@ def test_live_against_the_emulator_with_a_forced_disconnect(capsys, walls, tmp_p
     assert "--duration 3.5 s reached" in out and f"{len(journal)} reads of 1 tag journaled" in out
     assert "1 reconnect" in out and "hop table of 50 channels" in out
     assert len(read_track(tmp_path / "track.csv")) > 0
+    # The reader's hop table, for offline runs: the journal's channel indices map to its carriers.
+    scene = read_scene(tmp_path / "reads.scene.toml")
+    assert len(scene.hop_table) == 50
+    assert all(scene.hop_table[int(c)] == f for c, f in zip(journal.channel_index, journal.frequency_hz))
 
 
 def test_live_refuses_bad_options_before_connecting(capsys, walls, tmp_path):
