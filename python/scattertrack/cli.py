@@ -151,6 +151,11 @@ def print_tracker_summary(result, reads, wall_s: float) -> None:
         )
     for line in unresolved_warnings(result):
         say(line)
+    if reads is not None and hasattr(reads, "phase_rad"):
+        from scattertrack.track.plausibility import implausible_speed_warnings
+
+        for line in implausible_speed_warnings(result, reads):
+            say(line)
     if len(stats) > MAX_TAGS_LISTED:
         rest = list(stats.values())[MAX_TAGS_LISTED:]
         say(
@@ -489,6 +494,11 @@ def command_check_scene(args) -> int:
         raise UsageError(f"check-scene checks reader scenes ([reader] kind = \"cots\", or \"sdr-helper\" without "
                          f"--reads), not {scene.reader.kind!r}" + (" with --reads" if args.reads else ""))
     reads = io.read_reads(args.reads, scene) if args.reads else None
+    from scattertrack.check.calibration import calibration_lines
+
+    # What is not calibrated first; the geometry's verdict stays the last line.
+    for line in calibration_lines(scene, reads):
+        say(line)
     for line in check.check_scene(scene, reads).lines():
         say(line)
     return 0
