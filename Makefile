@@ -65,6 +65,7 @@ bench: setup
 	$(PY) bench/turbotrack.py
 	$(PY) bench/marvel.py
 	$(PY) bench/live.py
+	$(PY) bench/calibration.py
 
 clean:
 	rm -rf target out $(VENV) python/scattertrack/*.so

@@ -209,13 +209,29 @@ def _bias_consider(anchors: np.ndarray, position: np.ndarray, k_mean: float, axe
         return np.full((axes, axes), np.inf)
 
 
+COVER_WEIGHT = 0.005
+"""Candidates at least this likely lie within 2.5 sigma of the best row, on every axis."""
+
+
 def _mixture(candidates: list[Candidate]) -> np.ndarray:
-    """Second moment of the candidates about the best one."""
+    """Second moment of the candidates about the best one, widened so that
+    every candidate of weight ≥ :data:`COVER_WEIGHT` lies within its 3 sigma.
+
+    The second moment alone does not cover a far, unlikely mode: a
+    candidate of weight w at distance D sits at D / (√w D) = 1/√w sigmas,
+    beyond 3 once w < 1/9. A user reading "3 sigma" expects the listed
+    alternatives inside it, so the sigma is at least their distance / 2.5
+    (inside 3 sigma with a margin)."""
     best = candidates[0].position
     total = np.zeros((3, 3))
     for c in candidates:
         d = c.position - best
         total += c.weight * (c.covariance + np.outer(d, d))
+    reach = np.zeros(3)
+    for c in candidates:
+        if c.weight >= COVER_WEIGHT:
+            reach = np.maximum(reach, np.abs(c.position - best) / 2.5)
+    total[np.diag_indices(3)] += np.maximum(reach**2 - np.diag(total), 0.0)
     return total
 
 

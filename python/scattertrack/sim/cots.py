@@ -105,9 +105,12 @@ READER_MODEL_DEFAULTS = {
     "hopping": False,
     "channels_hz": None,  # list of Hz; None: US_CHANNELS_HZ
     "hop_dwell_s": 0.2,  # s per channel
+    "report_channel_index": False,  # write the reader's channel_index (1-based into its shuffled hop table)
+    "log_frequency": True,  # False: frequency_hz is the plan in index order, as an importer without the hop table writes it
     # offsets
     "antenna_phase_offsets": "random",  # "random" (uniform [0, 2 pi)) or "zero"
     "antenna_offset_calibration_error_rad": 0.0,  # 1-sigma error of the written offsets
+    "write_antenna_offsets": True,  # False: scene.toml states 0 (an uncalibrated installation)
     "channel_phase_offsets": "random",  # when hopping: "random" or "zero"
     "write_channel_offsets": True,  # write [[channel_offsets]] to scene.toml when hopping
     "channel_offset_calibration_error_rad": 0.0,  # 1-sigma error of the written offsets
@@ -123,6 +126,7 @@ READER_MODEL_DEFAULTS = {
     "reflectors": [],  # list of {kind = "plane"|"point", ...}
     # RSSI
     "report_rssi": True,
+    "tag_gain_spread_db": 0.0,  # 1-sigma per tag and antenna RSSI offset, dB (tag orientation under CP antennas)
     "tx_power_dbm": 30.0,
     "antenna_gain_dbi": 6.0,
     "tag_gain_dbi": 0.0,
@@ -441,20 +445,29 @@ def generate_reads(
     phase = quantise_phase(phase, period_rad, int(model["phase_step_units"]))
 
     rssi = rssi_dbm(amplitude, frequency, model, rngs["rssi"]) if model["report_rssi"] else np.full(n, np.nan)
+    if model["report_rssi"] and model["tag_gain_spread_db"] > 0.0:
+        # Drawn after the noise, so that rooms without it keep their draws.
+        gains = model["tag_gain_spread_db"] * rngs["rssi"].standard_normal((len(epcs), len(antenna_ids)))
+        rssi = rssi + gains[tag, antenna]
     doppler = (
         doppler_hz(antenna_positions[antenna], position, velocity, frequency, model, rngs["doppler"])
         if model["report_doppler"]
         else np.full(n, np.nan)
     )
     epc_array = np.asarray(epcs, dtype=str)
+    written_frequency = frequency.astype(float)
+    if not model["log_frequency"]:
+        # The reader logged only its channel index: the plan in index order is a guess.
+        written_frequency = np.sort(np.asarray(channels_hz, dtype=float))[channel]
     reads = Reads(
         time_s=time,
         epc=epc_array[tag] if n else np.array([], dtype=epc_array.dtype),
         antenna=np.asarray(antenna_ids, dtype=np.int64)[antenna],
-        frequency_hz=frequency.astype(float),
+        frequency_hz=written_frequency,
         phase_rad=phase,
         rssi_dbm=rssi,
         doppler_hz=doppler,
+        channel_index=(channel + 1).astype(np.int64) if model["report_channel_index"] else None,
     )
     counts = {
         "read_attempts": int(attempts),

@@ -488,7 +488,7 @@ def _resolve_reader_model(check: _Checker, given: dict, antenna_ids: set, phase_
         if end_s <= start_s:
             check.fail(where, f"must end after it starts, got {window!r}")
         windows[i] = [start_s, end_s]
-    for name in ("hopping", "write_channel_offsets", "report_rssi", "report_doppler"):
+    for name in ("hopping", "write_channel_offsets", "write_antenna_offsets", "report_rssi", "report_doppler", "report_channel_index", "log_frequency"):
         check.boolean(model[name], key + name)
     if model["channels_hz"] is not None:
         channels = model["channels_hz"]
@@ -508,6 +508,7 @@ def _resolve_reader_model(check: _Checker, given: dict, antenna_ids: set, phase_
         "rssi_step_db",
         "doppler_noise_hz",
         "doppler_step_hz",
+        "tag_gain_spread_db",
     ):
         model[name] = check.number(model[name], key + name, 0.0)
     if model["tag_phase_offset_rad"] != "random":
@@ -742,7 +743,7 @@ def simulate(scenario: dict, seed: int | None = None) -> Simulation:
         ),
         antennas=[
             Antenna(id=int(i), position=p.copy(), phase_offset_rad=float(o))
-            for i, p, o in zip(antenna_ids, antenna_positions, antenna_written)
+            for i, p, o in zip(antenna_ids, antenna_positions, antenna_written if model["write_antenna_offsets"] else np.zeros(len(antenna_ids)))
         ],
         plane_z=scene_spec.get("plane_z") if scene_spec["dimensions"] == 2 else None,
         region=Region(np.array(region["min"], float), np.array(region["max"], float)) if region else None,
