@@ -94,7 +94,7 @@ def report(result) -> None:
         say(f"  {plural(len(result.channel_residual_rad), 'channel')} calibrated; worst residuals: " + ", ".join(f"{f / 1e6:.2f} MHz {r:.3f} rad" for f, r in worst))
     if result.hop_table_hz:
         clear = sum(1 for v in result.hop_table_margin.values() if v > 0)
-        say(f"  hop table: {plural(len(result.hop_table_hz), 'channel index')} assigned to the US plan, {clear} clearly")
+        say(f"  hop table: {len(result.hop_table_hz)} channel indices assigned to the US plan, {clear} clearly")
     for antenna, loss in sorted(result.path_loss.items()):
         exponent = f"exponent {loss.exponent:.2f}" if loss.fitted_exponent else f"exponent {loss.exponent:.1f} (free space: the references' ranges do not spread enough to fit it)"
         say(f"  RSSI antenna {antenna}: {loss.reference_dbm:.1f} dBm at 1 m, {exponent}, spread {loss.sigma_db:.2f} dB")

@@ -18,7 +18,7 @@ for the EPC). It estimates, from those reads alone:
 It reports the **phase coherence** R of the calibrated model on the
 references (1: every phase explained; the same fit on random phases
 reaches R₀, also reported) and the residuals per antenna and channel.
-When R is not clearly above R₀ (R < max(0.5, 2 R₀)) the phase is not
+When R is not clearly above R₀ (R < max(0.8, 2 R₀)) the phase is not
 usable in this room: the result says so, and ``calibrate`` prints a
 ``warning:`` line. The calibrated scene (:meth:`Calibration.scene`) holds
 the estimates and a ``[calibration]`` table stating what was calibrated
@@ -40,7 +40,7 @@ from scattertrack.io.types import ChannelOffset, Reads, Scene, Truth
 
 US_PLAN_HZ = 902.75e6 + 0.5e6 * np.arange(50)
 """The US (FCC) channel plan: 50 carriers of 500 kHz, 902.75-927.25 MHz."""
-COHERENCE_USABLE = 0.5
+COHERENCE_USABLE = 0.8
 """Below this phase coherence (or below twice chance), phase is not usable for ranging here."""
 ROUNDS = 3
 """Sign/offset fits alternated with the hop-table assignment."""

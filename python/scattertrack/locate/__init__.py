@@ -42,7 +42,7 @@ from scattertrack.locate.phase import FOUR_PI_OVER_C, coherence, fisher_covarian
 
 TEMPERATURE = 1.0
 """Candidate weights ∝ exp(Δℓ / T): correlated phase errors overcount evidence (as in GLAC)."""
-COHERENCE_USABLE = 0.5
+COHERENCE_USABLE = 0.8
 """A tag whose best position explains its phases with less coherence is located by RSSI."""
 BIAS_SIGMA_RAD = 0.07
 """Per-antenna phase bias left after calibration (wander, residuals), 1-sigma."""

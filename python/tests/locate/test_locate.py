@@ -105,3 +105,26 @@ def test_hop_range_is_the_phase_slope_across_channels():
     assert abs(d - 1.234) < 4 * sigma and sigma < 0.02
     # One antenna's carrier constant is the tag's offset: no lattice, only the slope.
     assert abs(hop_range(z * np.exp(2.0j), k, 5.0)[0] - d) < 1e-9
+
+
+def test_in_the_multipath_room_calibrate_gives_up_on_phase_and_locate_uses_rssi():
+    scenario = copy.deepcopy(load_scenario("calibration-room-multipath"))
+    references = {t["epc"]: t["trajectory"]["position"] for t in scenario["tags"]}
+    rng = np.random.default_rng(7)
+    low, high = np.array(scenario["scene"]["region"]["min"]), np.array(scenario["scene"]["region"]["max"])
+    positions = rng.uniform(low + 0.2, high - 0.2, size=(20, 3))
+    scenario["tags"] += [{"epc": f"E200E{i:03d}", "trajectory": {"kind": "static", "position": p.tolist()}} for i, p in enumerate(positions)]
+    sim = simulate(scenario, seed=21)
+    calibration = calibrate(sim.scene, sim.reads, references)
+    assert not calibration.phase_usable and any("not usable" in w for w in calibration.warnings)
+    located = [loc for loc in locate(calibration.scene(), sim.reads) if loc.epc.startswith("E200E")]
+    errors, beyond = [], []
+    for loc in located:
+        best = loc.candidates[0]
+        assert best.cue == "rssi" and "not usable" in loc.note
+        error = best.position - positions[int(loc.epc[5:])]
+        errors.append(np.linalg.norm(error))
+        beyond.append(np.any(np.abs(error) > 3 * np.sqrt(np.diag(best.covariance))))
+    assert np.mean(beyond) <= 0.1
+    centre = 0.5 * (low + high)
+    assert np.median(errors) < np.median(np.linalg.norm(positions - centre, axis=1))
