@@ -28,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 import warnings
@@ -965,6 +966,10 @@ def main(argv: list[str] | None = None) -> int:
             warnings.simplefilter("always", category=InputWarning)
             warnings.showwarning = print_warning
             return args.run(args)
+    except BrokenPipeError:
+        # The reader of our output went away (`scattertrack ... | head`): not an error of ours.
+        sys.stdout = open(os.devnull, "w")
+        return 0
     except (ValueError, KeyError, OSError) as error:
         # FormatError is a ValueError: its message already names file, line and column.
         print(f"scattertrack: error: {error_message(error)}", file=sys.stderr)

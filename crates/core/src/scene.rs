@@ -1,5 +1,5 @@
 //! The hardware set-up: antennas, reader phase conventions, calibration and
-//! the region where tags can be (FORMATS.md section 1).
+//! the region where tags can be (docs/formats.md section 1).
 //!
 //! Phase model (monostatic COTS reader), for a tag at distance `d` (m) from
 //! antenna `a`, carrier `f` (Hz), wavelength `λ = c / f`:
@@ -17,7 +17,7 @@ use crate::error::{Error, Result};
 /// Speed of light in vacuum, m/s.
 pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
 
-/// What an antenna does (FORMATS.md §1 `role`): a COTS reader's ports
+/// What an antenna does (docs/formats.md §1 `role`): a COTS reader's ports
 /// transmit and receive; a localization helper has one transmit antenna
 /// and several receive antennas (bistatic).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]

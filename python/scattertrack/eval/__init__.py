@@ -3,7 +3,7 @@
 Contract
 --------
 Inputs are the in-memory :class:`~scattertrack.io.types.Truth` and
-:class:`~scattertrack.io.types.Track` (FORMATS.md sections 3-4); units are
+:class:`~scattertrack.io.types.Track` (docs/formats.md sections 3-4); units are
 SI (metres, seconds, m/s) in every field, converted only for display.
 
 - :func:`compare` ``(truth, track, *, convergence_threshold_m=0.02, hold_s=1.0,

@@ -1,4 +1,4 @@
-"""Accuracy metrics of a track against ground truth (FORMATS.md sections 3-4).
+"""Accuracy metrics of a track against ground truth (docs/formats.md sections 3-4).
 
 Everything here works on the in-memory :class:`~scattertrack.io.types.Truth`
 and :class:`~scattertrack.io.types.Track`; nothing does I/O except
@@ -6,7 +6,7 @@ and :class:`~scattertrack.io.types.Track`; nothing does I/O except
 
 Matching rule, per tag (epc): the truth rows of that tag are interpolated
 linearly at the track times. Truth is sampled at 100 Hz or more
-(FORMATS.md 3), so linear interpolation is accurate to well under a
+(docs/formats.md 3), so linear interpolation is accurate to well under a
 millimetre for hand- or arm-speed motion. Track rows outside the time span of
 that tag's truth are not extrapolated: they are excluded and counted.
 """
@@ -186,7 +186,7 @@ def compare(
             excluded.add(NO_TRUTH_FOR_TAG, n=len(track_rows))
             continue
         truth_time, truth_position, truth_velocity = _truth_of_tag(truth, truth_groups[epc])
-        # The tracker writes rows in time order per tag (FORMATS.md 4), but an
+        # The tracker writes rows in time order per tag (docs/formats.md 4), but an
         # in-memory track may not be; the convergence rule needs time order.
         track_rows = track_rows[np.argsort(track.time_s[track_rows], kind="stable")]
         time = track.time_s[track_rows]

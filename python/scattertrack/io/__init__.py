@@ -1,4 +1,4 @@
-"""Readers and writers of the public formats (FORMATS.md sections 1-7).
+"""Readers and writers of the public formats (docs/formats.md sections 1-7).
 
 Contract: every reader validates and raises :class:`FormatError` naming the
 file, the 1-based line and the column for a malformed file; suspicious but

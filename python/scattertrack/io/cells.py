@@ -8,7 +8,7 @@ other scripts (a full-width ``３`` reads as 3) and the words ``nan`` and
 ``inf``. A file from another program that holds such a cell almost surely
 means something else, so it is an error here. The words ``nan`` (any case,
 optional sign) are accepted only where a column allows them; infinities
-never are (FORMATS.md: non-finite values are rejected).
+never are (docs/formats.md: non-finite values are rejected).
 
 The fast path converts the column with ``float()``/``int()`` over the whole
 list and then rules out the extra forms with two C-speed scans of the

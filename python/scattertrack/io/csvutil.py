@@ -1,4 +1,4 @@
-"""Shared CSV reading and writing for the public formats (FORMATS.md sections 2-4).
+"""Shared CSV reading and writing for the public formats (docs/formats.md sections 2-4).
 
 What every CSV format shares: a header line with exact lower-case column names
 in any order, unknown columns ignored, one row per line, blank lines allowed

@@ -1,4 +1,4 @@
-"""Backscatter pose features, ``features.csv`` (FORMATS.md section 7).
+"""Backscatter pose features, ``features.csv`` (docs/formats.md section 7).
 
 One row per sensing epoch: ``time_s`` (seconds, the IMU's clock),
 ``range_m`` (controller-to-drone distance, metres), ``azimuth_rad`` and

@@ -1,4 +1,4 @@
-"""Wideband channel frames, ``frames.csv`` (FORMATS.md section 5).
+"""Wideband channel frames, ``frames.csv`` (docs/formats.md section 5).
 
 What the SDR localization helper's one-shot channel estimation produces:
 one row per (frame, receive antenna, subcarrier) with ``time_s`` (frame

@@ -25,7 +25,7 @@ US_CHANNELS = 50
 
 MATCH_HZ = 1e3
 """A row's frequency within this of its hop-table entry, hertz, agrees with it
-(as channel offsets are matched, FORMATS.md 1)."""
+(as channel offsets are matched, docs/formats.md 1)."""
 
 NO_CHANNEL = -1
 """The channel index of a row that has none."""

@@ -1,4 +1,4 @@
-"""Inertial samples, ``imu.csv`` (FORMATS.md section 6).
+"""Inertial samples, ``imu.csv`` (docs/formats.md section 6).
 
 Columns: ``time_s`` (seconds, the features' clock), ``ax``, ``ay``, ``az``
 (specific force in the body frame, m/s^2; at rest about ``(0, 0, +9.81)``),

@@ -1,4 +1,4 @@
-"""Tag reads, ``reads.csv`` (FORMATS.md section 2).
+"""Tag reads, ``reads.csv`` (docs/formats.md section 2).
 
 One row per phase reading: ``time_s`` (seconds), ``epc`` (tag id),
 ``antenna`` (port id from the scene), ``frequency_hz`` (carrier, hertz),

@@ -1,4 +1,4 @@
-"""Scenes, ``scene.toml`` (FORMATS.md section 1).
+"""Scenes, ``scene.toml`` (docs/formats.md section 1).
 
 A scene describes the hardware: the reader (kind, phase sign and period),
 its antennas (ids, positions in metres, calibrated phase offsets in
@@ -7,7 +7,7 @@ per-channel phase offsets (hertz, radians) and the reader's optional hop
 table (``[[hop_table]]``: 1-based ``channel_index`` -> ``frequency_hz``, hertz,
 what LLRP readers' channel indices in reads.csv stand for).
 
-A helper scene (``kind = "sdr-helper"``, FORMATS.md section 5) has exactly
+A helper scene (``kind = "sdr-helper"``, docs/formats.md section 5) has exactly
 one antenna with ``role = "tx"`` and at least two with ``role = "rx"`` (no
 ``"txrx"``); its optional ``[helper]`` table records the OFDM set-up
 (``centre_frequency_hz``, ``bandwidth_hz`` in hertz, ``n_subcarriers``,
@@ -386,7 +386,7 @@ class _SceneChecker:
                 raise self.fail("helper.n_subcarriers", f"expected a positive integer, found {value!r}")
 
     def region(self, table: dict, dimensions: int, plane_z: float | None) -> Region:
-        """The box where tags can be, metres (FORMATS.md 1).
+        """The box where tags can be, metres (docs/formats.md 1).
 
         With ``dimensions = 2`` only x and y bound the tag: z may have zero
         extent (min z = max z = plane_z, the natural way to write a plane)

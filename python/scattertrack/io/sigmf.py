@@ -43,7 +43,7 @@ missing or whose length is not a whole number of samples. Tracked in a
 scene, a recording whose antenna positions differ from the scene's by more
 than 5 cm is warned (:mod:`scattertrack.io.sigmf_scene`). :func:`read_sigmf_frames` runs the Rust
 DSP (``scattertrack._core.OfdmDsp``) over every window and returns
-:class:`Frames` (FORMATS.md section 5); windows without a detectable
+:class:`Frames` (docs/formats.md section 5); windows without a detectable
 preamble, all-NaN windows and failed receive antennas are skipped and
 counted in ``Frames.skipped`` (examples: 0-based window indices).
 """
@@ -512,7 +512,7 @@ class SigmfEstimate:
     """What :func:`estimate_sigmf` found: the frames and per-reply diagnostics."""
 
     frames: Frames
-    """FORMATS.md section 5 frames; ``frames.skipped`` counts what was declined."""
+    """docs/formats.md section 5 frames; ``frames.skipped`` counts what was declined."""
     window: np.ndarray
     """Window index of each frame (n_frames,), in the order of the recording."""
     score: np.ndarray
@@ -620,7 +620,7 @@ def estimate_sigmf(
     ``calibration``: a :class:`SigmfCalibration`, the path of a calibration
     recording (:func:`calibrate_sigmf` with its recorded tag position), or
     None (uncalibrated channels: the hardware response and the tag's
-    modulation phase remain, so the FORMATS.md section 5 convention does
+    modulation phase remain, so the docs/formats.md section 5 convention does
     not hold). ``ema_alpha``: smoothing across each tag's replies
     (``DspEma``; None: off). ``use_tx_index``: use each window's
     transmitter sample index to keep the symbol timing reference fixed
@@ -720,5 +720,5 @@ def estimate_sigmf(
 
 
 def read_sigmf_frames(path, scene: Scene, calibration=None, **options) -> Frames:
-    """The wideband frames (FORMATS.md section 5) of a helper recording: :func:`estimate_sigmf`'s ``frames``."""
+    """The wideband frames (docs/formats.md section 5) of a helper recording: :func:`estimate_sigmf`'s ``frames``."""
     return estimate_sigmf(path, scene, calibration, **options).frames

@@ -1,6 +1,6 @@
 """One-line accounts of what a reader did with a file's rows, for the command line.
 
-Every input row is used or declined with a reason (FORMATS.md: nothing is
+Every input row is used or declined with a reason (docs/formats.md: nothing is
 silently dropped). These lines say so for each input before tracking: how
 many rows came back, how many were out of time order (sorted) and how many
 the reader declined, by reason with example lines. Pure functions of the

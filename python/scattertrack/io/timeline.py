@@ -1,6 +1,6 @@
 """Clock jumps in a time column: valid input, but worth a warning.
 
-Rows may arrive out of time order (FORMATS.md 2: readers batch and
+Rows may arrive out of time order (docs/formats.md 2: readers batch and
 interleave reports) and the readers sort them. A reorder of a few hundred
 milliseconds is what buffering produces; a row more than
 :data:`BACKWARD_JUMP_S` earlier than a row before it means the reader's clock
@@ -79,7 +79,7 @@ def warn_outside_span(path, time_s: np.ndarray, lines: np.ndarray | None, span_p
     ("row", "epoch"). One warning per side, at the
     row furthest outside, with the count: rows outside have no inertial data
     to be fused with, so a fusion declines them; a whole file outside
-    means two clocks (FORMATS.md 7: features share the IMU's clock).
+    means two clocks (docs/formats.md 7: features share the IMU's clock).
     """
     if not len(time_s) or not len(span_time_s):
         return

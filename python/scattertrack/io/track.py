@@ -1,4 +1,4 @@
-"""Tracker output, ``track.csv`` (FORMATS.md section 4).
+"""Tracker output, ``track.csv`` (docs/formats.md section 4).
 
 Columns: ``time_s`` (seconds), ``epc`` (tag id), ``x``, ``y``, ``z``
 (position, metres), ``vx``, ``vy``, ``vz`` (velocity, m/s; the literal
@@ -81,7 +81,7 @@ def _joined(chunks: list[np.ndarray], width: int) -> np.ndarray:
 
 
 def _check_time_order(path, track: Track, lines: np.ndarray) -> None:
-    """Each tag's rows must be in time order (FORMATS.md 4); name the first that is not."""
+    """Each tag's rows must be in time order (docs/formats.md 4); name the first that is not."""
     order = np.lexsort((np.arange(len(track)), track.epc))  # by tag, file order kept
     time = track.time_s[order]
     same_tag = track.epc[order][1:] == track.epc[order][:-1]

@@ -1,4 +1,4 @@
-"""Ground truth, ``truth.csv`` (FORMATS.md section 3).
+"""Ground truth, ``truth.csv`` (docs/formats.md section 3).
 
 Columns: ``time_s`` (seconds, the reads' clock), ``epc`` (tag id),
 ``x``, ``y``, ``z`` (position, metres) and optionally ``vx``, ``vy``, ``vz``
@@ -30,7 +30,7 @@ VELOCITY = ["vx", "vy", "vz"]
 ORIENTATION = ["qw", "qx", "qy", "qz"]
 REQUIRED = ["time_s", "epc", *POSITION]
 MIN_RATE_HZ = 100.0
-"""Truth should be sampled at least this often, Hz (FORMATS.md 3), for linear interpolation."""
+"""Truth should be sampled at least this often, Hz (docs/formats.md 3), for linear interpolation."""
 
 
 def read_truth(path) -> Truth:
@@ -103,7 +103,7 @@ def _warn_sampling(path, time, codes, position, lines, names) -> None:
             rate = 1.0 / float(np.median(spacing))
             warn_input(path, int(lines[start]), "time_s",
                        f"truth of tag {names[codes[start]]!r} is sampled at {rate:.3g} Hz (median spacing "
-                       f"{1.0 / rate:.4g} s), below the {MIN_RATE_HZ:g} Hz that FORMATS.md asks for: "
+                       f"{1.0 / rate:.4g} s), below the {MIN_RATE_HZ:g} Hz that docs/formats.md asks for: "
                        "linear interpolation between rows adds error to the evaluation")
 
 

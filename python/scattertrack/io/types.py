@@ -1,4 +1,4 @@
-"""In-memory forms of the public formats (``FORMATS.md`` sections 1-4).
+"""In-memory forms of the public formats (``docs/formats.md`` sections 1-4).
 
 Plain dataclasses and columnar numpy arrays: one array per column, one row
 per index. Readers in :mod:`scattertrack.io` build them from files and
@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 SPEED_OF_LIGHT = 299_792_458.0
-"""Speed of light in vacuum, m/s (FORMATS.md section 1: lambda = c / f)."""
+"""Speed of light in vacuum, m/s (docs/formats.md section 1: lambda = c / f)."""
 
 
 class FormatError(ValueError):
@@ -132,7 +132,7 @@ class Scene:
         raise KeyError(antenna_id)
 
     def channel_offset(self, frequency_hz: float) -> float:
-        """Calibrated offset of the channel matched within 1 kHz; 0 if none (FORMATS.md 1)."""
+        """Calibrated offset of the channel matched within 1 kHz; 0 if none (docs/formats.md 1)."""
         for c in self.channel_offsets:
             if abs(c.frequency_hz - frequency_hz) <= 1e3:
                 return c.phase_offset_rad
@@ -269,7 +269,7 @@ class Track:
 
 @dataclass
 class Imu:
-    """Inertial samples (``imu.csv``, FORMATS.md section 6), sorted by time.
+    """Inertial samples (``imu.csv``, docs/formats.md section 6), sorted by time.
 
     Body frame x forward, y left, z up; at rest ``accel`` reads about
     (0, 0, +9.81) m/s^2 (specific force).
@@ -292,7 +292,7 @@ class Imu:
 
 @dataclass
 class Features:
-    """Backscatter pose features (``features.csv``, FORMATS.md section 7), sorted by time.
+    """Backscatter pose features (``features.csv``, docs/formats.md section 7), sorted by time.
 
     ``azimuth_rad``/``elevation_rad``: direction from the controller's array
     to the drone, world frame; ``yaw_rad``: heading of body x about +z, nan

@@ -1,7 +1,7 @@
 """Range checks of physical columns that name the unit a wrong value was likely written in.
 
 Files from other programs often carry a carrier frequency in MHz or a phase
-in degrees or in a reader's raw units. Such a value is rejected (FORMATS.md:
+in degrees or in a reader's raw units. Such a value is rejected (docs/formats.md:
 SI units everywhere) with the likely unit and its conversion, so that the
 user can fix the exporter instead of guessing.
 """
@@ -26,7 +26,7 @@ FREQUENCY_UNITS = (
 
 DEGREES_MAX = 360.0
 IMPINJ_PHASE_UNITS = 4096
-"""Impinj readers report phase as an integer 0..4095 (FORMATS.md 2: x * 2*pi / 4096)."""
+"""Impinj readers report phase as an integer 0..4095 (docs/formats.md 2: x * 2*pi / 4096)."""
 
 
 def frequency_outside(values: np.ndarray) -> np.ndarray:

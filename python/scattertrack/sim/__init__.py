@@ -18,7 +18,7 @@ Contract
     draw comes from ``numpy.random.default_rng(seed)``: the same scenario and
     seed give identical output on the same numpy.
 ``write_simulation(sim, out_dir)``
-    Writes ``scene.toml``, ``reads.csv``, ``truth.csv`` (FORMATS.md 1-3) and
+    Writes ``scene.toml``, ``reads.csv``, ``truth.csv`` (docs/formats.md 1-3) and
     ``simulation.json`` (seed, resolved scenario, package version, details).
 ``list_scenarios(pipeline="glac") -> list[str]``
     The named scenarios shipped in ``<repo>/scenarios`` for one pipeline
@@ -26,7 +26,7 @@ Contract
 
 Scenarios with ``pipeline = "turbotrack"`` simulate a reader plus SDR
 localization helper instead (:mod:`scattertrack.sim.wideband`): their
-``Simulation`` has ``frames`` (FORMATS.md section 5) and ``reads = None``,
+``Simulation`` has ``frames`` (docs/formats.md section 5) and ``reads = None``,
 and ``write_simulation`` writes ``frames.csv`` instead of ``reads.csv``.
 ``list_scenarios("turbotrack")`` lists them. The helper's channel physics
 (``tag_channel``, ``static_channel``, ``bistatic_path_lengths``,
@@ -37,7 +37,7 @@ exported here too.
 Scenarios with ``pipeline = "marvel"`` simulate a drone with four
 LoRa-backscatter tags and an IMU at the feature level
 (:mod:`scattertrack.sim.marvel`, docs/marvel.md section 9): their
-``Simulation`` has ``imu`` and ``features`` (FORMATS.md sections 6-7),
+``Simulation`` has ``imu`` and ``features`` (docs/formats.md sections 6-7),
 ``truth`` with orientation and ``reads = None``; ``write_simulation`` writes
 ``imu.csv`` and ``features.csv``. The drone's flights
 (``flight(params, t) -> FlightTruth``, ``tag_positions``, ``DEFAULT_TAGS``),
@@ -46,7 +46,7 @@ the IMU (``simulate_imu``, ``IMU_MODEL_DEFAULTS``) and the feature model
 level (``simulate_marvel_iq``: a LoRa recording instead of features) are exported here;
 quaternion helpers are in :mod:`scattertrack.sim.rotation`.
 
-The reads follow FORMATS.md's monostatic phase model
+The reads follow docs/formats.md's monostatic phase model
 ``phase = (phase_sign 4 pi f d / c + antenna offset + channel offset(f)
 + tag offset + noise) mod P`` with the impairments of
 :mod:`scattertrack.sim.cots`; trajectories are in

@@ -27,7 +27,7 @@ Carrier
     (default the 50 US channels 902.75 + 0.5 k MHz, k = 0..49), one channel per
     ``hop_dwell_s`` (0.2 s), the table repeating.
 
-Phase (FORMATS.md section 1)
+Phase (docs/formats.md section 1)
     ``phase = (phase_sign * 4 pi f d / c + multipath + antenna offset
     + channel offset(f) + tag offset + white noise + wander) mod P``, then an
     outlier (with probability ``outlier_probability``) is replaced by a

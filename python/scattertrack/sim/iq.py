@@ -38,7 +38,7 @@ Propagation
     ``G_r(f) [S_r(f) + s(t) Gamma T_r(f)] X(f)``: ``S`` the static channel
     (tx -> rx leakage and clutter, :func:`wideband.static_channel`), ``T``
     the tag channel at the tag's true position (:func:`wideband.tag_channel`,
-    FORMATS.md section 5 convention), ``Gamma = exp(j psi)`` the tag's
+    docs/formats.md section 5 convention), ``Gamma = exp(j psi)`` the tag's
     modulation phase (one per recording: all tags are of one model), ``G``
     the hardware response of each receive chain: a gain
     (``hardware_gain_db`` spread), smooth gain and phase ripple across the
@@ -542,7 +542,7 @@ def _helper_scene(scene: Scene, model: dict) -> Scene:
 
 
 def _truth(epcs, trajectories, query_end, duration_s) -> Truth:
-    """Every tag's position and velocity on a 200 Hz grid covering the session (FORMATS.md 3)."""
+    """Every tag's position and velocity on a 200 Hz grid covering the session (docs/formats.md 3)."""
     return wideband.truth_grid(epcs, trajectories, float(max(duration_s, query_end[-1] + 1e-3)), 200.0)
 
 

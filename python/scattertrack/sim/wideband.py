@@ -5,7 +5,7 @@ receive antennas. It sends OFDM symbols (``N`` subcarriers over a bandwidth
 ``B``) while a tag replies to the reader; every reply gives, per receive
 antenna, the tag's channel ``h(f)`` at every subcarrier ("one-shot wideband
 estimation": mean of the reflective symbols minus mean of the non-reflective
-ones, sec. 4.3). One such set of channels is a *frame* (FORMATS.md section 5).
+ones, sec. 4.3). One such set of channels is a *frame* (docs/formats.md section 5).
 
 This module has two layers.
 
@@ -23,7 +23,7 @@ Frame-level simulator
     of :data:`HELPER_MODEL_DEFAULTS`, without simulating IQ samples (fast:
     a 20 s session at 300 frames/s takes well under a second).
 
-Channel convention (FORMATS.md section 5)
+Channel convention (docs/formats.md section 5)
     After calibration one propagation path of length ``L`` (metres) gives
     ``a * exp(-j 2 pi f L / c)`` with ``a`` real, ``c = 299 792 458 m/s``.
     For the direct path ``L = d1 + d2`` with ``d1 = |tx - tag|`` and

@@ -9,7 +9,7 @@ import numpy as np
 from scattertrack.io.types import Scene
 
 DEFAULT_PHASE_NOISE_RAD = 0.1
-"""The filter's prior when the scene states none (FORMATS.md section 1), radians."""
+"""The filter's prior when the scene states none (docs/formats.md section 1), radians."""
 
 
 def scene_arguments(scene: Scene) -> tuple:

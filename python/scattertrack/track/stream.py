@@ -41,7 +41,7 @@ class StreamResult:
     """What one streaming run produced."""
 
     track: Track
-    """One row per reply with a position (FORMATS.md section 4)."""
+    """One row per reply with a position (docs/formats.md section 4)."""
     latency_ns: np.ndarray
     """Per reply, from its arrival to its output, ns (capture order)."""
     stage_ns: np.ndarray

@@ -1,6 +1,6 @@
 """TurboTrack and its comparison variants over the Rust core
 (``crates/core/src/track/turbotrack.rs``), fed wideband frames
-(``frames.csv``, FORMATS.md section 5).
+(``frames.csv``, docs/formats.md section 5).
 
 Method names: ``turbotrack`` (thesis ch. 5, Algorithm 1), ``gaussian-pf``
 (single broad Gaussian likelihood, bootstrap proposal: thesis §7.2(a)) and

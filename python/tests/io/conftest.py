@@ -6,7 +6,7 @@ import pytest
 
 REPOSITORY_ROOT = Path(__file__).resolve().parents[3]
 EXAMPLES = REPOSITORY_ROOT.parent / "shared" / "examples"
-"""Files written by an independent program (FORMATS.md examples), beside the repository."""
+"""Files written by an independent program (docs/formats.md examples), beside the repository."""
 
 
 @pytest.fixture

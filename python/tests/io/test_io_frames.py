@@ -1,4 +1,4 @@
-"""frames.csv (FORMATS.md section 5) and helper scenes: round trips, the shared example,
+"""frames.csv (docs/formats.md section 5) and helper scenes: round trips, the shared example,
 one test per malformed input (file, line and column), duplicates and reordering."""
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Every shared example and outside case (FORMATS.md files written by other programs) still
+"""Every shared example and outside case (docs/formats.md files written by other programs) still
 reads: scenes, reads, frames, imu and features, with their time spans agreeing; and every
 row of them is used (none declined on reading)."""
 

@@ -78,7 +78,7 @@ def test_subcarriers_of_the_thesis_helper():
 
 
 def test_noiseless_channel_phase_is_the_path_length():
-    """Independent check of FORMATS.md 5: -arg h = 2 pi f d / c (mod 2 pi), |h| = 1 / (d1 d2)."""
+    """Independent check of docs/formats.md 5: -arg h = 2 pi f d / c (mod 2 pi), |h| = 1 / (d1 d2)."""
     frequencies = subcarrier_frequencies(915e6, 100e6, 20)
     h = tag_channel(TX, RX, TAGS, frequencies)
     assert h.shape == (3, 4, 20) and h.dtype == np.complex128

@@ -2,7 +2,7 @@
 //! and eq. 5.1): the measurement model of the localization helper.
 //!
 //! After calibration a path of length `d` (m) gives, at subcarrier `f`
-//! (Hz), `h(f) = a · exp(−j 2π f d / c)` (FORMATS.md §5). The
+//! (Hz), `h(f) = a · exp(−j 2π f d / c)` (docs/formats.md §5). The
 //! fractional Fourier transform ("delay-domain beamformer")
 //!
 //! `B(d) = Σ_k h(f_k) · exp(+j 2π f_k d / c)`

@@ -53,7 +53,7 @@ pub struct PhaseRead {
 
 /// One wideband frame of an SDR localization helper: the tag channel
 /// estimated from a single reply at every subcarrier of every receive
-/// antenna (the rows of frames.csv with one `time_s`, FORMATS.md §5).
+/// antenna (the rows of frames.csv with one `time_s`, docs/formats.md §5).
 ///
 /// After calibration one path of length `d = |tx − tag| + |tag − rx|`
 /// (m) contributes `a · exp(−j 2π f d / c)` with `a > 0`.

@@ -4,7 +4,7 @@ use crate::error::{Error, Result};
 use crate::SPEED_OF_LIGHT;
 
 /// The channel of one path of length `d` (m) at each frequency (Hz):
-/// `a exp(−j 2π f d / c)` — the convention of FORMATS.md §5 (`a > 0`).
+/// `a exp(−j 2π f d / c)` — the convention of docs/formats.md §5 (`a > 0`).
 pub fn path_channel(frequencies_hz: &[f64], path_length_m: f64, amplitude: f64) -> Vec<Complex64> {
     frequencies_hz
         .iter()
@@ -13,7 +13,7 @@ pub fn path_channel(frequencies_hz: &[f64], path_length_m: f64, amplitude: f64) 
 }
 
 /// Per-(rx, subcarrier) complex correction that maps measured tag channels
-/// to the FORMATS.md §5 convention (thesis ch. 4.3: "a one-time calibration
+/// to the docs/formats.md §5 convention (thesis ch. 4.3: "a one-time calibration
 /// with a known RFID location in order to eliminate other over-the-wire
 /// hardware channels").
 ///

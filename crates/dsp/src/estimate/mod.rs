@@ -13,7 +13,7 @@
 //!   the variance of that estimate.
 //! - [`Ema`]: exponential moving average across replies of one tag.
 //! - [`Calibration`]: a per-(rx, subcarrier) complex correction from a tag
-//!   at a known position, so that calibrated channels follow FORMATS.md §5:
+//!   at a known position, so that calibrated channels follow docs/formats.md §5:
 //!   `h(f) = a exp(−j 2π f d / c)`, `d = |tx − tag| + |tag − rx|`.
 //!
 //! Which state is "reflective": the Gen2 waveform's level 1 (the FM0

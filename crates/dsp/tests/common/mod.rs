@@ -119,7 +119,7 @@ impl Reply {
         Complex64::from_polar(gain, phase + delay)
     }
 
-    /// The tag channel at FFT bin `k` in the FORMATS.md §5 convention.
+    /// The tag channel at FFT bin `k` in the docs/formats.md §5 convention.
     pub fn tag_channel_bin(&self, a: usize, k: usize, tag: &[f64; 3]) -> Complex64 {
         let (d1, d2) = (distance(&self.tx, tag), distance(tag, &self.rx[a]));
         Complex64::from_polar(
@@ -128,7 +128,7 @@ impl Reply {
         )
     }
 
-    /// FORMATS.md §5 tag channel, `rx × active subcarriers`, ascending.
+    /// docs/formats.md §5 tag channel, `rx × active subcarriers`, ascending.
     pub fn true_tag_channel(&self, tag: &[f64; 3]) -> Vec<Complex64> {
         let bins = self.config.active_bins();
         (0..self.rx.len()).flat_map(|a| bins.iter().map(move |&k| self.tag_channel_bin(a, k, tag))).collect()

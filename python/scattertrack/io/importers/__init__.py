@@ -1,4 +1,4 @@
-"""Importers of reader logs into :class:`~scattertrack.io.Reads` (``reads.csv``, FORMATS.md section 2).
+"""Importers of reader logs into :class:`~scattertrack.io.Reads` (``reads.csv``, docs/formats.md section 2).
 
 Contract: every format has a function ``import_FORMAT(paths, scene) -> (Reads, report)``
 (``report`` an :class:`ImportReport`), listed in :data:`IMPORTERS` by the name the
