@@ -17,6 +17,8 @@ lowest line (then the leftmost column), whichever check found it.
 from __future__ import annotations
 
 import csv
+import io
+import re
 from dataclasses import dataclass, field
 from itertools import chain, islice
 from operator import methodcaller
@@ -165,6 +167,12 @@ class CsvReader:
         self._last_line = 0  # the last file line consumed
 
     def __enter__(self) -> "CsvReader":
+        if is_parquet(self.path):
+            # The Parquet twin is read as the CSV it stands for, so that every
+            # check applies alike; its "line N" is table row N - 1.
+            self._file = io.StringIO(parquet_as_csv_text(self.path))
+            self._read_header()
+            return self
         # utf-8-sig drops a byte-order mark; newline="" keeps line ends for csv.
         self._file = open(self.path, newline="", encoding="utf-8-sig")
         self._read_header()
@@ -337,8 +345,52 @@ def quote_text(value: str) -> str:
     return '"' + value.replace('"', '""') + '"'
 
 
+PARQUET_SUFFIX = ".parquet"
+TEXT_COLUMNS = frozenset({"epc", "cue"})
+"""Columns that stay text in a Parquet twin; the others are typed from their cells."""
+_INTEGER_CELL = re.compile(r"[+-]?[0-9]+")
+
+
+def is_parquet(path) -> bool:
+    """Whether ``path`` names a Parquet twin (by its extension)."""
+    return str(path).lower().endswith(PARQUET_SUFFIX)
+
+
+def parquet_as_csv_text(path) -> str:
+    """A Parquet file's table as the CSV text of its twin (FormatError if unreadable)."""
+    import pyarrow.csv
+    import pyarrow.parquet
+
+    try:
+        table = pyarrow.parquet.read_table(path)
+    except (OSError, ValueError) as error:  # pyarrow's ArrowInvalid is a ValueError
+        raise FormatError(str(path), None, None, f"not a readable Parquet file: {error}") from None
+    buffer = io.BytesIO()
+    pyarrow.csv.write_csv(table, buffer)
+    return buffer.getvalue().decode("utf-8")
+
+
+def _typed(name: str, cells: list[str]):
+    """A Parquet column from formatted cells: text, int64 (all integers; empty = null) or float64."""
+    import pyarrow
+
+    if name in TEXT_COLUMNS:
+        return pyarrow.array(cells, pyarrow.string())
+    present = [c for c in cells if c != ""]
+    if present and all(_INTEGER_CELL.fullmatch(c) for c in present):
+        return pyarrow.array([int(c) if c != "" else None for c in cells], pyarrow.int64())
+    return pyarrow.array([float(c) if c != "" else float("nan") for c in cells], pyarrow.float64())
+
+
 def write_columns(path, header: list[str], columns: list[list[str]]) -> None:
-    """Write a CSV file from already formatted columns (one list of strings each)."""
+    """Write a CSV file (or its Parquet twin, by extension) from formatted columns (one list of strings each)."""
+    if is_parquet(path):
+        import pyarrow
+        import pyarrow.parquet
+
+        table = pyarrow.table({name: _typed(name, list(cells)) for name, cells in zip(header, columns)} if columns else {name: pyarrow.array([], pyarrow.float64()) for name in header})
+        pyarrow.parquet.write_table(table, path)
+        return
     with open(path, "w", encoding="utf-8", newline="") as f:
         f.write(",".join(header) + "\n")
         f.writelines(",".join(row) + "\n" for row in zip(*columns))
