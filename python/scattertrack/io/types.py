@@ -262,6 +262,10 @@ class Track:
     revised: Track | None = None
     """Marvel: the whole revised track (every column, each state as last
     revised before it left the smoother's window); None for other methods."""
+    covariance: np.ndarray | None = None
+    """(n, 6, 6) covariance of [p, v] (m², m²/s, m²/s²) per row, kept only
+    when an output needs it (``st.track.run(..., covariance=True)``: the
+    ROS 2 writers); not in ``track.csv``."""
 
     def __len__(self) -> int:
         return len(self.time_s)

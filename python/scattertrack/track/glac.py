@@ -147,7 +147,7 @@ _DECLINED = {
 }
 
 
-def track_from_columns(columns: dict, epcs: np.ndarray, input_skipped: SkipReport, stats: dict, declined: dict) -> Track:
+def track_from_columns(columns: dict, epcs: np.ndarray, input_skipped: SkipReport, stats: dict, declined: dict, keep_covariance: bool = False) -> Track:
     """A Track from the engine's output columns (lists of chunks; ``row``
     indexes ``epcs``), carrying the input's skip report plus what the
     trackers declined (``stats`` per tag, ``declined``: counter → reason)."""
@@ -168,16 +168,20 @@ def track_from_columns(columns: dict, epcs: np.ndarray, input_skipped: SkipRepor
         skipped=skipped,
     )
     track.stats = stats
+    if keep_covariance:
+        track.covariance = covariance.reshape(-1, 6, 6)
     return track
 
 
-def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chunk: int = 50_000, **params) -> Track:
+def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chunk: int = 50_000, covariance: bool = False, **params) -> Track:
     """Tracks every tag in ``reads`` (time-ordered, as the readers return
     them) and returns one estimate row per update, in time order.
 
     Causal: each row uses only reads at or before its time. The reads'
     own skip report (duplicates) is carried over, and reads the trackers
-    declined are added to it by reason.
+    declined are added to it by reason. ``covariance=True`` keeps every
+    row's full 6×6 covariance in ``Track.covariance`` (for the ROS 2
+    writers; 288 bytes a row).
     """
     tracker = Tracker(method, scene, **params)
     order = np.argsort(reads.time_s, kind="stable")
@@ -213,6 +217,6 @@ def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chun
     if bar is not None:
         bar.close()
     stats = {str(n): tracker.stats(str(n)) for n in names}
-    track = track_from_columns(columns, epcs, reads.skipped, stats, _DECLINED)
+    track = track_from_columns(columns, epcs, reads.skipped, stats, _DECLINED, keep_covariance=covariance)
     track.latency = tracker.latency()
     return track
