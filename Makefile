@@ -21,10 +21,12 @@ export RUSTFLAGS ?= -C target-cpu=$(RUST_TARGET_CPU)
 # extension built in release mode and the package installed (editable), so
 # that afterwards the CLI is .venv/bin/scattertrack.
 setup: $(VENV)/.deps-installed
+	@echo "setup: building the Rust extension (release) into .venv"
 	VIRTUAL_ENV=$(VENV) PATH=$(VENV)/bin:$$PATH $(VENV)/bin/maturin develop --release -m python/Cargo.toml -q
 	@test -x $(VENV)/bin/scattertrack
 
 $(VENV)/.deps-installed: requirements-dev.txt
+	@echo "setup: installing the pinned Python dependencies into .venv (minutes on a fresh clone)"
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -r requirements-dev.txt
@@ -50,9 +52,11 @@ demo-live: setup
 test: setup test-rust test-python
 
 test-rust:
+	@echo "test: Rust (scattertrack-core, -dsp, -runtime)"
 	cargo test -p scattertrack-core -p scattertrack-dsp -p scattertrack-runtime --release -q
 
 test-python:
+	@echo "test: Python (python/tests and the examples in docs/)"
 	$(PY) -m pytest -q python/tests docs
 
 bench: setup

@@ -140,10 +140,13 @@ def _phase_candidates(z, k, anchors, time_s, antenna, scene, low, high) -> list[
     values = np.empty(len(points))
     for start in range(0, len(points), 4096):
         values[start : start + 4096] = coherence(z, k, anchors, points[start : start + 4096])
-    # Seeds: the best grid points at least half a lattice step apart (greedy).
+    # Seeds: the best grid points at least half a lattice step apart (greedy),
+    # among those whose coherence comes near the best's: a lattice point the
+    # grid samples off its peak still reaches about half of it.
     order = np.argsort(-values)[: 50 * MAX_CANDIDATES]
+    floor = 0.5 * float(values[order[0]]) if len(order) else 0.0
     for i in order:
-        if len(seeds) >= 4 * MAX_CANDIDATES:
+        if len(seeds) >= 4 * MAX_CANDIDATES or values[i] < floor:
             break
         if not seeds or np.min(np.linalg.norm(np.array(seeds) - points[i], axis=1)) > 0.5 * spacing:
             seeds.append(points[i])
