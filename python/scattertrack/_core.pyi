@@ -379,3 +379,23 @@ def twin_positions(
     evidence_reads: float | None = None,
 ) -> list[tuple[list[float], list[int], float]]:
     """Twins of one position: (position m, shift per antenna, chi-square), nearest first."""
+
+# --- static-tag phase search (python/src/locate.rs) ---------------------------
+
+def locate_search(
+    z_re: np.ndarray,
+    z_im: np.ndarray,
+    k: np.ndarray,
+    antenna: np.ndarray,
+    anchors: np.ndarray,
+    low: tuple[float, float, float],
+    high: tuple[float, float, float],
+    axes: int,
+    max_points: int = 100_000,
+    max_seeds: int = 20,
+) -> tuple[np.ndarray, np.ndarray]:
+    """One tag's candidates in the box: positions (c, 3) m and coherences (c,), best first
+    (``antenna`` indexes ``anchors``; ``k`` = m s 4 pi f / c, rad/m)."""
+
+def locate_hop_range(z_re: np.ndarray, z_im: np.ndarray, k: np.ndarray, max_range_m: float) -> tuple[float, float] | None:
+    """One antenna's range from its reads over several channels: (range m, 1-sigma m), or None."""

@@ -3,6 +3,7 @@
 
 mod dsp;
 mod geometry;
+mod locate;
 mod lora;
 mod params;
 
@@ -566,6 +567,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     dsp::register(m)?;
     lora::register(m)?;
     geometry::register(m)?;
+    locate::register(m)?;
     Ok(())
 }
 

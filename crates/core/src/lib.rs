@@ -20,6 +20,7 @@ pub mod engine;
 pub mod error;
 pub mod filter;
 pub mod geometry;
+pub mod locate;
 pub mod model;
 pub mod params;
 pub mod scene;

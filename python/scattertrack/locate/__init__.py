@@ -36,9 +36,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from scattertrack import _core
 from scattertrack.io.types import Reads, Scene
 from scattertrack.locate import rssi as rssi_cue
-from scattertrack.locate.phase import FOUR_PI_OVER_C, coherence, fisher_covariance, hop_range, refine
+from scattertrack.locate.phase import FOUR_PI_OVER_C, fisher_covariance
 
 TEMPERATURE = 1.0
 """Candidate weights ∝ exp(Δℓ / T): correlated phase errors overcount evidence (as in GLAC)."""
@@ -124,7 +125,6 @@ def _phase_candidates(z, k, anchors, time_s, antenna, scene, low, high) -> list[
     spacing = 2.0 * np.pi / float(np.mean(np.abs(k)))  # m: ψ turns once per this much range (λ/2, λ/4 mod π)
     frequency_spread = float(np.std(np.abs(k))) / FOUR_PI_OVER_C
     hopping = frequency_spread >= HOPPING_SPREAD_HZ and len(np.unique(np.round(np.abs(k), 6))) >= 4
-    seeds: list = []
     box = (low, high)
     if hopping:
         centre, coarse = _hop_centre(z, k, anchors, antenna, low, high, axes)
@@ -135,30 +135,17 @@ def _phase_candidates(z, k, anchors, time_s, antenna, scene, low, high) -> list[
         half = np.minimum(np.maximum(3.0 * np.sqrt(np.clip(np.diag(coarse), 0, None)), 0.5 * spacing), 0.5)
         half = np.r_[half, np.zeros(3 - axes)]
         box = (np.maximum(centre - half, low - 0.05), np.minimum(centre + half, high + 0.05))
-        seeds.append(centre)
-    points = _grid(*box, spacing / 4.0, limit=100_000)
-    values = np.empty(len(points))
-    for start in range(0, len(points), 4096):
-        values[start : start + 4096] = coherence(z, k, anchors, points[start : start + 4096])
-    # Seeds: the best grid points at least half a lattice step apart (greedy),
-    # among those whose coherence comes near the best's: a lattice point the
-    # grid samples off its peak still reaches about half of it.
-    order = np.argsort(-values)[: 50 * MAX_CANDIDATES]
-    floor = 0.5 * float(values[order[0]]) if len(order) else 0.0
-    for i in order:
-        if len(seeds) >= 4 * MAX_CANDIDATES or values[i] < floor:
-            break
-        if not seeds or np.min(np.linalg.norm(np.array(seeds) - points[i], axis=1)) > 0.5 * spacing:
-            seeds.append(points[i])
-    refined = []
-    for seed in seeds:
-        position, r = refine(z, k, anchors, seed, axes)
-        inside = np.all(position >= low - 0.05) and np.all(position <= high + 0.05)
-        if inside and all(np.linalg.norm(position - q) > 0.005 for q, _ in refined):
-            refined.append((position, r))
+    # The grid, its seeds and their refinement run in the Rust core
+    # (scattertrack_core::locate::search): one call per tag.
+    unique_anchors, anchor_index = np.unique(anchors, axis=0, return_inverse=True)
+    positions, coherences = _core.locate_search(
+        np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), np.ascontiguousarray(k),
+        anchor_index.reshape(-1).astype(np.int64), np.ascontiguousarray(unique_anchors),
+        tuple(float(v) for v in box[0]), tuple(float(v) for v in box[1]), axes, 100_000, 4 * MAX_CANDIDATES,
+    )
+    refined = [(positions[i], float(coherences[i])) for i in range(len(coherences))]
     if not refined:
         return []
-    refined.sort(key=lambda item: -item[1])
     best_r = refined[0][1]
     sigma = math.sqrt(max(-2.0 * math.log(max(best_r, 1e-6)), 1e-6))
     n = len(z)
@@ -190,7 +177,8 @@ def _hop_centre(z, k, anchors, antenna, low, high, axes: int):
     where, hop, sigma = [], [], []
     for a in np.unique(antenna):
         rows = antenna == a
-        d, s = hop_range(z[rows], k[rows], max_range)
+        found = _core.locate_hop_range(np.ascontiguousarray(z[rows].real), np.ascontiguousarray(z[rows].imag), np.ascontiguousarray(k[rows]), max_range)
+        d, s = found if found is not None else (math.nan, math.nan)
         if math.isfinite(d) and math.isfinite(s):
             where.append(anchors[np.flatnonzero(rows)[0]])
             hop.append(d)
@@ -251,9 +239,10 @@ def _channel_offsets(scene: Scene, frequency_hz: np.ndarray) -> np.ndarray:
     return np.where(np.abs(table[nearest] - frequency_hz) <= 1e3, values[nearest], 0.0)
 
 
-def locate_tag(scene: Scene, reads: Reads, epc: str) -> Location:
-    """One tag's :class:`Location` from its reads."""
-    rows = np.flatnonzero(np.asarray(reads.epc).astype(str) == epc)
+def locate_tag(scene: Scene, reads: Reads, epc: str, rows: np.ndarray | None = None) -> Location:
+    """One tag's :class:`Location` from its reads (``rows``: their indices, if known)."""
+    if rows is None:
+        rows = np.flatnonzero(np.asarray(reads.epc).astype(str) == epc)
     location = Location(epc, int(len(rows)))
     antennas = {a.id: a for a in scene.antennas}
     rows = rows[np.isin(np.asarray(reads.antenna)[rows], list(antennas))]
@@ -304,5 +293,8 @@ def locate_tag(scene: Scene, reads: Reads, epc: str) -> Location:
 
 
 def locate(scene: Scene, reads: Reads) -> list[Location]:
-    """Every tag in ``reads`` (see the module docstring)."""
-    return [locate_tag(scene, reads, epc) for epc in reads.epcs()]
+    """Every tag in ``reads`` (see the module docstring), in order of first appearance."""
+    names, first, tag = np.unique(np.asarray(reads.epc).astype(str), return_index=True, return_inverse=True)
+    order = np.argsort(tag, kind="stable")
+    bounds = np.searchsorted(tag[order], np.arange(len(names) + 1))
+    return [locate_tag(scene, reads, str(names[t]), order[bounds[t] : bounds[t + 1]]) for t in np.argsort(first)]
