@@ -31,6 +31,7 @@ from scattertrack.calibrate import calibrate
 from scattertrack.eval import compare
 from scattertrack.locate import locate
 from scattertrack.sim import load_scenario, simulate
+from scattertrack.sim.rooms import static_tags
 
 ARM = {"epc": "E2000A01", "trajectory": {"kind": "pick-and-place", "peak_speed": 0.25, "pause_s": 0.3, "waypoints": [
     [0.60, 0.60, 0.45], [0.60, 0.60, 0.75], [0.85, 0.85, 0.88], [1.00, 1.00, 0.75], [1.00, 1.00, 0.45], [1.00, 1.00, 0.75], [0.75, 0.70, 0.85], [0.60, 0.60, 0.75]]}}
@@ -68,21 +69,8 @@ def tracking_block(block: dict, seed: int) -> tuple[float, float]:
     return true_median, calibrated_median
 
 
-def static_room(count: int, duration_s: float, seed: int, hopping: bool = True):
-    scenario = copy.deepcopy(load_scenario("glac-3d-walls"))
-    scenario["duration_s"] = duration_s
-    if hopping:
-        scenario["reader_model"].update({"hopping": True})
-        scenario["reader_model"].pop("frequency_hz", None)
-    rng = np.random.default_rng(seed)
-    low, high = np.array(scenario["scene"]["region"]["min"]), np.array(scenario["scene"]["region"]["max"])
-    positions = rng.uniform(low + 0.1, high - 0.1, size=(count, 3))
-    scenario["tags"] = [{"epc": f"E200D{i:03d}", "trajectory": {"kind": "static", "position": p.tolist()}} for i, p in enumerate(positions)]
-    return simulate(scenario, seed=seed), {f"E200D{i:03d}": p for i, p in enumerate(positions)}
-
-
 def locate_block(count: int, duration_s: float, seed: int, hopping: bool = True) -> str:
-    sim, truth = static_room(count, duration_s, seed, hopping)
+    sim, truth = static_tags("glac-3d-walls", count, duration_s, seed, hopping)
     start = time.perf_counter()
     locations = locate(sim.scene, sim.reads)
     wall_s = time.perf_counter() - start

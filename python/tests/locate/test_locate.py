@@ -12,25 +12,14 @@ from scattertrack.calibrate import calibrate
 from scattertrack.locate import locate
 from scattertrack import _core
 from scattertrack.sim import load_scenario, simulate
+from scattertrack.sim.rooms import static_tags
 
 REFERENCES = {"E2000C00": [0.3, 0.3, 0.4], "E2000C01": [3.0, 3.0, 1.2], "E2000C02": [0.5, 3.5, 0.3], "E2000C03": [3.5, 0.5, 1.0]}
 
 
 def static_room(count: int, duration_s: float, seed: int, hopping: bool = True, references: bool = False):
-    """``count`` static tags at random positions in glac-3d-walls' region (and the references)."""
-    scenario = copy.deepcopy(load_scenario("glac-3d-walls"))
-    scenario["duration_s"] = duration_s
-    if hopping:
-        scenario["reader_model"].update({"hopping": True})
-        scenario["reader_model"].pop("frequency_hz", None)
-    rng = np.random.default_rng(seed)
-    low, high = np.array(scenario["scene"]["region"]["min"]), np.array(scenario["scene"]["region"]["max"])
-    positions = rng.uniform(low + 0.1, high - 0.1, size=(count, 3))
-    tags = {f"E200D{i:03d}": p.tolist() for i, p in enumerate(positions)}
-    if references:
-        tags.update(REFERENCES)
-    scenario["tags"] = [{"epc": e, "trajectory": {"kind": "static", "position": p}} for e, p in tags.items()]
-    return simulate(scenario, seed=seed), tags
+    """``count`` static tags in glac-3d-walls' region (and the references)."""
+    return static_tags("glac-3d-walls", count, duration_s, seed, hopping, REFERENCES if references else None)
 
 
 def score(locations, tags):
