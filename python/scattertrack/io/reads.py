@@ -179,29 +179,39 @@ def _finish(columns: dict, lines: np.ndarray, epc_table: np.ndarray) -> Reads:
 def duplicate_rows(columns: dict) -> np.ndarray:
     """Mask of rows equal to an earlier row in time, epc, antenna, frequency and phase.
 
-    Duplicates share their time, and distinct reads rarely do, so only rows
-    whose time occurs more than once are compared in full (cheap for big files).
+    Vectorised: the rows are sorted by those columns with the file order as
+    the last key, so that copies lie next to each other with the first copy
+    (in file order) first; every row equal to its predecessor is a
+    duplicate. Text columns are compared through their codes. (A Python
+    loop over the rows that share a time took 9 s of a 5.9 M-read file.)
     """
-    time = columns["time_s"]
-    order = np.argsort(time, kind="stable")
-    same_as_next = time[order][1:] == time[order][:-1]
-    shares_time = np.zeros(len(time), dtype=bool)
-    shares_time[order[1:][same_as_next]] = True
-    shares_time[order[:-1][same_as_next]] = True
-    duplicate = np.zeros(len(time), dtype=bool)
-    seen = set()
-    for i in np.flatnonzero(shares_time).tolist():  # in file order: the first copy is kept
-        key = tuple(_plain(columns[name][i]) for name in KEY_COLUMNS)
-        if key in seen:
-            duplicate[i] = True
-        else:
-            seen.add(key)
+    time = np.asarray(columns["time_s"])
+    n = len(time)
+    duplicate = np.zeros(n, dtype=bool)
+    if n < 2:
+        return duplicate
+    # Copies share their time and distinct reads rarely do: only rows whose
+    # time occurs more than once are compared in full.
+    by_time = np.argsort(time, kind="stable")
+    same_time = time[by_time][1:] == time[by_time][:-1]
+    candidates = np.unique(np.concatenate([by_time[1:][same_time], by_time[:-1][same_time]]))
+    if not candidates.size:
+        return duplicate
+    keys = []
+    for name in KEY_COLUMNS:
+        values = np.asarray(columns[name])[candidates]
+        if values.dtype.kind in "OUS":
+            values = np.unique(values.astype(str), return_inverse=True)[1]
+        keys.append(values)
+    # np.lexsort sorts by the last key first: time, epc, ... then file order
+    # (candidates are ascending), so the first copy of a row comes first.
+    order = np.lexsort((np.arange(len(candidates)), *reversed(keys)))
+    same = np.ones(len(candidates) - 1, dtype=bool)
+    for values in keys:
+        ordered = values[order]
+        same &= ordered[1:] == ordered[:-1]
+    duplicate[candidates[order[1:][same]]] = True
     return duplicate
-
-
-def _plain(value):
-    """A numpy scalar as a Python value (hashable, compared by value); other values as they are."""
-    return value.item() if isinstance(value, np.generic) else value
 
 
 def write_reads(path, reads: Reads) -> None:
