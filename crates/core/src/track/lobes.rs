@@ -28,18 +28,26 @@
 //! clamp(λ_k, −c, c), −B, ∞)`. `e^{L_k}` is then the posterior odds of lobe
 //! `k` against the filter's (equal prior odds) over the recent frames; the
 //! filter moves its particles to lobe `k` when `L_k > h`. Levels (defaults,
-//! chosen on our simulator, see docs/turbotrack.md):
+//! chosen on our simulator — `bench/turbotrack_lobes.py`, the in-line
+//! layout at 2 dB and the multipath arm at 4 dB — see docs/turbotrack.md):
 //!
-//! - `h = lobe_switch_nats = 10`: odds of 22 000 : 1 for the other lobe.
-//! - `c = lobe_frame_cap_nats = 5`: one frame moves any `L_k` by at most 5
-//!   nats, so one corrupted frame (a burst, a reflection) cannot switch; a
-//!   switch needs `(B + h) / c = 6` frames' agreement at least (20 ms at 300
-//!   frames/s), about `(B + h) / λ̄` frames in general.
-//! - `B = lobe_floor_nats = 20`: how far below the filter's lobe an
-//!   alternative's evidence may sink. It bounds the time to recover after the
-//!   truth changes lobe (a filter that was right) and leaves a lobe that lost
-//!   `e^{−20} ≈ 2·10⁻⁹` of posterior mass, so its spread never inflates the
-//!   reported covariance.
+//! - `h = lobe_switch_nats = 10`: posterior odds of 22 000 : 1 for the other
+//!   lobe.
+//! - `c = lobe_frame_cap_nats = 2`: one frame moves any `L_k` by at most 2
+//!   nats, so one corrupted frame (a burst, a reflection) cannot switch; from
+//!   an even start a switch needs `h / c = 5` agreeing frames at least.
+//! - `B = lobe_floor_nats = 200`: how far below the filter's lobe an
+//!   alternative's evidence may sink, i.e. how much history protects a lobe
+//!   the filter has been confirmed on: `(B + h) / c = 105` frames (0.35 s at
+//!   300 frames/s) of contrary evidence before it is left. Multipath makes
+//!   the per-frame evidence correlated: on the simulated multipath arm at
+//!   4 dB a reflection favoured a wrong lobe for a few tens of frames, and
+//!   with `B = 20, c = 5` the filter left the right lobe in 19 of 20 starts
+//!   (0 with these levels). A lobe at the floor keeps `e^{−200}` of
+//!   posterior mass: nothing in the reported covariance.
+//!
+//! The evidence starts over when the filter's own lobe jumps (`JUMP_M`),
+//! and a frame that lacks a receiver is skipped (`ADOPT_AFTER`).
 //!
 //! **Reported covariance**: the exactly evaluated lobes enter the reported
 //! covariance as a mixture about the reported state,
@@ -62,6 +70,16 @@ pub struct LobeLevels {
     /// `c`: one frame changes an evidence by at most ±c.
     pub frame_cap_nats: f64,
 }
+
+/// Frames in a row with another receiver set before the evidence starts
+/// over on that set (0.1 s at 300 frames/s, as long as the filter's own
+/// outlier run before it starts over).
+const ADOPT_AFTER: usize = 30;
+
+/// A jump of the filter's fitted lobe between frames larger than this, m,
+/// is a change of lobe (neighbouring lobes are 10-60 cm apart; the tag
+/// moves about 1 mm a frame at 30 cm/s and 300 frames/s).
+const JUMP_M: f64 = 0.08;
 
 /// Shifts evaluated exactly per frame (the best by accumulated + approximate evidence).
 const EXACT_PER_FRAME: usize = 2;
@@ -239,6 +257,8 @@ pub struct LobeEvidence {
     /// one Gauss–Newton step, not four.
     previous_x0: Option<Vector3<f64>>,
     previous: Vec<(usize, Vector3<f64>)>,
+    /// Consecutive frames with another receiver set than `antennas`.
+    other_set: usize,
     scratch: Vec<(f64, Vector3<f64>)>,
 }
 
@@ -251,14 +271,28 @@ impl LobeEvidence {
         self.previous_x0 = None;
     }
 
-    fn resize_for(&mut self, receivers: &[Receiver]) {
+    /// Whether this frame's receivers are the ones the evidence refers to.
+    /// A frame that lacks one (a missed reply on one antenna) is skipped,
+    /// not allowed to reset the evidence: a reset would forget how far the
+    /// alternatives had fallen behind, and with one receiver fewer the
+    /// lobes are told apart by the envelope alone. After `ADOPT_AFTER`
+    /// frames in a row with another set the evidence starts over on it.
+    fn same_receivers(&mut self, receivers: &[Receiver]) -> bool {
         let same = self.antennas.len() == receivers.len() && self.antennas.iter().zip(receivers).all(|(a, r)| *a == r.antenna);
-        if !same {
+        if same && !self.lattice.is_empty() {
+            self.other_set = 0;
+            return true;
+        }
+        self.other_set += 1;
+        if self.lattice.is_empty() || self.other_set > ADOPT_AFTER {
             self.antennas = receivers.iter().map(|r| r.antenna).collect();
             self.lattice = shift_lattice(receivers.len());
             self.evidence = vec![0.0; self.lattice.len() / receivers.len().max(1)];
             self.reset();
+            self.other_set = 0;
+            return true;
         }
+        false
     }
 
     /// One frame: the evidence of every shift against the lobe of the
@@ -274,7 +308,10 @@ impl LobeEvidence {
         levels: &LobeLevels,
         in_region: impl Fn(&Vector3<f64>) -> bool,
     ) -> LobeDecision {
-        self.resize_for(receivers);
+        if !self.same_receivers(receivers) {
+            // Skipped: the last frame's lobes (and their spread) stand.
+            return LobeDecision::Stay;
+        }
         std::mem::swap(&mut self.previous, &mut self.exact);
         self.exact.clear();
         let r = receivers.len();
@@ -289,6 +326,12 @@ impl LobeEvidence {
         let x0 = refine_on_teeth(geometry, receivers, &teeth, estimate, 1).map_or(*estimate, |f| f.0);
         let moved = self.previous_x0.map_or(Vector3::zeros(), |p| x0 - p);
         self.previous_x0 = Some(x0);
+        if moved.norm() > JUMP_M {
+            // The filter's lobe moved by itself (resampling into another
+            // lobe, an outlier run): the evidence was against the old one.
+            self.started = false;
+            self.previous.clear();
+        }
         let l0 = mixture_log_likelihood(geometry, receivers, &x0, weight_floor).0;
         let mut approx = std::mem::take(&mut self.scratch);
         approximate_evidence(geometry, receivers, &teeth, &x0, &self.lattice, weight_floor, &mut approx);
@@ -509,6 +552,30 @@ mod tests {
         }
         let sigma = lobes.spread(&tag).trace().sqrt();
         assert!(sigma > 0.05, "{sigma}");
+    }
+
+    #[test]
+    fn a_frame_without_one_receiver_neither_resets_nor_switches() {
+        let tag = Vector3::new(0.8, 1.6, 0.8);
+        let g = geometry();
+        let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
+        let mut lobes = LobeEvidence::default();
+        let right = receivers(&tag, 0.003, [0; 4], 2.0);
+        for _ in 0..10 {
+            lobes.update(&g, &right, &tag, 1e-3, &levels, |_| true);
+        }
+        let before = lobes.strongest();
+        // Three receivers that favour another lobe, for a few frames.
+        let three: Vec<Receiver> = receivers(&tag, 0.003, [1, 1, 1, 1], 50.0).into_iter().take(3).collect();
+        for _ in 0..5 {
+            assert_eq!(lobes.update(&g, &three, &tag, 1e-3, &levels, |_| true), LobeDecision::Stay);
+        }
+        assert_eq!(lobes.strongest(), before);
+        // A receiver set that persists is adopted.
+        for _ in 0..ADOPT_AFTER + 2 {
+            lobes.update(&g, &three, &tag, 1e-3, &levels, |_| true);
+        }
+        assert_eq!(lobes.antennas.len(), 3);
     }
 
     #[test]
