@@ -29,7 +29,6 @@ over all runs' rows, the share of rows beyond 3 reported sigmas on some axis
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import os
 import time
@@ -47,7 +46,7 @@ REPO = Path(__file__).resolve().parents[1]
 LOCK_IN_M = 0.05  # m: median error over the last half of a run above this = locked on a wrong lobe
 SKIP_FIRST_S = 0.2  # s after the (new) first frame left out of the medians (as the outside scorer does)
 SWEEP_SCENARIOS = {"static": "turbotrack-static", "moving": "turbotrack-3d-arm"}
-SWEEP_SNR_DB = (2, 5, 8, 11, 14, 17, 20)  # the full sweep (--lobe-full)
+SWEEP_SNR_DB = (2, 5, 8, 11, 14, 17, 20)  # the full sweep (bench/turbotrack.py --lobe-full)
 QUICK_SNR_DB = (4, 8, 14)  # the default, reduced sweep
 SWEEP_DURATION_S = 1.5  # s simulated per sweep cell; starts spread over its first half
 
@@ -72,18 +71,7 @@ def helper_cases(root: Path | None = None) -> list[Path]:
 
 def drop_frames(frames, k: int):
     """``frames`` without its first ``k`` frames (a later start)."""
-    start = int(frames.frame_start[k])
-    cut = lambda a: a[start:]  # noqa: E731
-    return dataclasses.replace(
-        frames,
-        time_s=cut(frames.time_s),
-        epc=cut(frames.epc),
-        tx=cut(frames.tx),
-        rx=cut(frames.rx),
-        frequency_hz=cut(frames.frequency_hz),
-        h=cut(frames.h),
-        frame_start=frames.frame_start[k:] - start,
-    )
+    return frames.select_frames(np.arange(k, frames.n_frames)) if k else frames
 
 
 def start_offsets(n_frames: int, starts: int) -> list[int]:
