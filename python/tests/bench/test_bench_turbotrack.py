@@ -26,7 +26,7 @@ bench = _bench_turbotrack()
 
 ARGV = [
     "--seeds", "1", "--duration-s", "4", "--particles", "10,100", "--throughput-duration-s", "1",
-    "--runtime-duration-s", "0.2", "--no-progress",
+    "--runtime-duration-s", "0.2", "--lobe-starts", "2", "--no-progress",
 ]
 
 
@@ -53,8 +53,10 @@ def test_every_table_is_printed_under_its_command(smoke):
     text, result = smoke
     for number in range(1, 8):
         assert f"\n{number}. " in text
-    # Every table is headed by the command that produced it.
-    assert text.count(f"$ {result['command']}") == 7
+    assert "\n8b. " in text
+    # Every table is headed by the command that produced it (8a only where the outside recordings are).
+    tables = 8 + (1 if result["lobes"]["outside"] else 0)
+    assert text.count(f"$ {result['command']}") == tables
     assert "bench/turbotrack.py" in result["command"] and "--seeds 1" in result["command"]
     assert "\nSummary\n" in text
 
@@ -115,6 +117,42 @@ def test_particles_and_throughput(smoke):
     assert t["receivers"] == 4 and t["frames"] > 0
     assert _finite(t["frames_per_s"], t["step_mean_us"], t["step_max_us"], t["step_p99_us"])
     assert t["step_max_us"] >= t["step_mean_us"] > 0
+
+
+def test_lobe_block_counts_lock_ins_per_case_and_cell(smoke):
+    stdout, result = smoke
+    lobes = result["lobes"]
+    assert "8b. Lobe lock-in on our simulator" in stdout
+    assert [(r["snr_db"], r["motion"], r["layout"]) for r in lobes["sweep"]] == [
+        (float(snr), motion, layout) for snr in bench.lobes.QUICK_SNR_DB for motion in ("static", "moving") for layout in ("plus", "inline")
+    ]
+    for r in lobes["sweep"] + lobes["outside"]:
+        assert r["starts"] == 2 and 0 <= r["lock_ins"] <= r["starts"]
+        assert _finite(r["median_cm"], r["beyond_3sigma"]) and r["lobe_switches"] >= 0
+    if bench.lobes.helper_cases():
+        assert "8a. Lobe lock-in on the outside helper recordings" in stdout
+        assert {r["case"] for r in lobes["outside"]} >= {"helper-3d-multipath-4db"}
+
+
+def test_lock_in_rule_start_offsets_and_dropped_frames():
+    lobes = bench.lobes
+    # Locked: the last half's median above 5 cm, whatever the first half did.
+    assert lobes.locked_in(np.r_[np.full(10, 0.005), np.full(10, 0.17)])
+    assert not lobes.locked_in(np.r_[np.full(10, 0.5), np.full(10, 0.004)])
+    assert lobes.locked_in(np.zeros(0))
+    offsets = lobes.start_offsets(300, 40)
+    assert len(offsets) == 40 and offsets[0] == 0 and max(offsets) < 150
+    from scattertrack.sim import simulate
+
+    data = simulate(lobes.sweep_scenario("static", 8.0, "inline", duration_s=0.1), seed=0)
+    later = lobes.drop_frames(data.frames, 5)
+    assert later.n_frames == data.frames.n_frames - 5
+    assert later.frame_time_s[0] == data.frames.frame_time_s[5]
+    roles = [a.role for a in data.scene.antennas]
+    assert roles.count("tx") == 1 and roles.count("rx") == 4
+    tx = next(a for a in data.scene.antennas if a.role == "tx")
+    in_line = [a for a in data.scene.antennas if a.role == "rx" and a.position[1] == tx.position[1]]
+    assert len(in_line) == 3
 
 
 def test_pool_pools_rows_over_seeds():

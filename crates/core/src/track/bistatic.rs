@@ -241,10 +241,37 @@ pub fn tuple_gaussian(
     near: &Vector3<f64>,
     tolerance_m: f64,
 ) -> Option<PositionGaussian> {
+    fuse_subsets(geometry, receivers, indices, subset_list, near, tolerance_m, true)
+}
+
+/// [`tuple_gaussian`] over the subsets whose loci meet, None only when
+/// none does. For seeding (which refits the point on every receiver):
+/// near the truth a pair of ellipses can be nearly tangent, and at low SNR
+/// noise pushes them apart by more than the tangency tolerance, which
+/// would drop the true tuple for one ill-conditioned subset.
+pub fn tuple_gaussian_lenient(
+    geometry: &HelperGeometry,
+    receivers: &[Receiver],
+    indices: &[i64],
+    subset_list: &[Vec<usize>],
+    near: &Vector3<f64>,
+    tolerance_m: f64,
+) -> Option<PositionGaussian> {
+    fuse_subsets(geometry, receivers, indices, subset_list, near, tolerance_m, false)
+}
+
+fn fuse_subsets(
+    geometry: &HelperGeometry,
+    receivers: &[Receiver],
+    indices: &[i64],
+    subset_list: &[Vec<usize>],
+    near: &Vector3<f64>,
+    tolerance_m: f64,
+    require_all: bool,
+) -> Option<PositionGaussian> {
     let tx = geometry.tx_position;
     let planar = geometry.dimensions == 2;
-    let m = subset_list.len();
-    let mut points: Vec<Vector3<f64>> = Vec::with_capacity(m);
+    let mut points: Vec<Vector3<f64>> = Vec::with_capacity(subset_list.len());
     let mut covariance = Matrix3::zeros();
     let mut positions = Vec::with_capacity(3);
     let mut distances = Vec::with_capacity(3);
@@ -262,9 +289,19 @@ pub fn tuple_gaussian(
             sigmas.push(receivers[j].candidates.sigma_m);
         }
         let solutions = bistatic_intersections(&tx, &positions, &distances, geometry.plane(), tolerance_m);
-        let p = solutions.into_iter().min_by(|a, b| (a - near).norm_squared().total_cmp(&(b - near).norm_squared()))?;
-        covariance += intersection_covariance(&p, &tx, &members, &sigmas, planar)?;
+        let p = solutions.into_iter().min_by(|a, b| (a - near).norm_squared().total_cmp(&(b - near).norm_squared()));
+        let Some((p, c)) = p.and_then(|p| Some((p, intersection_covariance(&p, &tx, &members, &sigmas, planar)?))) else {
+            if require_all {
+                return None;
+            }
+            continue;
+        };
+        covariance += c;
         points.push(p);
+    }
+    let m = points.len();
+    if m == 0 {
+        return None;
     }
     let mean = points.iter().sum::<Vector3<f64>>() / m as f64;
     let covariance = covariance / (m * m) as f64;
@@ -306,6 +343,47 @@ pub fn mixture_log_likelihood(geometry: &HelperGeometry, receivers: &[Receiver],
     (log_l, chi2)
 }
 
+/// The logarithms [`mixture_log_likelihood`] takes per receiver, once per
+/// frame: `ln w_j(n)` of each kept candidate, `ln σ_j` and `ln floor`. A
+/// particle's likelihood then needs no logarithm (with 100 particles and 4
+/// receivers that is 800 logarithms a frame, a third of the step).
+#[derive(Debug, Clone, Default)]
+pub struct MixtureLogs {
+    log_weights: Vec<Vec<f64>>,
+    log_sigma: Vec<f64>,
+    log_floor: f64,
+}
+
+impl MixtureLogs {
+    pub fn new(receivers: &[Receiver], weight_floor: f64) -> Self {
+        Self {
+            log_weights: receivers.iter().map(|r| r.candidates.weights.iter().map(|w| w.ln()).collect()).collect(),
+            log_sigma: receivers.iter().map(|r| r.candidates.sigma_m.ln()).collect(),
+            log_floor: weight_floor.ln(),
+        }
+    }
+}
+
+/// [`mixture_log_likelihood`] with the frame's logarithms tabulated
+/// (`logs` built from the same `receivers` and floor): the same numbers,
+/// bit for bit (`ln max(w, f) = max(ln w, ln f)`, the same operations in the
+/// same order).
+pub fn mixture_log_likelihood_with(geometry: &HelperGeometry, receivers: &[Receiver], logs: &MixtureLogs, p: &Vector3<f64>) -> (f64, f64) {
+    let half_log_two_pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+    let mut log_l = 0.0;
+    let mut chi2 = 0.0;
+    for (j, rx) in receivers.iter().enumerate() {
+        let d = bistatic_distance(p, &geometry.tx_position, &rx.position).0;
+        let c = &rx.candidates;
+        let n = c.nearest_index(d);
+        let z = (d - c.distance(n)) / c.sigma_m;
+        chi2 += z * z;
+        let log_w = if n >= 0 && (n as usize) < c.weights.len() { logs.log_weights[j][n as usize].max(logs.log_floor) } else { logs.log_floor };
+        log_l += log_w + (-0.5 * z * z - logs.log_sigma[j] - half_log_two_pi);
+    }
+    (log_l, chi2)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -328,6 +406,35 @@ mod tests {
         assert_eq!(subsets(4, 3), vec![vec![0, 1, 2], vec![0, 1, 3], vec![0, 2, 3], vec![1, 2, 3]]);
         assert_eq!(subsets(3, 2).len(), 3);
         assert_eq!(subsets(5, 3).len(), 10);
+    }
+
+    #[test]
+    fn tabulated_logarithms_give_the_same_likelihood() {
+        use crate::model::wideband::Candidates;
+        let geometry = HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 };
+        let receivers: Vec<Receiver> = [[0.0, 0.0], [0.4, 0.0], [0.8, 0.0], [0.6, 0.4]]
+            .iter()
+            .enumerate()
+            .map(|(j, p)| Receiver {
+                antenna: j + 1,
+                position: Vector3::new(p[0], p[1], 0.0),
+                candidates: Candidates {
+                    distances_m: vec![2.0 + 0.1 * j as f64, 2.33 + 0.1 * j as f64, 2.66 + 0.1 * j as f64],
+                    weights: vec![0.2, 0.7, 0.1],
+                    spacing_m: 0.33,
+                    sigma_m: 0.003 + 0.001 * j as f64,
+                    best: 1,
+                },
+            })
+            .collect();
+        let logs = MixtureLogs::new(&receivers, 1e-3);
+        for k in 0..200 {
+            let p = Vector3::new(0.3 + 0.01 * k as f64, 1.0 - 0.003 * k as f64, 0.5 + 0.002 * k as f64);
+            let a = mixture_log_likelihood(&geometry, &receivers, &p, 1e-3);
+            let b = mixture_log_likelihood_with(&geometry, &receivers, &logs, &p);
+            assert_eq!(a.0.to_bits(), b.0.to_bits(), "{k}");
+            assert_eq!(a.1.to_bits(), b.1.to_bits());
+        }
     }
 
     #[test]

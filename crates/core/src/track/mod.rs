@@ -18,7 +18,9 @@ mod ellipse_intersection;
 mod glac;
 pub mod glac_params;
 mod initial;
+mod key_hash;
 mod line_twins;
+pub mod lobes;
 pub mod registry;
 mod rfind;
 mod turbotrack;
@@ -182,6 +184,9 @@ pub struct TrackerStats {
     pub filter_updates: u64,
     /// Re-seeding searches run while tracking (GLAC).
     pub reseeds: u64,
+    /// Times the particles moved to another lobe because its accumulated
+    /// evidence passed the switch level (TurboTrack's lobe test).
+    pub lobe_switches: u64,
 }
 
 impl TrackerStats {

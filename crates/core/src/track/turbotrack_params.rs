@@ -14,6 +14,9 @@ use crate::params::{choice, float, integer, optional_float, Bound, Range, Table}
 /// `(0, 1]`: the likelihood temper κ.
 const TEMPER: Range = Range { low: Bound::Exclusive(0.0), high: Bound::Inclusive(1.0) };
 
+/// `(0, inf]`: a level that `inf` switches off.
+const POSITIVE_OR_OFF: Range = Range { low: Bound::Exclusive(0.0), high: Bound::Inclusive(f64::INFINITY) };
+
 /// The table of TurboTrack and its variants.
 pub fn turbotrack_table() -> Table<TurboTrackParams> {
     Table::new(
@@ -48,7 +51,7 @@ pub fn turbotrack_table() -> Table<TurboTrackParams> {
                 "perimeter_threshold_m",
                 Range::POSITIVE,
                 "m",
-                "perimeter threshold T of the initial pruning (doubled up to 3 times when no tuple survives)",
+                "gaussian-pf only: perimeter threshold T of the thesis's initial pruning (doubled up to 3 times when no tuple survives); turbotrack and uniform-pf test each tuple's chi-square against outlier_chi2 instead",
                 |p| p.perimeter_threshold_m,
                 |p, v| p.perimeter_threshold_m = v,
             ),
@@ -135,6 +138,30 @@ pub fn turbotrack_table() -> Table<TurboTrackParams> {
                 "acquisition window of the RFind baseline (a static tag is assumed over it)",
                 |p| p.rfind_window_s,
                 |p, v| p.rfind_window_s = v,
+            ),
+            float(
+                "lobe_switch_nats",
+                POSITIVE_OR_OFF,
+                "nats",
+                "lobe test: move the particles to another lobe when its accumulated evidence against theirs exceeds this (inf: never)",
+                |p| p.lobe_switch_nats,
+                |p, v| p.lobe_switch_nats = v,
+            ),
+            float(
+                "lobe_floor_nats",
+                Range::NON_NEGATIVE,
+                "nats",
+                "lobe test: an alternative lobe's evidence never sinks below minus this",
+                |p| p.lobe_floor_nats,
+                |p, v| p.lobe_floor_nats = v,
+            ),
+            float(
+                "lobe_frame_cap_nats",
+                Range::POSITIVE,
+                "nats",
+                "lobe test: one frame changes a lobe's evidence by at most this",
+                |p| p.lobe_frame_cap_nats,
+                |p, v| p.lobe_frame_cap_nats = v,
             ),
             float(
                 "candidate_min_relative_weight",
