@@ -75,7 +75,7 @@ def fit_trajectory(scene, reads, t0: float, t1: float, start, q: float, knot_s: 
     """Best smooth trajectory over the reads in [t0, t1] near ``start``.
 
     ``start(t)`` gives (n, 3) positions, m, to start from. Phases follow
-    FORMATS.md §1: φ = sign·4π d/λ + θ_antenna + θ_channel (mod the reader's
+    docs/formats.md §1: φ = sign·4π d/λ + θ_antenna + θ_channel (mod the reader's
     period); residuals are wrapped to ±period/2, so the fit stays on the
     candidate trajectory it starts on. 2D scenes keep z at the plane.
     """
