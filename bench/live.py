@@ -101,6 +101,42 @@ def mosquitto(folder: Path):
         process.wait(5.0)
 
 
+def read_back(folder: Path, live, offline) -> str:
+    """The MCAP and the bag read with independent readers (``mcap`` +
+    ``mcap_ros2.decoder``, ``rosbags``) against the live track.csv and the
+    offline covariances of the journal."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from scattertrack.io import ros2
+
+    poses: dict = {"MCAP": {}, "bag": {}}
+    with open(folder / "track.mcap", "rb") as stream:
+        for _, channel, _, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            poses["MCAP"].setdefault(channel.topic, []).append(decoded)
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(folder / "bag") as reader:
+        for connection, _, raw in reader.messages():
+            poses["bag"].setdefault(connection.topic, []).append(store.deserialize_cdr(raw, connection.msgtype))
+    parts = []
+    for name, topics in poses.items():
+        counts_match, worst_position, worst_covariance = True, 0.0, 0.0
+        for epc in sorted(set(live.epc.astype(str))):
+            mine = np.flatnonzero(live.epc.astype(str) == epc)
+            for kind in ("pose", "odom"):
+                counts_match &= len(topics.get(ros2.topic(epc, kind), [])) == len(mine)
+            for message, i in zip(topics[ros2.topic(epc, "pose")], mine):
+                p = message.pose.pose.position
+                worst_position = max(worst_position, float(np.abs(np.array([p.x, p.y, p.z]) - live.position[i]).max()))
+                covariance = np.array(message.pose.covariance).reshape(6, 6)[:3, :3]
+                worst_covariance = max(worst_covariance, float(np.abs(covariance - offline.covariance[i][:3, :3]).max() / np.abs(offline.covariance[i][:3, :3]).max()))
+        tags = len(set(live.epc.astype(str)))
+        parts.append(f"{name}: {'pose and odom per tag = rows per tag' if counts_match else 'COUNTS DIFFER'} ({tags} tags), position to track.csv <= {worst_position:.1e} m, covariance to offline <= {worst_covariance:.1e} (relative)")
+    return "; ".join(parts)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--speed", type=float, default=40.0, help="simulated seconds per wall second")
@@ -128,7 +164,7 @@ def main() -> int:
     sent = int(re.search(r"sent (\d+) read", served).group(1))
     journal = read_reads(folder / "reads.csv")
     live = read_track(folder / "track.csv")
-    offline = track.run("glac", sim.scene, journal)
+    offline = track.run("glac", sim.scene, journal, covariance=args.outputs)
     difference = float(np.abs(live.position - offline.position).max()) if len(live) == len(offline) else float("nan")
     # The journal's clock is the emulated reader's: Unix epoch + simulated time.
     epoch_s = float(re.search(r"reader clock = simulated time \+ ([0-9.]+) s", served).group(1))
@@ -137,6 +173,7 @@ def main() -> int:
     print(f"  throughput: {summary.throughput_reads_per_s:,.0f} reads/s journaled and tracked (target >= 1,000)")
     if outputs is not None:
         print(f"  outputs on: {outputs.messages:,} ROS 2 messages in the MCAP and the bag each, {outputs.foxglove_published:,} served on Foxglove, {outputs.mqtt_published:,} estimates over MQTT, Parquet of {len(read_track(folder / 'track.parquet')):,} rows")
+        print(f"  read back: {read_back(folder, live, offline)}")
     print(f"  exactly once: emulator sent {sent:,}, journal holds {len(journal):,}, duplicates declined {summary.declined.get('duplicate report (already received)', 0)}")
     outage = summary.outages_s[0] if summary.outages_s else float("nan")
     print(f"  forced disconnect at {drop_after:g} s simulated: back after {outage:.3f} s ({summary.connections} connections)")

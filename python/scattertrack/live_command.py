@@ -235,7 +235,12 @@ def command_live(args) -> int:
     settings = ReaderSettings(args.antennas, args.tx_power_dbm, args.reader_mode, args.session, args.search_mode)
     progress = None if args.no_progress else _progress_line
     outputs = LiveOutputs(options, scene, track_csv) if options.any else None
-    session = LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress, outputs=outputs)
+    try:
+        session = LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress, outputs=outputs)
+    except BaseException:
+        if outputs is not None:  # the session closes them, once it exists
+            outputs.close()
+        raise
     say(f"live: {host}:{port}, journal {args.journal}, track {track_csv}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
     if outputs is not None and outputs.foxglove is not None:
         say(f"  Foxglove WebSocket on ws://{options.foxglove[0]}:{outputs.foxglove.port}")

@@ -13,8 +13,13 @@ that subscribes to them, since they are published only once.
 
 from __future__ import annotations
 
+import time
+
 DEFAULT_HOST = "127.0.0.1"
 DEFAULT_PORT = 8765
+DRAIN_S = 0.3
+"""At the end, how long the server keeps sending what is queued for its
+clients (stopping it drops that; the SDK cannot say when a queue is empty)."""
 
 
 class FoxgloveServer:
@@ -62,6 +67,8 @@ class FoxgloveServer:
         self.published += 1
 
     def close(self) -> None:
+        if self.published:
+            time.sleep(DRAIN_S)
         for channel in self._channels.values():
             channel.close()
         self._server.stop()
