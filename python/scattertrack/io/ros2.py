@@ -22,6 +22,11 @@ estimates orientation (Marvel), which is then given with
 :data:`NOMINAL_ROTATION_VARIANCE`. Stamps are the estimates' times
 (Unix epoch for live input). ``transform`` (x, y, z, qw, qx, qy, qz) maps
 the scene frame into the robot's: p' = R p + t, Σ' = R Σ Rᵀ.
+
+:class:`Builder` turns one row into its messages, for a whole track
+(:func:`messages`) and for a live estimate
+(:mod:`scattertrack.readers.outputs`) alike; :class:`McapFile` and
+:class:`BagFile` take them one at a time, so a live run writes as it goes.
 """
 
 from __future__ import annotations
