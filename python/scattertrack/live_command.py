@@ -27,12 +27,11 @@ import sys
 import time
 from pathlib import Path
 
+from scattertrack import outputs_command
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
 
 LLRP_PORT = 5084
 """The IANA port of LLRP (5085 with TLS)."""
-MQTT_PORT = 1883
-"""The IANA port of MQTT (8883 with TLS)."""
 
 
 def host_and_port(text: str, default_port: int = LLRP_PORT) -> tuple[str, int]:
@@ -48,92 +47,6 @@ def host_and_port(text: str, default_port: int = LLRP_PORT) -> tuple[str, int]:
     if not host or not 1 <= port <= 65535:
         raise argparse.ArgumentTypeError(f"expected HOST[:PORT] with a port from 1 to 65535, got {text!r}")
     return host, port
-
-
-def mqtt_address(text: str) -> tuple[str, int]:
-    """``HOST[:PORT]`` of an MQTT broker (port 1883 by default)."""
-    return host_and_port(text, MQTT_PORT)
-
-
-def foxglove_address(text: str) -> tuple[str, int]:
-    """``[HOST:]PORT`` to serve the Foxglove WebSocket on (loopback unless a host is given; port 0: a free one)."""
-    host, _, number = text.rpartition(":")
-    host = host.strip("[]") if host else "127.0.0.1"
-    try:
-        port = ascii_int(number)
-    except (ValueError, argparse.ArgumentTypeError):
-        port = -1
-    if not host or not 0 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"expected [HOST:]PORT with a port from 0 to 65535, got {text!r}")
-    return host, port
-
-
-def add_output_options(parser, files: bool) -> None:
-    """The ROS 2 and robot outputs of ``live`` (``files``) and ``stream``."""
-    if files:
-        parser.add_argument("--mcap", help="also write the track as MCAP with ROS 2 messages as it goes (pose and odometry per row, antennas)")
-        parser.add_argument("--ros2-bag", help="also write the track as a ROS 2 bag directory (must not exist) as it goes")
-    parser.add_argument("--frame-id", default="scattertrack", help="frame_id of the ROS 2 messages (default scattertrack: the scene's frame)")
-    parser.add_argument("--transform", help="scene-to-robot transform x,y,z,qw,qx,qy,qz applied to the ROS 2 messages")
-    parser.add_argument("--foxglove", type=foxglove_address, metavar="[HOST:]PORT", help="serve the ROS 2 messages live on a Foxglove WebSocket (host 127.0.0.1 unless given)")
-    parser.add_argument("--mqtt-out", type=mqtt_address, metavar="HOST[:PORT]", help="publish every estimate as JSON to this MQTT broker (scattertrack/tags/<EPC>/estimate)")
-
-
-def output_options(args, parquet: str | None = None):
-    """:class:`~scattertrack.readers.outputs.OutputOptions` from the options above.
-    A bad --transform or an existing --ros2-bag fails before anything starts."""
-    from scattertrack.cli import ros2_transform
-    from scattertrack.readers.outputs import OutputOptions
-
-    return OutputOptions(
-        parquet=parquet,
-        mcap=getattr(args, "mcap", None),
-        ros2_bag=getattr(args, "ros2_bag", None),
-        foxglove=args.foxglove,
-        mqtt=args.mqtt_out,
-        frame_id=args.frame_id,
-        transform=ros2_transform(args),
-    )
-
-
-def start_outputs(args, scene):
-    """``stream``'s --foxglove and --mqtt-out, started (None: neither given)."""
-    from scattertrack.readers.outputs import LiveOutputs
-
-    options = output_options(args)
-    if not options.any:
-        return None
-    outputs = LiveOutputs(options, scene)
-    if outputs.foxglove is not None:
-        say(f"  Foxglove WebSocket on ws://{options.foxglove[0]}:{outputs.foxglove.port}")
-    return outputs
-
-
-def finish_outputs(outputs, track) -> None:
-    """Publish ``stream``'s track through ``outputs``, then close them."""
-    from scattertrack.readers.outputs import publish_track
-
-    if outputs is None:
-        return
-    try:
-        publish_track(outputs, track)
-    finally:
-        outputs.close()
-    say_outputs(outputs)
-
-
-def say_outputs(outputs) -> None:
-    """Where the outputs went (after the run)."""
-    options = outputs.options
-    if options.parquet:
-        say(f"  wrote the track as Parquet to {options.parquet}")
-    for path, kind in ((options.mcap, "MCAP file"), (options.ros2_bag, "ROS 2 bag")):
-        if path:
-            say(f"  wrote {plural(outputs.messages, 'ROS 2 message')} on {plural(len(outputs.topics), 'topic')} to the {kind} {path}")
-    if outputs.foxglove_published is not None:
-        say(f"  served {plural(outputs.foxglove_published, 'message')} on the Foxglove WebSocket {options.foxglove[0]}:{outputs.foxglove_port}")
-    if outputs.mqtt_published is not None:
-        say(f"  published {plural(outputs.mqtt_published, 'estimate')} to the MQTT broker {options.mqtt[0]}:{options.mqtt[1]}")
 
 
 def antenna_list(text: str) -> tuple[int, ...]:
@@ -168,7 +81,7 @@ def add_parsers(commands) -> None:
     live.add_argument("--search-mode", type=ascii_int, help="Impinj search mode (1 single, 2 dual target, 3 TagFocus)")
     live.add_argument("--scene-out", help="the scene with the reader's hop table ([[hop_table]]) to write (default: beside the journal, JOURNAL.scene.toml)")
     live.add_argument("--no-progress", action="store_true", help="no progress line")
-    add_output_options(live, files=True)
+    outputs_command.add_output_options(live, files=True)
     live.set_defaults(run=command_live)
 
     emulate = commands.add_parser(
@@ -215,18 +128,17 @@ def _progress_line(session) -> None:
 
 def command_live(args) -> int:
     from scattertrack import io, track
+    from scattertrack.io.csvutil import is_parquet
     from scattertrack.readers.live import LiveSession, ReaderSettings
+    from scattertrack.readers.outputs import LiveOutputs
 
     params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
     tracker = track.make(args.method, scene, **params)  # a bad parameter or method fails before connecting
-    from scattertrack.io.csvutil import is_parquet
-    from scattertrack.readers.outputs import LiveOutputs
-
     host, port = args.llrp
     # Parquet has no append: the rows go to the CSV beside it as they come, the twin is made at the end.
     track_csv = Path(args.out).with_suffix(".csv") if is_parquet(args.out) else Path(args.out)
-    options = output_options(args, parquet=args.out if is_parquet(args.out) else None)
+    options = outputs_command.output_options(args, parquet=args.out if is_parquet(args.out) else None)
     for path in (args.out, args.journal, args.mcap, args.ros2_bag):
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -247,7 +159,7 @@ def command_live(args) -> int:
     summary = asyncio.run(_run_until_interrupted(session))
     print_live_summary(summary, args)
     if outputs is not None:
-        say_outputs(outputs)
+        outputs_command.say_outputs(outputs)
     if summary.hop_table_hz:
         # Offline runs of the journal (import, calibrate, locate) read the carriers from it.
         scene_out = Path(args.scene_out) if args.scene_out else Path(args.journal).with_suffix(".scene.toml")
