@@ -15,16 +15,24 @@ in-process. Printed:
   ``scattertrack.track.run`` on the journal, and both tracks' median 3D
   error against the truth.
 
-    .venv/bin/python bench/live.py [--speed 40] [--duration 60]
+With ``--outputs`` the same run also writes every live output (Parquet at
+the end, MCAP, a ROS 2 bag) and serves them (a Foxglove WebSocket on a free
+loopback port, MQTT to a ``mosquitto`` the bench starts on loopback), and
+prints how many of each went out: compare its throughput with a run
+without.
+
+    .venv/bin/python bench/live.py [--speed 40] [--duration 60] [--outputs]
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import dataclasses
 import logging
 import re
+import shutil
 import socket
 import subprocess
 import sys
@@ -38,6 +46,7 @@ from scattertrack import track
 from scattertrack.eval import compare
 from scattertrack.io import read_reads, read_track
 from scattertrack.readers.live import LiveSession
+from scattertrack.readers.outputs import LiveOutputs, OutputOptions
 from scattertrack.sim import load_scenario, simulate
 
 SCENARIO = "glac-3d-arm-5tags"
@@ -70,11 +79,70 @@ def start_emulator(port: int, speed: float, duration_s: float, drop_after_s: flo
     raise RuntimeError("the emulator did not start")
 
 
+@contextlib.contextmanager
+def mosquitto(folder: Path):
+    """A loopback MQTT broker on a free port (yields the port)."""
+    binary = shutil.which("mosquitto") or "/usr/sbin/mosquitto"
+    port = free_port()
+    (folder / "mosquitto.conf").write_text(f"listener {port} 127.0.0.1\nallow_anonymous true\npersistence false\n")
+    process = subprocess.Popen([binary, "-c", str(folder / "mosquitto.conf")], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        deadline = time.monotonic() + 10.0
+        while True:
+            with socket.socket() as probe:
+                if probe.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            if time.monotonic() > deadline or process.poll() is not None:
+                raise RuntimeError("mosquitto did not start")
+            time.sleep(0.02)
+        yield port
+    finally:
+        process.terminate()
+        process.wait(5.0)
+
+
+def read_back(folder: Path, live, offline) -> str:
+    """The MCAP and the bag read with independent readers (``mcap`` +
+    ``mcap_ros2.decoder``, ``rosbags``) against the live track.csv and the
+    offline covariances of the journal."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+    from rosbags.rosbag2 import Reader
+    from rosbags.typesys import Stores, get_typestore
+
+    from scattertrack.io import ros2
+
+    poses: dict = {"MCAP": {}, "bag": {}}
+    with open(folder / "track.mcap", "rb") as stream:
+        for _, channel, _, decoded in make_reader(stream, decoder_factories=[DecoderFactory()]).iter_decoded_messages():
+            poses["MCAP"].setdefault(channel.topic, []).append(decoded)
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    with Reader(folder / "bag") as reader:
+        for connection, _, raw in reader.messages():
+            poses["bag"].setdefault(connection.topic, []).append(store.deserialize_cdr(raw, connection.msgtype))
+    parts = []
+    for name, topics in poses.items():
+        counts_match, worst_position, worst_covariance = True, 0.0, 0.0
+        for epc in sorted(set(live.epc.astype(str))):
+            mine = np.flatnonzero(live.epc.astype(str) == epc)
+            for kind in ("pose", "odom"):
+                counts_match &= len(topics.get(ros2.topic(epc, kind), [])) == len(mine)
+            for message, i in zip(topics[ros2.topic(epc, "pose")], mine):
+                p = message.pose.pose.position
+                worst_position = max(worst_position, float(np.abs(np.array([p.x, p.y, p.z]) - live.position[i]).max()))
+                covariance = np.array(message.pose.covariance).reshape(6, 6)[:3, :3]
+                worst_covariance = max(worst_covariance, float(np.abs(covariance - offline.covariance[i][:3, :3]).max() / np.abs(offline.covariance[i][:3, :3]).max()))
+        tags = len(set(live.epc.astype(str)))
+        parts.append(f"{name}: {'pose and odom per tag = rows per tag' if counts_match else 'COUNTS DIFFER'} ({tags} tags), position to track.csv <= {worst_position:.1e} m, covariance to offline <= {worst_covariance:.1e} (relative)")
+    return "; ".join(parts)
+
+
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--speed", type=float, default=40.0, help="simulated seconds per wall second")
     parser.add_argument("--duration", type=float, default=60.0, help="simulated seconds")
     parser.add_argument("--seed", type=int, default=1)
+    parser.add_argument("--outputs", action="store_true", help="all live outputs on: Parquet, MCAP, ROS 2 bag, Foxglove, MQTT")
     args = parser.parse_args()
     logging.getLogger("llrpkit").setLevel(logging.CRITICAL)  # the forced disconnect is expected
     scenario = load_scenario(SCENARIO)
@@ -83,20 +151,29 @@ def main() -> int:
     folder = Path(tempfile.mkdtemp())
     port = free_port()
     drop_after = args.duration / 2
-    emulator = start_emulator(port, args.speed, args.duration, drop_after, args.seed)
-    session = LiveSession(sim.scene, "127.0.0.1", port, folder / "reads.csv", folder / "track.csv", track.make("glac", sim.scene), duration_s=args.duration / args.speed + 3.0)
-    summary = asyncio.run(session.run())
+    with contextlib.ExitStack() as stack:
+        outputs = None
+        if args.outputs:
+            broker = stack.enter_context(mosquitto(folder))
+            options = OutputOptions(parquet=str(folder / "track.parquet"), mcap=str(folder / "track.mcap"), ros2_bag=str(folder / "bag"), foxglove=("127.0.0.1", 0), mqtt=("127.0.0.1", broker))
+            outputs = LiveOutputs(options, sim.scene, folder / "track.csv")
+        emulator = start_emulator(port, args.speed, args.duration, drop_after, args.seed)
+        session = LiveSession(sim.scene, "127.0.0.1", port, folder / "reads.csv", folder / "track.csv", track.make("glac", sim.scene), duration_s=args.duration / args.speed + 3.0, outputs=outputs)
+        summary = asyncio.run(session.run())
     served, _ = emulator.communicate(timeout=60)
     sent = int(re.search(r"sent (\d+) read", served).group(1))
     journal = read_reads(folder / "reads.csv")
     live = read_track(folder / "track.csv")
-    offline = track.run("glac", sim.scene, journal)
+    offline = track.run("glac", sim.scene, journal, covariance=args.outputs)
     difference = float(np.abs(live.position - offline.position).max()) if len(live) == len(offline) else float("nan")
     # The journal's clock is the emulated reader's: Unix epoch + simulated time.
     epoch_s = float(re.search(r"reader clock = simulated time \+ ([0-9.]+) s", served).group(1))
     live_on_sim_clock = dataclasses.replace(live, time_s=live.time_s - epoch_s)
     print(f"live LLRP path, {SCENARIO}: {args.duration:g} s simulated at {args.speed:g}x ({len(sim.reads) / (args.duration / args.speed):,.0f} reads/s offered), seed {args.seed}")
     print(f"  throughput: {summary.throughput_reads_per_s:,.0f} reads/s journaled and tracked (target >= 1,000)")
+    if outputs is not None:
+        print(f"  outputs on: {outputs.messages:,} ROS 2 messages in the MCAP and the bag each, {outputs.foxglove_published:,} served on Foxglove, {outputs.mqtt_published:,} estimates over MQTT, Parquet of {len(read_track(folder / 'track.parquet')):,} rows")
+        print(f"  read back: {read_back(folder, live, offline)}")
     print(f"  exactly once: emulator sent {sent:,}, journal holds {len(journal):,}, duplicates declined {summary.declined.get('duplicate report (already received)', 0)}")
     outage = summary.outages_s[0] if summary.outages_s else float("nan")
     print(f"  forced disconnect at {drop_after:g} s simulated: back after {outage:.3f} s ({summary.connections} connections)")

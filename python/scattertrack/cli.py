@@ -37,7 +37,7 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
-from scattertrack import calibrate_command, live_command, locate_command
+from scattertrack import calibrate_command, live_command, locate_command, outputs_command
 
 DEMO_SCENARIO = "glac-3d-arm"
 """The scenario ``scattertrack demo`` (and so ``make demo``) runs by default."""
@@ -672,6 +672,7 @@ def command_stream(args) -> int:
     warn_about_geometry(scene, None)
     calibration = calibration_for(args)
     speed = None if args.fast else (1.0 if args.speed is None else args.speed)
+    outputs = outputs_command.start_outputs(args, scene)  # before the run: clients can connect
     result = stream_sigmf(
         args.sigmf, scene, calibration, args.method, speed=speed,
         workers=args.workers, layout=args.layout, prewake_s=args.prewake_us * 1e-6, ema_alpha=args.ema_alpha, **params,
@@ -696,6 +697,7 @@ def command_stream(args) -> int:
             f"{name} {format_nanoseconds(lo)}/{format_nanoseconds(hi)}" for name, lo, hi in zip(result.stages, p50, p99)
         )
         say(f"  where it went, p50/p99: {parts}")
+    outputs_command.finish_outputs(outputs, result.track)
     return 0
 
 
@@ -916,6 +918,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     stream.add_argument("--ema-alpha", type=ascii_float, help="EMA factor across each tag's channels (default: off)")
     stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
+    outputs_command.add_output_options(stream, files=False)
     stream.set_defaults(run=command_stream)
 
     check_scene = commands.add_parser(

@@ -1,8 +1,10 @@
 """``scattertrack live`` and ``scattertrack emulate-reader``: a real reader in.
 
-    scattertrack live --scene S --llrp HOST[:PORT] --out track.csv --journal reads.csv
+    scattertrack live --scene S --llrp HOST[:PORT] --out track.csv|track.parquet --journal reads.csv
                       [--method glac] [--duration SECONDS] [--antennas 1,2,3,4]
                       [--tx-power-dbm P] [--reader-mode M] [--session N] [--search-mode N]
+                      [--mcap FILE] [--ros2-bag DIR] [--frame-id F] [--transform x,y,z,qw,qx,qy,qz]
+                      [--foxglove [HOST:]PORT] [--mqtt-out HOST[:PORT]]
     scattertrack emulate-reader --scenario NAME [--port P] [--speed X] [--drop-after S] [--seed N]
 
 ``live`` runs :class:`scattertrack.readers.live.LiveSession` until
@@ -25,15 +27,16 @@ import sys
 import time
 from pathlib import Path
 
+from scattertrack import outputs_command
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
 
 LLRP_PORT = 5084
 """The IANA port of LLRP (5085 with TLS)."""
 
 
-def host_and_port(text: str) -> tuple[str, int]:
+def host_and_port(text: str, default_port: int = LLRP_PORT) -> tuple[str, int]:
     """``HOST[:PORT]`` (an IPv6 address in brackets: ``[::1]:5084``)."""
-    host, port = text, LLRP_PORT
+    host, port = text, default_port
     if text.startswith("["):
         host, _, rest = text[1:].partition("]")
         if rest.startswith(":"):
@@ -66,7 +69,7 @@ def add_parsers(commands) -> None:
     )
     live.add_argument("--scene", required=True, help="scene.toml (the antennas' ids are the reader's ports)")
     live.add_argument("--llrp", required=True, type=host_and_port, metavar="HOST[:PORT]", help=f"the reader (port {LLRP_PORT} by default)")
-    live.add_argument("--out", required=True, help="track.csv to write (appended to if it exists)")
+    live.add_argument("--out", required=True, help="track.csv to write (appended to if it exists); track.parquet: the CSV beside it as it goes, the Parquet twin at the end")
     live.add_argument("--journal", required=True, help="reads.csv to append every received read to")
     live.add_argument("--method", default="glac", help="tracking method for phase reads (default glac)")
     live.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
@@ -78,6 +81,7 @@ def add_parsers(commands) -> None:
     live.add_argument("--search-mode", type=ascii_int, help="Impinj search mode (1 single, 2 dual target, 3 TagFocus)")
     live.add_argument("--scene-out", help="the scene with the reader's hop table ([[hop_table]]) to write (default: beside the journal, JOURNAL.scene.toml)")
     live.add_argument("--no-progress", action="store_true", help="no progress line")
+    outputs_command.add_output_options(live, files=True)
     live.set_defaults(run=command_live)
 
     emulate = commands.add_parser(
@@ -124,22 +128,38 @@ def _progress_line(session) -> None:
 
 def command_live(args) -> int:
     from scattertrack import io, track
+    from scattertrack.io.csvutil import is_parquet
     from scattertrack.readers.live import LiveSession, ReaderSettings
+    from scattertrack.readers.outputs import LiveOutputs
 
     params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
     tracker = track.make(args.method, scene, **params)  # a bad parameter or method fails before connecting
     host, port = args.llrp
-    for path in (args.out, args.journal):
-        Path(path).parent.mkdir(parents=True, exist_ok=True)
+    # Parquet has no append: the rows go to the CSV beside it as they come, the twin is made at the end.
+    track_csv = Path(args.out).with_suffix(".csv") if is_parquet(args.out) else Path(args.out)
+    options = outputs_command.output_options(args, parquet=args.out if is_parquet(args.out) else None)
+    for path in (args.out, args.journal, args.mcap, args.ros2_bag):
+        if path:
+            Path(path).parent.mkdir(parents=True, exist_ok=True)
     # llrpkit logs every lost connection; the summary reports them instead.
     logging.getLogger("llrpkit").setLevel(logging.CRITICAL)
     settings = ReaderSettings(args.antennas, args.tx_power_dbm, args.reader_mode, args.session, args.search_mode)
     progress = None if args.no_progress else _progress_line
-    session = LiveSession(scene, host, port, args.journal, args.out, tracker, settings=settings, duration_s=args.duration, progress=progress)
-    say(f"live: {host}:{port}, journal {args.journal}, track {args.out}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
+    outputs = LiveOutputs(options, scene, track_csv) if options.any else None
+    try:
+        session = LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress, outputs=outputs)
+    except BaseException:
+        if outputs is not None:  # the session closes them, once it exists
+            outputs.close()
+        raise
+    say(f"live: {host}:{port}, journal {args.journal}, track {track_csv}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
+    if outputs is not None and outputs.foxglove is not None:
+        say(f"  Foxglove WebSocket on ws://{options.foxglove[0]}:{outputs.foxglove.port}")
     summary = asyncio.run(_run_until_interrupted(session))
     print_live_summary(summary, args)
+    if outputs is not None:
+        outputs_command.say_outputs(outputs)
     if summary.hop_table_hz:
         # Offline runs of the journal (import, calibrate, locate) read the carriers from it.
         scene_out = Path(args.scene_out) if args.scene_out else Path(args.journal).with_suffix(".scene.toml")

@@ -127,10 +127,18 @@ class TrackAppender(_Appender):
     def __init__(self, path) -> None:
         super().__init__(path, TRACK_HEADER)
 
-    def append(self, time_s: float, epc: str, position, velocity, sigma) -> None:
-        """Write one estimate: s, m, m/s, m (velocity nan is written ``nan``)."""
-        values = [*position, *velocity, *sigma]
+    def append(self, time_s: float, epc: str, position, velocity, sigma) -> list[str]:
+        """Write one estimate: s, m, m/s, m (velocity nan is written ``nan``).
+        Returns the row's cells (:data:`TRACK_HEADER`), for outputs that must
+        say exactly what the file says."""
         if not all(math.isfinite(v) for v in [time_s, *position]):
             raise ValueError(f"{self.path}: cannot write an estimate with a non-finite time or position")
-        cells = [f"{time_s:.6f}", quote_text(epc)] + ["nan" if math.isnan(v) else f"{v:.6f}" for v in values]
+        cells = track_cells(time_s, epc, position, velocity, sigma)
         self._write(cells)
+        return cells
+
+
+def track_cells(time_s: float, epc: str, position, velocity, sigma) -> list[str]:
+    """One ``track.csv`` row's cells (:data:`TRACK_HEADER`), 6 decimals, nan as ``nan``."""
+    values = [*position, *velocity, *sigma]
+    return [f"{time_s:.6f}", quote_text(epc)] + ["nan" if math.isnan(v) else f"{v:.6f}" for v in values]

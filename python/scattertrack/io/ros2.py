@@ -22,6 +22,11 @@ estimates orientation (Marvel), which is then given with
 :data:`NOMINAL_ROTATION_VARIANCE`. Stamps are the estimates' times
 (Unix epoch for live input). ``transform`` (x, y, z, qw, qx, qy, qz) maps
 the scene frame into the robot's: p' = R p + t, Σ' = R Σ Rᵀ.
+
+:class:`Builder` turns one row into its messages, for a whole track
+(:func:`messages`) and for a live estimate
+(:mod:`scattertrack.readers.outputs`) alike; :class:`McapFile` and
+:class:`BagFile` take them one at a time, so a live run writes as it goes.
 """
 
 from __future__ import annotations
@@ -93,59 +98,106 @@ def _stamp(types, time_s: float):
     return types["builtin_interfaces/msg/Time"](sec=int(sec), nanosec=nanosec)
 
 
-def _covariances(track, i: int, rotation: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(position 3×3, velocity 3×3) of row ``i`` in the output frame."""
-    if getattr(track, "covariance", None) is not None:
-        full = np.asarray(track.covariance[i], dtype=float).reshape(6, 6)
+def _blocks(covariance, sigma) -> tuple[np.ndarray, np.ndarray]:
+    """(position 3×3, velocity 3×3) in the scene frame, from a full 6×6
+    covariance of [p, v] when there is one, else from the sigmas."""
+    if covariance is not None:
+        full = np.asarray(covariance, dtype=float).reshape(6, 6)
         position, velocity = full[:3, :3], full[3:, 3:]
     else:
-        sigma = np.asarray(track.sigma[i], dtype=float) if track.sigma is not None else np.full(3, np.nan)
+        sigma = np.asarray(sigma, dtype=float) if sigma is not None else np.full(3, np.nan)
         position, velocity = np.diag(sigma**2), np.full((3, 3), np.nan)
     velocity = np.where(np.isfinite(velocity), velocity, 0.0) if np.isfinite(velocity).any() else np.diag([UNKNOWN_ROTATION_VARIANCE] * 3)
-    return rotation @ position @ rotation.T, rotation @ velocity @ rotation.T
+    return position, velocity
 
 
 def _six(block: np.ndarray, rotation_variance: float) -> np.ndarray:
     six = np.zeros((6, 6))
     six[:3, :3] = block
-    six[3:, 3:] = np.eye(3) * rotation_variance
+    six[3, 3] = six[4, 4] = six[5, 5] = rotation_variance  # (not np.eye: this runs per live estimate)
     return six.reshape(36)
+
+
+class Builder:
+    """Builds the messages of one track row: the single place a row becomes
+    ROS 2, for a whole track (:func:`messages`) and for a live estimate
+    alike, so that files and live outputs cannot drift apart."""
+
+    def __init__(self, frame_id: str = "scattertrack", transform: Transform = IDENTITY) -> None:
+        self.store = _typestore()
+        self.types = self.store.types
+        self.frame_id = frame_id
+        self.transform = transform
+        self._rotation = transform.matrix()
+
+    def antennas(self, scene, time_s: float):
+        """``(topic, msgtype, stamp_ns, message)`` of the antennas' markers."""
+        return ANTENNA_TOPIC, MARKERS, _nanoseconds(time_s), _antenna_markers(self.types, scene, time_s, self.frame_id, self.transform)
+
+    def row(self, time_s: float, epc: str, position, velocity, covariance=None, sigma=None, orientation=None) -> list:
+        """The pose and odometry ``(topic, msgtype, stamp_ns, message)`` of one
+        row: ``covariance`` the 6×6 of [p, v] (or None: ``sigma``, 3 m),
+        ``orientation`` (w, x, y, z) or None, all in the scene frame."""
+        types, rotation, transform = self.types, self._rotation, self.transform
+        position = rotation @ np.asarray(position, dtype=float) + transform.translation
+        velocity = np.asarray(velocity, dtype=float)
+        velocity = rotation @ np.where(np.isnan(velocity), 0.0, velocity)
+        position_cov, velocity_cov = (rotation @ block @ rotation.T for block in _blocks(covariance, sigma))
+        if orientation is not None and np.all(np.isfinite(orientation)):
+            q, rotation_variance = _rotate_quaternion(transform.rotation, np.asarray(orientation, dtype=float)), NOMINAL_ROTATION_VARIANCE
+        else:
+            q, rotation_variance = np.array([1.0, 0.0, 0.0, 0.0]), UNKNOWN_ROTATION_VARIANCE
+        header = types["std_msgs/msg/Header"](stamp=_stamp(types, time_s), frame_id=self.frame_id)
+        pose = types["geometry_msgs/msg/PoseWithCovariance"](
+            pose=types["geometry_msgs/msg/Pose"](
+                position=types["geometry_msgs/msg/Point"](x=position[0], y=position[1], z=position[2]),
+                orientation=types["geometry_msgs/msg/Quaternion"](x=q[1], y=q[2], z=q[3], w=q[0]),
+            ),
+            covariance=_six(position_cov, rotation_variance),
+        )
+        Vector3 = types["geometry_msgs/msg/Vector3"]
+        twist = types["geometry_msgs/msg/TwistWithCovariance"](
+            twist=types["geometry_msgs/msg/Twist"](linear=Vector3(x=velocity[0], y=velocity[1], z=velocity[2]), angular=Vector3(x=0.0, y=0.0, z=0.0)),
+            covariance=_six(velocity_cov, UNKNOWN_ROTATION_VARIANCE),
+        )
+        stamp = _nanoseconds(time_s)
+        return [
+            (topic(epc, "pose"), POSE, stamp, types[POSE](header=header, pose=pose)),
+            (topic(epc, "odom"), ODOMETRY, stamp, types[ODOMETRY](header=header, child_frame_id=f"tag_{epc}", pose=pose, twist=twist)),
+        ]
+
+    def schema(self, msgtype: str) -> str:
+        """The ``ros2msg`` definition of ``msgtype`` (with its dependencies)."""
+        text, _ = self.store.generate_msgdef(msgtype, ros_version=2)
+        return text
+
+    def cdr(self, message, msgtype: str) -> bytes:
+        return bytes(self.store.serialize_cdr(message, msgtype))
+
+
+def _nanoseconds(time_s: float) -> int:
+    return int(round(float(time_s) * 1e9))
 
 
 def messages(track, scene=None, frame_id: str = "scattertrack", transform: Transform = IDENTITY):
     """Yield ``(topic, msgtype, stamp_ns, message)`` in time order: the
     antennas first (if ``scene``), then per track row its pose and odometry."""
-    ts = _typestore()
-    types = ts.types
-    rotation = transform.matrix()
+    builder = Builder(frame_id, transform)
     order = np.argsort(np.asarray(track.time_s), kind="stable")
     if scene is not None and len(order):
-        yield ANTENNA_TOPIC, MARKERS, int(round(float(track.time_s[order[0]]) * 1e9)), _antenna_markers(types, scene, float(track.time_s[order[0]]), frame_id, transform)
-    Header, Point, Quaternion, Pose, Vector3 = (types[t] for t in ("std_msgs/msg/Header", "geometry_msgs/msg/Point", "geometry_msgs/msg/Quaternion", "geometry_msgs/msg/Pose", "geometry_msgs/msg/Vector3"))
-    PoseWithCovariance, Twist, TwistWithCovariance = (types[t] for t in ("geometry_msgs/msg/PoseWithCovariance", "geometry_msgs/msg/Twist", "geometry_msgs/msg/TwistWithCovariance"))
+        yield builder.antennas(scene, float(track.time_s[order[0]]))
+    covariance = getattr(track, "covariance", None)
     orientation = getattr(track, "orientation", None)
     for i in order:
-        time_s = float(track.time_s[i])
-        epc = str(track.epc[i])
-        position = rotation @ np.asarray(track.position[i], dtype=float) + transform.translation
-        velocity = rotation @ np.nan_to_num(np.asarray(track.velocity[i], dtype=float))
-        position_cov, velocity_cov = _covariances(track, i, rotation)
-        if orientation is not None and np.all(np.isfinite(orientation[i])):
-            q, rotation_variance = _rotate_quaternion(transform.rotation, np.asarray(orientation[i], dtype=float)), NOMINAL_ROTATION_VARIANCE
-        else:
-            q, rotation_variance = np.array([1.0, 0.0, 0.0, 0.0]), UNKNOWN_ROTATION_VARIANCE
-        header = Header(stamp=_stamp(types, time_s), frame_id=frame_id)
-        pose = PoseWithCovariance(
-            pose=Pose(position=Point(x=position[0], y=position[1], z=position[2]), orientation=Quaternion(x=q[1], y=q[2], z=q[3], w=q[0])),
-            covariance=_six(position_cov, rotation_variance),
+        yield from builder.row(
+            float(track.time_s[i]),
+            str(track.epc[i]),
+            track.position[i],
+            track.velocity[i],
+            covariance=None if covariance is None else covariance[i],
+            sigma=None if track.sigma is None else track.sigma[i],
+            orientation=None if orientation is None else orientation[i],
         )
-        stamp = int(round(time_s * 1e9))
-        yield topic(epc, "pose"), POSE, stamp, types[POSE](header=header, pose=pose)
-        twist = TwistWithCovariance(
-            twist=Twist(linear=Vector3(x=velocity[0], y=velocity[1], z=velocity[2]), angular=Vector3(x=0.0, y=0.0, z=0.0)),
-            covariance=_six(velocity_cov, UNKNOWN_ROTATION_VARIANCE),
-        )
-        yield topic(epc, "odom"), ODOMETRY, stamp, types[ODOMETRY](header=header, child_frame_id=f"tag_{epc}", pose=pose, twist=twist)
 
 
 def _rotate_quaternion(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -192,42 +244,79 @@ def _antenna_markers(types, scene, time_s: float, frame_id: str, transform: Tran
     return types[MARKERS](markers=markers)
 
 
+class McapFile:
+    """An MCAP file written message by message (ros2msg schemas, CDR), so a
+    live run can write it as it goes; :meth:`close` writes the index."""
+
+    def __init__(self, path, builder: Builder) -> None:
+        from mcap.writer import Writer
+
+        self.builder = builder
+        self.counts: dict[str, int] = {}
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._stream = open(path, "wb")
+        self._writer = Writer(self._stream)
+        self._writer.start(profile="ros2", library="scattertrack")
+
+    def write(self, name: str, msgtype: str, stamp: int, data: bytes) -> None:
+        """One message, already CDR (:meth:`Builder.cdr`: serialized once for every output)."""
+        if msgtype not in self._schemas:
+            self._schemas[msgtype] = self._writer.register_schema(name=msgtype, encoding="ros2msg", data=self.builder.schema(msgtype).encode())
+        if name not in self._channels:
+            self._channels[name] = self._writer.register_channel(topic=name, message_encoding="cdr", schema_id=self._schemas[msgtype])
+        sequence = self.counts.get(name, 0)
+        self._writer.add_message(channel_id=self._channels[name], log_time=stamp, data=data, publish_time=stamp, sequence=sequence)
+        self.counts[name] = sequence + 1
+
+    def close(self) -> None:
+        if not self._stream.closed:
+            self._writer.finish()
+            self._stream.close()
+
+
+class BagFile:
+    """A ROS 2 bag (rosbag2, sqlite3 storage) written message by message.
+    ``directory`` must not exist yet (rosbag2's rule)."""
+
+    def __init__(self, directory, builder: Builder) -> None:
+        from rosbags.rosbag2 import Writer
+
+        self.builder = builder
+        self.counts: dict[str, int] = {}
+        self._connections: dict = {}
+        self._writer = Writer(directory, version=8)
+        self._writer.open()
+        self._open = True
+
+    def write(self, name: str, msgtype: str, stamp: int, data: bytes) -> None:
+        """One message, already CDR."""
+        if name not in self._connections:
+            self._connections[name] = self._writer.add_connection(name, msgtype, typestore=self.builder.store)
+        self._writer.write(self._connections[name], stamp, data)
+        self.counts[name] = self.counts.get(name, 0) + 1
+
+    def close(self) -> None:
+        if self._open:
+            self._writer.close()
+            self._open = False
+
+
+def _write(sink, track, scene, frame_id, transform) -> dict:
+    try:
+        for name, msgtype, stamp, message in messages(track, scene, frame_id, transform):
+            sink.write(name, msgtype, stamp, sink.builder.cdr(message, msgtype))
+    finally:
+        sink.close()
+    return sink.counts
+
+
 def write_mcap(path, track, scene=None, frame_id: str = "scattertrack", transform: Transform = IDENTITY) -> dict:
     """Write the track as MCAP (ros2msg + CDR); returns messages per topic."""
-    from mcap.writer import Writer
-
-    ts = _typestore()
-    counts: dict[str, int] = {}
-    schemas: dict[str, int] = {}
-    channels: dict[str, int] = {}
-    with open(path, "wb") as stream:
-        writer = Writer(stream)
-        writer.start(profile="ros2", library="scattertrack")
-        for name, msgtype, stamp, message in messages(track, scene, frame_id, transform):
-            if msgtype not in schemas:
-                text, _ = ts.generate_msgdef(msgtype, ros_version=2)
-                schemas[msgtype] = writer.register_schema(name=msgtype, encoding="ros2msg", data=text.encode())
-            if name not in channels:
-                channels[name] = writer.register_channel(topic=name, message_encoding="cdr", schema_id=schemas[msgtype])
-            data = ts.serialize_cdr(message, msgtype)
-            writer.add_message(channel_id=channels[name], log_time=stamp, data=bytes(data), publish_time=stamp, sequence=counts.get(name, 0))
-            counts[name] = counts.get(name, 0) + 1
-        writer.finish()
-    return counts
+    return _write(McapFile(path, Builder(frame_id, transform)), track, scene, frame_id, transform)
 
 
 def write_ros2_bag(directory, track, scene=None, frame_id: str = "scattertrack", transform: Transform = IDENTITY) -> dict:
     """Write the track as a ROS 2 bag (rosbag2, sqlite3 storage); returns messages per topic.
     ``directory`` must not exist yet (rosbag2's rule)."""
-    from rosbags.rosbag2 import Writer
-
-    ts = _typestore()
-    counts: dict[str, int] = {}
-    connections = {}
-    with Writer(directory, version=8) as writer:
-        for name, msgtype, stamp, message in messages(track, scene, frame_id, transform):
-            if name not in connections:
-                connections[name] = writer.add_connection(name, msgtype, typestore=ts)
-            writer.write(connections[name], stamp, ts.serialize_cdr(message, msgtype))
-            counts[name] = counts.get(name, 0) + 1
-    return counts
+    return _write(BagFile(directory, Builder(frame_id, transform)), track, scene, frame_id, transform)

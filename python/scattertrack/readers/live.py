@@ -18,7 +18,9 @@ needs (RF phase angle, peak RSSI, Doppler), and for every tag report:
    ``scattertrack.track.make("glac", scene)``: this layer knows no method)
    with the values *as written* to the journal, so ``scattertrack track``
    on the journal gives exactly the live track;
-5. appends any estimate to the track (``track.csv``), flushed.
+5. appends any estimate to the track (``track.csv``), flushed, and hands
+   the row to ``outputs`` (Parquet, MCAP, ROS 2 bag, Foxglove, MQTT:
+   :class:`scattertrack.readers.outputs.LiveOutputs`), closed at the end.
 
 When the connection drops it reconnects with exponential backoff and sets
 the reader up again (a reader deactivates its ROSpecs when its client goes:
@@ -122,6 +124,7 @@ class LiveSession:
         backoff_s: tuple[float, float] = (0.1, 5.0),
         progress: Callable[["LiveSession"], None] | None = None,
         progress_interval_s: float = 1.0,
+        outputs=None,
     ) -> None:
         self.scene = scene
         self.host, self.port = host, int(port)
@@ -135,6 +138,8 @@ class LiveSession:
         self.antenna_ids = {a.id for a in scene.antennas}
         self.journal = ReadsAppender(journal_path)
         self.track = TrackAppender(track_path)
+        self.outputs = outputs
+        """Anything with ``add(epc, cells, covariance)`` and ``close()``, or None."""
         self.summary = LiveSummary()
         self.last_estimate: dict = {}
         """EPC -> its latest :class:`~scattertrack.track.glac.Estimate`."""
@@ -182,8 +187,10 @@ class LiveSession:
         estimate = self.tracker.step(time_s, read.epc, read.antenna, read.frequency_hz, phase_rad)
         if estimate is not None:
             sigma = [math.sqrt(max(estimate.covariance[k, k], 0.0)) for k in range(3)]
-            self.track.append(estimate.time_s, read.epc, estimate.position, estimate.velocity, sigma)
+            cells = self.track.append(estimate.time_s, read.epc, estimate.position, estimate.velocity, sigma)
             self.track.flush()
+            if self.outputs is not None:
+                self.outputs.add(read.epc, cells, estimate.covariance)
             self.summary.estimates += 1
             self.last_estimate[read.epc] = estimate
 
@@ -278,5 +285,7 @@ class LiveSession:
                 await asyncio.wait_for(asyncio.gather(worker, ticker, stopper, return_exceptions=True), STOP_GRACE_S)
             self.journal.close()
             self.track.close()
+            if self.outputs is not None:
+                self.outputs.close()
             self.summary.wall_s = time.monotonic() - self._started
         return self.summary

@@ -162,7 +162,7 @@ def stream_sigmf(
         skipped.add(SKIP_UNREADABLE, n=int(out["unreadable"]))
     columns = {k: [out[k]] for k in ("row", "time_s", "position", "velocity", "covariance")}
     stats = {str(name): dict(core.stats(i)) for i, name in enumerate(names)}
-    track = track_from_columns(columns, epcs, skipped, stats, wideband._DECLINED)
+    track = track_from_columns(columns, epcs, skipped, stats, wideband._DECLINED, keep_covariance=True)  # for the ROS 2 outputs
     return StreamResult(
         track=track,
         latency_ns=np.asarray(out["latency_ns"], dtype=np.int64),

@@ -94,3 +94,52 @@ def test_live_with_no_reader_stops_at_its_duration(capsys, walls, tmp_path):
 def test_emulate_reader_needs_a_cots_scenario(capsys):
     code, _, err = run(capsys, "emulate-reader", "--scenario", "turbotrack-static", "--port", "0")
     assert code == 2 and "not a COTS reader scenario" in err
+
+
+def test_live_writes_parquet_mcap_and_a_bag_and_serves_mqtt(capsys, walls, tmp_path):
+    from robots import Subscriber, mosquitto_broker
+
+    port = free_port()
+    emulator = subprocess.Popen(
+        [sys.executable, "-m", "scattertrack", "emulate-reader", "--scenario", "glac-3d-walls", "--port", str(port), "--speed", "10", "--linger", "0.5"],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    try:
+        with mosquitto_broker(tmp_path) as broker:
+            subscriber = Subscriber(broker)
+            try:
+                wait_listening(port, emulator)
+                time.sleep(0.2)
+                code, out, err = run(
+                    capsys, "live", "--scene", walls / "scene.toml", "--llrp", f"127.0.0.1:{port}", "--out", tmp_path / "track.parquet", "--journal", tmp_path / "reads.csv",
+                    "--duration", "2.5", "--no-progress", "--mcap", tmp_path / "live.mcap", "--ros2-bag", tmp_path / "bag", "--frame-id", "map",
+                    "--transform", "1,0,0,1,0,0,0", "--foxglove", "0", "--mqtt-out", f"127.0.0.1:{broker}",
+                )
+                assert code == 0, err
+                csv = read_track(tmp_path / "track.csv")  # the row-by-row record beside the Parquet twin
+                messages = subscriber.wait_for(len(csv))
+            finally:
+                subscriber.close()
+    finally:
+        emulator.kill()
+        emulator.communicate()
+    assert code == 0, err
+    assert len(csv) > 0 and len(messages) == len(csv)
+    parquet = read_track(tmp_path / "track.parquet")
+    assert (parquet.position == csv.position).all()
+    assert f"wrote {2 * len(csv) + 1} ROS 2 messages on 3 topics to the MCAP file" in out and "to the ROS 2 bag" in out
+    assert f"published {len(csv)} estimates to the MQTT broker" in out and "Foxglove WebSocket on ws://127.0.0.1:" in out
+
+
+def test_live_refuses_bad_output_options_before_connecting(capsys, walls, tmp_path):
+    base = ["live", "--scene", walls / "scene.toml", "--llrp", "127.0.0.1", "--out", tmp_path / "t.csv", "--journal", tmp_path / "r.csv"]
+    code, _, err = run(capsys, *base, "--foxglove", "localhost")
+    assert code == 2 and "[HOST:]PORT" in err
+    code, _, err = run(capsys, *base, "--transform", "1,2,3")
+    assert code == 2 and "--transform" in err
+    (tmp_path / "bag").mkdir()
+    code, _, err = run(capsys, *base, "--ros2-bag", tmp_path / "bag")
+    assert code == 2 and "already exists" in err
+    assert not (tmp_path / "r.csv").exists()

@@ -96,3 +96,12 @@ def test_track_writes_mcap_and_a_bag_and_refuses_an_existing_bag(tmp_path, capsy
     assert "already exists" in capsys.readouterr().err
     assert main(base + ["--mcap", str(tmp_path / "u.mcap"), "--transform", "1,2"]) == 2
     assert "--transform: expected" in capsys.readouterr().err
+
+
+def test_one_builder_serves_a_whole_track_and_a_single_estimate(tracked):
+    sim, result = tracked
+    builder = ros2.Builder("map")
+    whole = [(t, s, builder.cdr(m, k)) for t, k, s, m in ros2.messages(result, None, frame_id="map")]
+    i = int(np.argsort(result.time_s, kind="stable")[0])
+    single = builder.row(float(result.time_s[i]), str(result.epc[i]), result.position[i], result.velocity[i], covariance=result.covariance[i])
+    assert [(t, s, builder.cdr(m, k)) for t, k, s, m in single] == whole[:2]
