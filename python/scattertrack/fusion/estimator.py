@@ -38,7 +38,7 @@ import gtsam
 import numpy as np
 from gtsam.symbol_shorthand import B, L, M, O, V, W, X
 
-from scattertrack.fusion import factors
+from scattertrack.fusion import divergence, factors, rest
 from scattertrack.fusion.params import GRAVITY_M_S2, MarvelParams
 
 
@@ -60,12 +60,14 @@ DECLINE_REASONS = {
     "direction_gate": "direction outside the innovation gate (declined)",
     "yaw_gate": "yaw outside the innovation gate (declined)",
     "solver_failure": "feature row on which the smoother's linear system failed (declined; smoother restarted)",
-    "diverged": "feature row whose solve left the physical bounds, max_speed_m_s or max_controller_range_m (declined; smoother restarted)",
+    "diverged": "feature row whose solve left the physical bounds, max_speed_m_s, max_controller_range_m or max_position_m (refused; smoother restarted from the features)",
+    "persistently_gated": "feature row after persistent gating (divergence_gated_fraction of divergence_window_epochs; declined; smoother restarted from the features)",
 }
 
 class Diverged(RuntimeError):
     """A solve whose state left the physical bounds (``MarvelParams.max_speed_m_s``,
-    ``max_controller_range_m``): handled like a failed solve."""
+    ``max_controller_range_m``, ``max_position_m``): the row is refused and the
+    smoother restarts from the features (:mod:`scattertrack.fusion.divergence`)."""
 
 
 # IMU samples the estimator ignores, counted in ``MarvelEstimator.imu_declined``.
@@ -137,6 +139,13 @@ def _world_position_covariance(pose, pose_covariance) -> np.ndarray:
     GTSAM's Pose3 tangent is [rotation, translation] in the body frame."""
     rotation = pose.rotation().matrix()
     return rotation @ np.asarray(pose_covariance)[3:, 3:] @ rotation.T
+
+
+def _spread(covariance: np.ndarray, default: float) -> np.ndarray:
+    """Three times the 1-sigmas of a (3, 3) covariance (at least 0.03), or
+    ``3 default`` when it is not finite: a restart's loose priors."""
+    diagonal = np.diag(covariance) if np.all(np.isfinite(covariance)) else np.full(3, default**2)
+    return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
 
 
 def _finite_or(value: float, default: float) -> float:
@@ -232,14 +241,50 @@ class MarvelEstimator:
         self.revised_fallbacks = 0
         """Revised rows that are the causal estimate: the smoother failed (and
         restarted) while the state was in its window."""
-        self._left_ground = not p.use_ground  # True once any IMU sample showed motion
-        self._rest_force_sum = np.zeros(3)  # specific force summed over the first tilt_window_s, m/s^2
-        self._rest_force_count = 0
+        # Rest (fusion/rest.py): the first tilt_window_s of IMU samples are
+        # tested; until the verdict the state is "pending", then "rest" or
+        # "moving". Ground factors only while "rest" and not left.
+        self._rest_state = "pending"
+        self._rest_samples: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._rest_baro: list[tuple[float, float]] = []
+        self.rest_test: rest.RestTest | None = None
+        """The rest test's verdict on the first ``tilt_window_s`` of IMU samples (None while pending)."""
+        self._rest_reference = np.zeros(3)  # mean specific force at rest, m/s^2
+        self._rest_baro_mean = float("nan")  # mean barometer height at rest, m
+        self._left_ground = False  # True once the ground phase is over (or never began)
+        self.ground_end_reason = ""
+        """Why the ground phase ended: "imu" (motion), "barometer", "not_at_rest" (the test failed), or ""."""
+        self._ground_epochs: list[tuple[float, int]] = []  # (time s, k) of epochs whose ground factors are in the graph
+        self._ground_factor_indices: dict[int, list[int]] = {}  # k -> the smoother's indices of its ground factors
+        self._ground_backlog: list[int] = []  # epochs before the verdict, to get ground factors if at rest
+        self._pending_removals: list[int] = []  # factor indices to remove with the next update
+        self.ground_factors_dropped = 0
+        """Ground factors removed because the IMU or the barometer contradicted them."""
+        # Features before the first IMU sample (a log missing its first
+        # seconds of IMU): the first such row anchors the world frame.
+        self._anchor_row: tuple[float, float, float, float, float, float] | None = None
+        self._anchor_used = False  # whether the anchor row placed the origin (the IMU began in motion)
+        self._gate_monitor = divergence.GateMonitor(p.divergence_window_epochs, p.divergence_gated_fraction)
+        self.divergences = 0
+        """Times the state was found diverged (bounds or persistent gating) and restarted from the features."""
+        self.divergences_recovered = 0
+        """Of those, the ones followed by ``recovery_epochs`` epochs without another."""
+        self._since_divergence: int | None = None  # accepted epochs since the last divergence, None when recovered
+        self.divergence_reasons: list[str] = []
+        self._baro_datum = float("nan")  # the barometer offset over the first seconds, m
+        self._controller_fallback = np.zeros(3)  # where the first row put the controller, m
 
     @property
     def on_ground(self) -> bool:
-        """Whether every IMU sample so far was at rest (the drone has not taken off)."""
-        return not self._left_ground
+        """Whether the drone is (still) known to rest on the ground: the rest
+        test has not failed and no IMU sample or barometer window has shown
+        motion since. True while the test is pending."""
+        return self._rest_state != "moving" and not self._left_ground
+
+    @property
+    def rest_state(self) -> str:
+        """``"pending"`` (the rest test's window is not complete), ``"rest"`` or ``"moving"``."""
+        return self._rest_state
 
     # --- IMU ---------------------------------------------------------------
 
@@ -262,7 +307,9 @@ class MarvelEstimator:
             self.imu_declined["not_after_previous"] += 1
             return
         self.imu_samples += 1
-        if not self._left_ground:
+        if self._rest_state == "pending":
+            self._collect_rest(time_s, accel, gyro, baro_z)
+        elif self._rest_state == "rest" and not self._left_ground:
             self._watch_take_off(time_s, accel, gyro)
         if self._first_imu_time is None:
             self._first_imu_time = time_s
@@ -307,12 +354,45 @@ class MarvelEstimator:
             state.attitude().matrix(), dtype=float
         )
 
+    def _collect_rest(self, time_s: float, accel: np.ndarray, gyro: np.ndarray, baro_z) -> None:
+        """Gathers the rest test's window (the first ``tilt_window_s`` of IMU
+        samples) and gives the verdict at the first sample past it."""
+        p = self.params
+        first = self._rest_samples[0][0] if self._rest_samples else time_s
+        if time_s <= first + p.tilt_window_s:
+            self._rest_samples.append((time_s, accel, gyro))
+            if baro_z is not None and math.isfinite(baro_z):
+                self._rest_baro.append((time_s, float(baro_z)))
+            return
+        accel_window = np.array([a for _, a, _ in self._rest_samples])
+        gyro_window = np.array([g for _, _, g in self._rest_samples])
+        thresholds = rest.RestThresholds(
+            p.gravity_m_s2, p.rest_force_tolerance_m_s2, p.rest_accel_rms_m_s2, p.rest_gyro_rms_rad_s, p.rest_baro_rate_m_s
+        )
+        baro_t = [t for t, _ in self._rest_baro]
+        baro_z_window = [z for _, z in self._rest_baro]
+        self.rest_test = rest.rest_test(accel_window, gyro_window, thresholds, baro_t, baro_z_window)
+        # The anchor row placed the origin (the IMU began in motion, after the
+        # features): "at the origin" cannot hold then.
+        at_rest = self.rest_test.at_rest and not self._anchor_used
+        self._rest_samples = []
+        if at_rest:
+            self._rest_state = "rest"
+            self._rest_reference = self.rest_test.mean_force
+            self._rest_baro_mean = float(np.mean(baro_z_window)) if baro_z_window else float("nan")
+            self._watch_take_off(time_s, accel, gyro)
+        else:
+            self._rest_state = "moving"
+            self._left_ground = True
+            self.ground_end_reason = "not_at_rest"
+            self._ground_backlog = []
+
     def _watch_take_off(self, time_s: float, accel: np.ndarray, gyro: np.ndarray) -> None:
         """Ends the ground phase at the first sample that shows motion.
 
         Motion: an angular rate above ``rest_gyro_threshold_rad_s``, or a
-        specific force that differs, as a VECTOR, from the mean of the first
-        ``tilt_window_s`` (gravity seen at rest) by more than
+        specific force that differs, as a VECTOR, from the mean of the rest
+        test's window (gravity seen at rest) by more than
         ``rest_accel_threshold_m_s2``. Not the magnitude: a level body
         accelerated horizontally (the paper's rail, sec. V-B) changes
         ``|f| = sqrt(g^2 + a^2)`` only to second order (0.045 m/s^2 for
@@ -320,16 +400,22 @@ class MarvelEstimator:
         whole run.
         """
         p = self.params
-        if np.linalg.norm(gyro) > p.rest_gyro_threshold_rad_s:
-            self._left_ground = True
-            return
-        if self._first_imu_time is None or time_s <= self._first_imu_time + p.tilt_window_s:
-            self._rest_force_sum += accel
-            self._rest_force_count += 1
-            return  # the reference is still being averaged (the ground may not be level)
-        reference = self._rest_force_sum / self._rest_force_count
-        if np.linalg.norm(accel - reference) > p.rest_accel_threshold_m_s2:
-            self._left_ground = True
+        if np.linalg.norm(gyro) > p.rest_gyro_threshold_rad_s or np.linalg.norm(accel - self._rest_reference) > p.rest_accel_threshold_m_s2:
+            self._end_ground(time_s, "imu")
+
+    def _end_ground(self, time_s: float, reason: str) -> None:
+        """The ground phase ends (IMU motion or the barometer at ``time_s``, s):
+        the ground factors of the epochs after ``time_s - ground_release_s``
+        are removed with the next update (dropped, not obeyed)."""
+        self._left_ground = True
+        self.ground_end_reason = reason
+        cut = time_s - self.params.ground_release_s
+        for t, k in self._ground_epochs:
+            if t > cut:
+                indices = self._ground_factor_indices.pop(k, [])
+                self._pending_removals.extend(indices)
+                self.ground_factors_dropped += len(indices)
+        self._ground_epochs = []
 
     def _integrate_to(self, time_s: float) -> None:
         """Extends the preintegration to ``time_s`` holding the newest sample
@@ -361,6 +447,13 @@ class MarvelEstimator:
             return self._decline("non_finite")
         time_s = float(time_s)
         if self._first_imu_time is None or time_s < self._first_imu_time:
+            if self._anchor_row is None:
+                # The world origin is where the drone was at the log's first
+                # row; without IMU yet, this row is all that ties the
+                # controller to it (see _take_off).
+                self._anchor_row = (time_s, float(range_m), float(azimuth_rad), float(elevation_rad),
+                                    _finite_or(range_sigma_m, self.params.range_sigma_m),
+                                    _finite_or(angle_sigma_rad, self.params.angle_sigma_rad))
             return self._decline("before_imu")
         if self._last_epoch_time is not None and time_s <= self._last_epoch_time:
             return self._decline("not_after_previous")
@@ -381,7 +474,8 @@ class MarvelEstimator:
         previous_position = None if self._nav is None else np.asarray(self._nav.position(), dtype=float)
 
         if self._key < 0:
-            self._take_off(graph, initial, stamps, float(yaw_rad) if has_yaw else 0.0)
+            self._take_off(graph, initial, stamps, float(yaw_rad) if has_yaw else 0.0,
+                           (float(range_m), float(azimuth_rad), float(elevation_rad), range_sigma, angle_sigma))
             # A row at the take-off instant itself measures X(0).
             if self._preintegrated.deltaTij() > 0.0:
                 self._key = 1
@@ -395,9 +489,8 @@ class MarvelEstimator:
         k = self._key
         for key in (X(k), V(k), B(k)):
             stamps[key] = time_s
-        if not self._left_ground:
-            self._add_ground(graph, k)
         predicted = self._nav
+        ground_slots = self._ground_for_epoch(graph, k, time_s)
 
         # Controller: initialised from the first row, rho = p - d u.
         # No gate on the ground: the controller is placed by the rest rows
@@ -406,10 +499,18 @@ class MarvelEstimator:
             self._controller is not None
             and self._gate is not None
             and self._declined_run < p.max_declined_epochs
-            and self._left_ground
+            and not self.on_ground
         )
         if self._controller is None:
             self._controller = predicted.position() - range_m * factors.direction(azimuth_rad, elevation_rad)
+            if self._anchor_used:
+                # Features before the IMU: the controller as the anchor row
+                # (drone at the origin) places it, with that row's spread.
+                _, d0, az0, el0, range_sigma0, angle_sigma0 = self._anchor_row
+                self._controller = divergence.controller_from_origin(d0, az0, el0)
+                spread = divergence.feature_position_sigmas(d0, range_sigma0, angle_sigma0)
+                graph.add(gtsam.PriorFactorPoint3(CONTROLLER, self._controller, gtsam.noiseModel.Isotropic.Sigma(3, spread)))
+            self._controller_fallback = self._controller.copy()
             initial.insert(CONTROLLER, self._controller)
             if self._has_range_bias():
                 graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, 0.0, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
@@ -450,6 +551,9 @@ class MarvelEstimator:
                 if (name != "yaw" or has_yaw) and not used[name]:
                     self.declined[f"{name}_gate"] += 1
             self._declined_run = 0 if (used["range"] or used["direction"] or used["yaw"]) else self._declined_run + 1
+            if self._gate_monitor.add(not (used["range"] and used["direction"])):
+                # Persistently beyond the gate: the state is wrong, not the rows.
+                return self._diverge(k, time_s, predicted, "persistently_gated", (range_m, azimuth_rad, elevation_rad, yaw_rad if has_yaw else None))
         else:
             self._declined_run = 0
 
@@ -505,11 +609,18 @@ class MarvelEstimator:
             self._smoother.setSmootherLag(lag)
             self._lag = lag
         self._release(self._stamp(time_s) - lag)
+        removals, self._pending_removals = self._pending_removals, []
         try:
-            self._smoother.update(graph, initial, stamps)
+            self._smoother.update(graph, initial, stamps, removals)
+            if ground_slots:
+                self._record_ground(k, time_s, ground_slots)
             for _ in range(p.extra_iterations):
                 self._smoother.update()
             estimate = self._read_estimate(time_s, used)
+        except Diverged as failure:
+            self._release(math.inf, revise=False)
+            self._last_epoch_time = time_s
+            return self._diverge(k, time_s, predicted, "diverged", (range_m, azimuth_rad, elevation_rad, yaw_rad if has_yaw else None), str(failure))
         except RuntimeError as failure:
             # GTSAM reports an ill-conditioned system (IndeterminateLinearSystem)
             # by throwing; the smoother's state is then unusable, and so is
@@ -523,8 +634,14 @@ class MarvelEstimator:
             self._last_epoch_time = time_s
             self._preintegrated.resetIntegrationAndSetBias(self._bias)
             self.restarts += 1
-            return self._decline("diverged" if isinstance(failure, Diverged) else "solver_failure")
+            del failure
+            return self._decline("solver_failure")
         self._window[k] = (float(stamps[X(k)]), estimate)
+        if self._since_divergence is not None:
+            self._since_divergence += 1
+            if self._since_divergence >= p.recovery_epochs:
+                self.divergences_recovered += 1
+                self._since_divergence = None
         self._last_epoch_time = time_s
         # The next interval integrates against the newest bias estimate.
         self._preintegrated.resetIntegrationAndSetBias(self._bias)
@@ -675,18 +792,53 @@ class MarvelEstimator:
 
     # --- graph building ----------------------------------------------------
 
-    def _take_off(self, graph, initial, stamps, yaw_rad: float) -> None:
-        """State X(0) at the first IMU sample: at rest at the origin, roll and
-        pitch from the averaged accelerometer, yaw from the first yaw feature."""
+    def _provisional_rest(self) -> bool:
+        """Whether the IMU samples so far pass the rest test (the verdict when it
+        is in, else the test on the part of its window received)."""
+        if self._rest_state != "pending":
+            return self._rest_state == "rest"
+        p = self.params
+        thresholds = rest.RestThresholds(
+            p.gravity_m_s2, p.rest_force_tolerance_m_s2, p.rest_accel_rms_m_s2, p.rest_gyro_rms_rad_s, p.rest_baro_rate_m_s
+        )
+        accel = np.array([a for _, a, _ in self._rest_samples]).reshape(-1, 3)
+        gyro = np.array([g for _, _, g in self._rest_samples]).reshape(-1, 3)
+        return rest.rest_test(accel, gyro, thresholds, min_samples=1).at_rest
+
+    def _take_off(self, graph, initial, stamps, yaw_rad: float, row=None) -> None:
+        """State X(0) at the first IMU sample: at the origin, roll and pitch
+        from the averaged accelerometer, yaw from the first yaw feature; the
+        velocity near zero if the IMU so far shows rest, else unknown.
+        ``row``: this epoch's (range m, azimuth rad, elevation rad, range
+        sigma m, angle sigma rad), for a log whose features began before its IMU."""
         p = self.params
         mean_force = self._tilt_sum / self._tilt_count if self._tilt_count else np.array([0.0, 0.0, 1.0])
         roll, pitch = tilt_from_specific_force(mean_force)
-        pose = gtsam.Pose3(gtsam.Rot3.Ypr(yaw_rad, pitch, roll), np.zeros(3))
+        position = np.zeros(3)
+        position_sigma = p.prior_position_sigma_m
+        provisional = self._provisional_rest()
+        # A row before the IMU matters only if the IMU begins in motion: at
+        # rest, the drone was where it is now (the origin) all along.
+        self._anchor_used = self._anchor_row is not None and row is not None and not provisional
+        if self._anchor_used:
+            # The IMU starts after the features: the origin is where the drone
+            # was at the anchor row, and this state is where this row puts it
+            # from there; loose (the controller's prior carries the anchor).
+            _, d0, az0, el0, range_sigma0, angle_sigma0 = self._anchor_row
+            controller = divergence.controller_from_origin(d0, az0, el0)
+            position = divergence.position_from_features(controller, *row[:3])
+            position_sigma = 10.0 * max(divergence.feature_position_sigmas(row[0], row[3], row[4]),
+                                        divergence.feature_position_sigmas(d0, range_sigma0, angle_sigma0))
+        pose = gtsam.Pose3(gtsam.Rot3.Ypr(yaw_rad, pitch, roll), position)
         # Pose3 tangent: rotation about body x, y, z then translation.
         pose_sigmas = np.array(
-            [p.prior_tilt_sigma_rad, p.prior_tilt_sigma_rad, p.prior_yaw_sigma_rad] + [p.prior_position_sigma_m] * 3
+            [p.prior_tilt_sigma_rad, p.prior_tilt_sigma_rad, p.prior_yaw_sigma_rad] + [position_sigma] * 3
         )
-        velocity_noise = gtsam.noiseModel.Isotropic.Sigma(3, p.prior_velocity_sigma_m_s)
+        # At rest (so far: the test's window may not be complete) the
+        # velocity is near zero; otherwise it is unknown (a lift-off, a log
+        # begun in flight): a wide zero-mean prior, the IMU and the rows find it.
+        velocity_sigma = p.prior_velocity_sigma_m_s if provisional else p.moving_velocity_sigma_m_s
+        velocity_noise = gtsam.noiseModel.Isotropic.Sigma(3, velocity_sigma)
         bias_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3))
         graph.add(gtsam.PriorFactorPose3(X(0), pose, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
         graph.add(gtsam.PriorFactorVector(V(0), np.zeros(3), velocity_noise))
@@ -714,32 +866,87 @@ class MarvelEstimator:
 
     def _restart(self, k: int, time_s: float, predicted) -> None:
         """A fresh smoother holding state ``k`` (the IMU prediction ``predicted``), the bias and
-        the controller, each with a prior as wide as its last covariance (or a loose default)."""
+        the controller, each with a prior as wide as its last covariance (or a loose default):
+        the recovery from a failed solve, whose state was sound before it."""
+        pose_sigmas = np.concatenate([np.full(3, 0.05), _spread(self._cov_position, 1.0)])
+        self._restart_with(
+            k, time_s, predicted, pose_sigmas, _spread(self._cov_velocity, 0.5), self._bias,
+            self._controller, _spread(self._cov_controller, 5.0),
+        )
+
+    def _restart_from_features(self, k: int, time_s: float, predicted, row) -> None:
+        """A fresh smoother holding state ``k`` where the feature ``row`` and the
+        barometer put it (:mod:`scattertrack.fusion.divergence`): the recovery
+        from a diverged state, which the IMU's prediction would carry on.
+
+        ``row``: (range m, azimuth rad, elevation rad, yaw rad or None). The
+        controller stays where it was if that is plausible (within
+        ``max_controller_range_m`` of the take-off point), else it goes back
+        to where the first row put it. Position ``rho + d u``, its height from
+        the barometer's datum when there is one; velocity 0 with
+        ``moving_velocity_sigma_m_s``; roll and pitch kept, the yaw the row's
+        (else kept) with a loose sigma; the biases kept when plausible.
+        """
         p = self.params
+        range_m, azimuth_rad, elevation_rad, yaw_rad = row
+        controller_ok = self._controller is not None and divergence.is_plausible_controller(
+            self._controller, np.zeros(3), p.max_controller_range_m
+        )
+        controller = self._controller if controller_ok else self._controller_fallback
+        controller_sigmas = _spread(self._cov_controller, 5.0) if controller_ok else np.full(3, 5.0)
+        position = divergence.position_from_features(controller, range_m, azimuth_rad, elevation_rad)
+        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
+        if p.use_baro and samples and math.isfinite(self._baro_datum):
+            position[2] = float(np.mean(samples)) - self._baro_datum
+        position_sigma = divergence.feature_position_sigmas(range_m, p.range_sigma_m, p.angle_sigma_rad) * 3.0
+        rotation = predicted.attitude() if np.all(np.isfinite(predicted.attitude().matrix())) else gtsam.Rot3()
+        ypr = rotation.ypr()
+        yaw_sigma = p.prior_yaw_sigma_rad
+        if yaw_rad is not None and math.isfinite(yaw_rad):
+            ypr = (float(yaw_rad), ypr[1], ypr[2])
+        rotation = gtsam.Rot3.Ypr(*ypr)
+        nav = gtsam.NavState(gtsam.Pose3(rotation, position), np.zeros(3))
+        pose_sigmas = np.array([0.1, 0.1, yaw_sigma] + [position_sigma] * 3)
+        bias = self._bias
+        accel_bias = np.asarray(bias.accelerometer(), dtype=float)
+        gyro_bias = np.asarray(bias.gyroscope(), dtype=float)
+        if not (np.all(np.abs(accel_bias) <= 10.0 * p.accel_bias_sigma) and np.all(np.abs(gyro_bias) <= 10.0 * p.gyro_bias_sigma)):
+            bias = gtsam.imuBias.ConstantBias()
+        self._restart_with(
+            k, time_s, nav, pose_sigmas, np.full(3, p.moving_velocity_sigma_m_s), bias, controller, controller_sigmas
+        )
+        # The gate's covariances: the restart's priors (the old ones belong to the diverged state).
+        self._cov_position = np.eye(3) * position_sigma**2
+        self._cov_velocity = np.eye(3) * p.moving_velocity_sigma_m_s**2
+        self._cov_controller = np.diag(controller_sigmas**2)
+        self._cov_yaw = yaw_sigma**2
 
-        def spread(covariance: np.ndarray, default: float) -> np.ndarray:
-            diagonal = np.diag(covariance) if np.all(np.isfinite(covariance)) else np.full(3, default**2)
-            return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
-
+    def _restart_with(self, k, time_s, nav, pose_sigmas, velocity_sigmas, bias, controller, controller_sigmas) -> None:
+        """A fresh smoother holding state ``k`` = ``nav`` (a NavState), ``bias`` and the
+        ``controller`` (m) with the given 1-sigma priors (Pose3 tangent order:
+        rotation rad, then translation m)."""
+        p = self.params
         self._smoother = self._new_smoother()
         self._lag = self.params.smoother_lag_s
+        self._pending_removals = []
+        self._ground_factor_indices = {}
+        self._ground_epochs = []
         graph = gtsam.NonlinearFactorGraph()
         initial = gtsam.Values()
-        pose = predicted.pose()
-        pose_sigmas = np.concatenate([np.full(3, 0.05), spread(self._cov_position, 1.0)])
-        graph.add(gtsam.PriorFactorPose3(X(k), pose, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
-        graph.add(gtsam.PriorFactorVector(V(k), predicted.velocity(), gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_velocity, 0.5))))
+        pose = nav.pose()
+        graph.add(gtsam.PriorFactorPose3(X(k), pose, gtsam.noiseModel.Diagonal.Sigmas(np.asarray(pose_sigmas, dtype=float))))
+        graph.add(gtsam.PriorFactorVector(V(k), nav.velocity(), gtsam.noiseModel.Diagonal.Sigmas(np.asarray(velocity_sigmas, dtype=float))))
         bias_sigmas = np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3)
-        graph.add(gtsam.PriorFactorConstantBias(B(k), self._bias, gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
-        graph.add(gtsam.PriorFactorPoint3(CONTROLLER, self._controller, gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_controller, 5.0))))
+        graph.add(gtsam.PriorFactorConstantBias(B(k), bias, gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
+        graph.add(gtsam.PriorFactorPoint3(CONTROLLER, controller, gtsam.noiseModel.Diagonal.Sigmas(np.asarray(controller_sigmas, dtype=float))))
         if self._has_range_bias():
             # Its prior sigma: its marginal is not kept (one more marginal per
             # epoch for the rare restart).
             graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, self._range_bias, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
         initial.insert(X(k), pose)
-        initial.insert(V(k), predicted.velocity())
-        initial.insert(B(k), self._bias)
-        initial.insert(CONTROLLER, self._controller)
+        initial.insert(V(k), nav.velocity())
+        initial.insert(B(k), bias)
+        initial.insert(CONTROLLER, controller)
         stamps = {X(k): time_s, V(k): time_s, B(k): time_s, CONTROLLER: time_s}
         if self._has_range_bias():
             initial.insert(RANGE_BIAS, self._range_bias)
@@ -747,7 +954,68 @@ class MarvelEstimator:
         self._baro_chain = False  # a new barometer offset chain starts with the next epoch
         self._multipath_chain = False  # and a new multipath chain
         self._smoother.update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
-        self._nav = predicted
+        self._nav = nav
+        self._bias = bias
+        self._controller = np.asarray(controller, dtype=float).copy()
+
+    def _diverge(self, k: int, time_s: float, predicted, reason: str, row, detail: str = "") -> None:
+        """The state has diverged (``reason``: a key of :data:`DECLINE_REASONS`):
+        counted, the row refused, the smoother restarted from the features."""
+        self.divergences += 1
+        self.divergence_reasons.append(f"{time_s:.2f} s: {detail or reason}")
+        self._since_divergence = 0
+        self._release(math.inf, revise=False)
+        self._restart_from_features(k, time_s, predicted, row)
+        self._last_epoch_time = time_s
+        self._preintegrated.resetIntegrationAndSetBias(self._bias)
+        self.restarts += 1
+        self._gate_monitor.clear()
+        self._declined_run = 0
+        self._range_declined_run = 0
+        return self._decline(reason)
+
+    def _ground_for_epoch(self, graph, k: int, time_s: float) -> list:
+        """The ground factors of epoch ``k`` at ``time_s`` (s), added to ``graph``
+        only once the rest test has passed and while nothing contradicts it
+        (:mod:`scattertrack.fusion.rest`); epochs before the verdict get theirs
+        with the first epoch after it. Returns ``[(j, t_j, slots)]``: the
+        epochs given ground factors and their positions in ``graph``."""
+        p = self.params
+        if self._rest_state == "pending":
+            self._ground_backlog.append((k, time_s))
+            return []
+        if self._rest_state != "rest" or self._left_ground:
+            self._ground_backlog = []
+            return []
+        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
+        if p.use_baro and samples and rest.baro_contradicts_ground(float(np.mean(samples)), self._rest_baro_mean, p.ground_baro_rise_m):
+            self._end_ground(time_s, "barometer")
+            self._ground_backlog = []
+            return []
+        if not p.use_ground:
+            self._ground_backlog = []
+            return []
+        added = []
+        for j, t_j in [*self._ground_backlog, (k, time_s)]:
+            first = graph.size()
+            self._add_ground(graph, j)
+            added.append((j, t_j, list(range(first, graph.size()))))
+        self._ground_backlog = []
+        return added
+
+    def _record_ground(self, k: int, time_s: float, added) -> None:
+        """After the update that added them: the smoother's indices of the
+        ground factors in ``added`` (from :meth:`_ground_for_epoch`), so a
+        later contradiction can remove them; older than 2 ``ground_release_s``
+        (and 1 s) they are never removed and are forgotten."""
+        indices = list(self._smoother.getISAM2Result().getNewFactorsIndices())
+        for j, t_j, slots in added:
+            self._ground_factor_indices[j] = [int(indices[i]) for i in slots]
+            self._ground_epochs.append((t_j, j))
+        keep = time_s - max(2.0 * self.params.ground_release_s, 1.0)
+        for t_j, j in [e for e in self._ground_epochs if e[0] < keep]:
+            self._ground_factor_indices.pop(j, None)
+        self._ground_epochs = [e for e in self._ground_epochs if e[0] >= keep]
 
     def _add_ground(self, graph, k: int) -> None:
         """At rest at the origin before take-off: position, zero velocity and,
@@ -884,14 +1152,21 @@ class MarvelEstimator:
             # level: a position of inf) is a solver failure like a thrown
             # one: the caller declines the row and restarts the smoother.
             raise RuntimeError("non-finite estimate")
-        speed = float(np.linalg.norm(velocity))
-        reach = float(np.linalg.norm(controller - np.asarray(pose.translation(), dtype=float)))
-        if speed > self.params.max_speed_m_s or reach > self.params.max_controller_range_m:
-            raise Diverged(f"drone at {speed:.3g} m/s, controller {reach:.3g} m away")
+        p = self.params
+        violation = divergence.physical_violation(
+            np.asarray(pose.translation(), dtype=float), velocity, controller,
+            max_speed_m_s=p.max_speed_m_s, max_controller_range_m=p.max_controller_range_m, max_position_m=p.max_position_m,
+        )
+        if violation is not None:
+            raise Diverged(violation)
         self._bias = smoother.calculateEstimateConstantBias(B(k))
         self._controller = controller
         if self._baro_chain:
             self._baro_offset = smoother.calculateEstimateDouble(O(self._baro_key))
+            if self.epochs < 20 and self.divergences == 0:
+                # The datum a restart from the features takes the height from:
+                # the offset while the take-off (or the first state's prior) pins it.
+                self._baro_datum = float(self._baro_offset)
         if self._multipath_chain:
             self._multipath = np.asarray(smoother.calculateEstimateVector(M(self._multipath_key)), dtype=float)
         if self._has_range_bias():

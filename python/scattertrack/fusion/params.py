@@ -126,6 +126,35 @@ class MarvelParams:
     """An IMU sample with a larger angular rate means the drone has left the ground, rad/s."""
     rest_accel_threshold_m_s2: float = parameter(0.3, "> 0", "m/s^2", "... or with a specific force whose magnitude differs from g by more")
     """... or with a specific force whose magnitude differs from g by more, m/s^2."""
+    rest_force_tolerance_m_s2: float = parameter(0.1, "> 0", "m/s^2", "rest test: | |mean specific force| - g | at most this over tilt_window_s")
+    """Rest test (:mod:`scattertrack.fusion.rest`): the mean specific force's
+    magnitude differs from g by at most this, m/s^2. Why 0.1: the
+    accelerometer bias's 1-sigma is 0.02 per axis (3 sigma 0.06); a
+    minimum-jerk lift-off to 2 m at 1 m/s accelerates by 0.3-0.8 m/s^2 in its
+    first half second."""
+    rest_accel_rms_m_s2: float = parameter(0.05, "> 0", "m/s^2", "rest test: RMS of the specific force about its mean at most this")
+    """Rest test: RMS of the specific force about its window mean, m/s^2 (white
+    noise alone: 0.017 at 1e-3 m/s^2/sqrt(Hz) and 100 Hz)."""
+    rest_gyro_rms_rad_s: float = parameter(0.02, "> 0", "rad/s", "rest test: RMS angular rate at most this (bias included)")
+    """Rest test: RMS angular rate over the window, bias included, rad/s (3
+    bias sigmas of 0.002 rad/s per axis and the noise: about 0.011)."""
+    rest_baro_rate_m_s: float = parameter(0.3, "> 0", "m/s", "rest test: |least-squares slope of baro_z| at most this")
+    """Rest test: the barometer's least-squares slope over the window, m/s
+    (3 sigma of the slope of 50 samples of 0.1 m noise over 0.5 s)."""
+    ground_baro_rise_m: float = parameter(0.3, "> 0", "m", "on the ground: a barometer window mean this far from the rest window's ends the ground phase")
+    """On the ground: a barometer window mean this far (m) from the rest
+    window's mean contradicts "on the ground"; the ground phase ends and the
+    last ``ground_release_s`` of ground factors are dropped (3 sigma of the
+    difference of two window means plus the offset's walk over seconds)."""
+    ground_release_s: float = parameter(0.3, ">= 0", "s", "ground factors of the epochs this long before a contradiction (IMU or barometer) are removed")
+    """When the IMU or the barometer contradicts the ground (take-off
+    detected), the ground factors of the epochs in the last this many seconds
+    are removed from the graph, not obeyed: the detector lags the take-off
+    (a minimum-jerk climb crosses ``rest_accel_threshold_m_s2`` 0.1-0.2 s in)."""
+    moving_velocity_sigma_m_s: float = parameter(2.0, "> 0", "m/s", "velocity prior of a log that does not start at rest, and of a restart after divergence")
+    """1-sigma (m/s, per axis, zero mean) of the first state's velocity when
+    the rest test has not passed (a log that starts in flight or while lifting
+    off), and of the state a divergence restarts from."""
     ground_position_sigma_m: float = parameter(0.02, "> 0", "m", "1-sigma of 'at the origin' on the ground")
     """1-sigma of "at the origin" on the ground (the detector lags take-off by a few mm), m."""
     ground_velocity_sigma_m_s: float = parameter(0.01, "> 0", "m/s", "1-sigma of 'not moving' on the ground")
@@ -142,8 +171,10 @@ class MarvelParams:
     """Loose take-off yaw prior, rad: the yaw's value comes from the first
     yaw feature when there is one (0 otherwise), its information from the
     yaw factors."""
-    tilt_window_s: float = parameter(0.5, "> 0", "s", "accelerometer samples averaged for roll and pitch at take-off")
-    """Accelerometer samples averaged for roll and pitch at take-off, s."""
+    tilt_window_s: float = parameter(0.5, "> 0", "s", "the first IMU samples of the rest test (and averaged for roll and pitch at take-off)")
+    """The first IMU samples over this span (s) are the rest test's window
+    (:mod:`scattertrack.fusion.rest`) and, at rest, are averaged for roll
+    and pitch at take-off. Ground factors begin only once it passed."""
 
     use_baro: bool = parameter(True, "any", "", "barometer factors when the IMU has baro_z")
     """Barometer factors when ``baro_z`` is given."""
@@ -179,6 +210,18 @@ class MarvelParams:
     """A solve with the controller farther than this from the drone has
     diverged, m (LoRa backscatter reaches tens of metres; paper: 50 m)."""
 
+    max_position_m: float = parameter(1000.0, "> 0", "m", "a solve with the drone farther than this from the take-off point has diverged")
+    """A solve with the drone farther than this from the take-off point has
+    diverged, m (a drone at -49169 m was once printed as a result)."""
+    divergence_window_epochs: int = parameter(20, ">= 0", "epochs", "epochs over which persistent gating is judged; 0: no such test")
+    """Epochs over which persistent gating is judged (:mod:`scattertrack.fusion.divergence`); 0: none."""
+    divergence_gated_fraction: float = parameter(0.8, "(0, 1]", "", "range or direction gated on this share of those epochs: diverged, restart from the features")
+    """Range or direction gated on at least this share of the last
+    ``divergence_window_epochs`` epochs means the state, not the rows, is
+    wrong: the smoother restarts from the features and the barometer."""
+    recovery_epochs: int = parameter(30, ">= 1", "epochs", "a divergence counts as recovered after this many epochs without another")
+    """A divergence counts as recovered after this many accepted epochs in a
+    row without another (3 s at 10 Hz)."""
     compute_sigma: bool = parameter(True, "any", "", "1-sigma position and controller in the output (marginal covariances; always with the gate on)")
     """1-sigma position and controller in the output, from iSAM2's marginal
     covariances of the newest pose, velocity and controller (about 0.4 ms of
