@@ -269,11 +269,13 @@ class MarvelEstimator:
         # seconds of IMU): the first such row anchors the world frame.
         self._anchor_row: tuple[float, float, float, float, float, float] | None = None
         self._anchor_used = False  # whether the anchor row placed the origin (the IMU began in motion)
+        self._anchor_position_sigma = float("nan")  # m, the first state's spread about where the rows put it
         self._gate_monitor = divergence.GateMonitor(p.divergence_window_epochs, p.divergence_gated_fraction)
         self.divergences = 0
         """Times the state was found diverged (bounds or persistent gating) and restarted from the features."""
         self.divergences_recovered = 0
-        """Of those, the ones followed by ``recovery_epochs`` epochs without another."""
+        """Of those, the ones followed by ``recovery_epochs`` accepted epochs
+        without another (all since the last recovery count then)."""
         self._since_divergence: int | None = None  # accepted epochs since the last divergence, None when recovered
         self.divergence_reasons: list[str] = []
         self._baro_datum = float("nan")  # the barometer offset over the first seconds, m
@@ -649,7 +651,9 @@ class MarvelEstimator:
         if self._since_divergence is not None:
             self._since_divergence += 1
             if self._since_divergence >= p.recovery_epochs:
-                self.divergences_recovered += 1
+                # Every divergence since the last recovery is over (one that
+                # followed another within recovery_epochs superseded it).
+                self.divergences_recovered = self.divergences
                 self._since_divergence = None
         self._last_epoch_time = time_s
         # The next interval integrates against the newest bias estimate.
@@ -866,8 +870,11 @@ class MarvelEstimator:
             _, d0, az0, el0, range_sigma0, angle_sigma0 = self._anchor_row
             controller = divergence.controller_from_origin(d0, az0, el0)
             position = divergence.position_from_features(controller, *row[:3])
-            position_sigma = 10.0 * max(divergence.feature_position_sigmas(row[0], row[3], row[4]),
-                                        divergence.feature_position_sigmas(d0, range_sigma0, angle_sigma0))
+            # The two rows' spreads together: how far this state can be from
+            # where they put it (the barometer's datum is checked against it).
+            self._anchor_position_sigma = math.hypot(divergence.feature_position_sigmas(row[0], row[3], row[4]),
+                                                     divergence.feature_position_sigmas(d0, range_sigma0, angle_sigma0))
+            position_sigma = 10.0 * self._anchor_position_sigma
         pose = gtsam.Pose3(gtsam.Rot3.Ypr(yaw_rad, pitch, roll), position)
         # Pose3 tangent: rotation about body x, y, z then translation.
         pose_sigmas = np.array(
@@ -1110,6 +1117,16 @@ class MarvelEstimator:
             walk = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_random_walk * math.sqrt(dt))
             graph.add(gtsam.BetweenFactorDouble(O(self._baro_key), O(k), 0.0, walk))
             initial.insert(O(k), self._baro_offset)
+        elif self._anchor_used and self.epochs == 0 and self.divergences == 0 and samples and self._datum_agrees(float(np.mean(samples)), predicted):
+            # No take-off pins the height (the IMU began in flight): the
+            # barometer's own datum, the take-off point, does, if the
+            # features agree with it (a barometer reading height above sea
+            # level, or zeroed elsewhere, keeps the loose prior).
+            self._baro_offset = 0.0
+            datum = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_datum_sigma_m)
+            graph.add(gtsam.PriorFactorDouble(O(k), 0.0, datum))
+            initial.insert(O(k), 0.0)
+            self._baro_chain = True
         else:
             self._baro_offset = float(np.mean(samples)) - predicted.position()[2]
             loose = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_offset_prior_sigma_m)
@@ -1124,6 +1141,15 @@ class MarvelEstimator:
         noise = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_sigma_m / math.sqrt(len(samples)))
         graph.add(factors.height_factor(X(k), O(k), float(np.mean(samples)), noise))
         return True
+
+    def _datum_agrees(self, baro_m: float, predicted) -> bool:
+        """Whether a barometer height (m) is within 3 sigmas of the height the
+        features put the first state at (its sigma: the anchor row's and the
+        first row's spreads and the datum's)."""
+        if not self._anchor_used:
+            return False
+        sigma = math.hypot(self._anchor_position_sigma, self.params.baro_datum_sigma_m)
+        return abs(baro_m - float(predicted.position()[2])) <= 3.0 * sigma
 
     def _noise(self, sigmas: np.ndarray):
         model = gtsam.noiseModel.Diagonal.Sigmas(sigmas)

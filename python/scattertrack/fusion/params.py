@@ -195,6 +195,13 @@ class MarvelParams:
     baro_offset_prior_sigma_m: float = parameter(100.0, "> 0", "m", "loose prior on the barometer's offset (an arbitrary datum)")
     """Loose prior on the offset (the barometer reads an arbitrary datum), m."""
 
+    baro_datum_sigma_m: float = parameter(0.3, "> 0", "m", "1-sigma of the barometer reading height above the take-off point, used when no take-off pins the height")
+    """1-sigma (m) of "the barometer reads height above the take-off point"
+    (a flight controller zeroes it on the ground), used instead of the loose
+    ``baro_offset_prior_sigma_m`` when no take-off state pins the height: a
+    log whose IMU (and barometer) begin in flight, after its features. 0.3
+    m: the offset's random walk (``baro_random_walk``, 0.02 m/sqrt(s) in the
+    simulator) over five minutes between zeroing and take-off."""
     gate_probability: float = parameter(0.999, "[0, 1)", "", "chi-square gate on each measurement's normalised innovation; 0: no gate")
     """Chi-square gate on each measurement's normalised innovation (0: no gate)."""
     min_epoch_interval_s: float = parameter(1.0e-3, ">= 0", "s", "rows closer than this to the previous epoch are declined")
