@@ -410,15 +410,17 @@ class MarvelEstimator:
         """
         p = self.params
         if np.linalg.norm(gyro) > p.rest_gyro_threshold_rad_s or np.linalg.norm(accel - self._rest_reference) > p.rest_accel_threshold_m_s2:
-            self._end_ground(time_s, "imu")
+            # Each sample before this one was within the rest thresholds: the
+            # IMU contradicts the ground from now on, not before.
+            self._end_ground(time_s, "imu", 0.0)
 
-    def _end_ground(self, time_s: float, reason: str) -> None:
+    def _end_ground(self, time_s: float, reason: str, release_s: float) -> None:
         """The ground phase ends (IMU motion or the barometer at ``time_s``, s):
-        the ground factors of the epochs after ``time_s - ground_release_s``
-        are removed with the next update (dropped, not obeyed)."""
+        the ground factors of the epochs after ``time_s - release_s`` are
+        removed with the next update (dropped, not obeyed)."""
         self._left_ground = True
         self.ground_end_reason = reason
-        cut = time_s - self.params.ground_release_s
+        cut = time_s - release_s
         for t, k in self._ground_epochs:
             if t > cut:
                 indices = self._ground_factor_indices.pop(k, [])
@@ -1035,7 +1037,9 @@ class MarvelEstimator:
             return []
         samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
         if p.use_baro and samples and rest.baro_contradicts_ground(float(np.mean(samples)), self._rest_baro_mean, p.ground_baro_rise_m):
-            self._end_ground(time_s, "barometer")
+            # The barometer's window mean lags its rise, and the IMU missed
+            # it: the last ground_release_s of ground factors are suspect.
+            self._end_ground(time_s, "barometer", p.ground_release_s)
             self._ground_backlog = []
             return []
         if not p.use_ground:
