@@ -32,21 +32,20 @@ import math
 import statistics
 import time
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, L, M, O, V, W, X
+from gtsam.symbol_shorthand import B, M, O, V, X
 
 from scattertrack.fusion import divergence, factors, rest
+from scattertrack.fusion.ground import GroundPhase
+from scattertrack.fusion.keys import CONTROLLER, RANGE_BIAS
 from scattertrack.fusion.latency import Latency
 from scattertrack.fusion.params import GRAVITY_M_S2, MarvelParams
+from scattertrack.fusion.restart import Diverged, Restarts
+from scattertrack.fusion.revised import RevisedTrack, _quaternion, _world_position_covariance
 
-
-CONTROLLER = L(0)
-"""Key of the controller's position in the graph."""
-RANGE_BIAS = W(0)
-"""Key of the constant range bias (``range_bias_sigma_m > 0``)."""
 
 # Reasons a feature row (or one of its measurements) is declined; the keys
 # are the counters in ``MarvelEstimator.declined``, the values the text of
@@ -64,11 +63,6 @@ DECLINE_REASONS = {
     "diverged": "feature row whose solve left the physical bounds, max_speed_m_s, max_controller_range_m or max_position_m (refused; smoother restarted from the features)",
     "persistently_gated": "feature row after persistent gating (divergence_gated_fraction of divergence_window_epochs; declined; smoother restarted from the features)",
 }
-
-class Diverged(RuntimeError):
-    """A solve whose state left the physical bounds (``MarvelParams.max_speed_m_s``,
-    ``max_controller_range_m``, ``max_position_m``): the row is refused and the
-    smoother restarts from the features (:mod:`scattertrack.fusion.divergence`)."""
 
 
 # IMU samples the estimator ignores, counted in ``MarvelEstimator.imu_declined``.
@@ -128,32 +122,11 @@ def tilt_from_specific_force(specific_force) -> tuple[float, float]:
     return math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2]))
 
 
-def _quaternion(pose) -> np.ndarray:
-    """A Pose3's rotation as ``(qw, qx, qy, qz)`` with ``qw >= 0`` (one of the two equal quaternions)."""
-    quaternion = pose.rotation().toQuaternion()
-    q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
-    return -q if q[0] < 0.0 else q
-
-
-def _world_position_covariance(pose, pose_covariance) -> np.ndarray:
-    """The world-frame position covariance (3, 3) m^2 of a Pose3 marginal:
-    GTSAM's Pose3 tangent is [rotation, translation] in the body frame."""
-    rotation = pose.rotation().matrix()
-    return rotation @ np.asarray(pose_covariance)[3:, 3:] @ rotation.T
-
-
-def _spread(covariance: np.ndarray, default: float) -> np.ndarray:
-    """Three times the 1-sigmas of a (3, 3) covariance (at least 0.03), or
-    ``3 default`` when it is not finite: a restart's loose priors."""
-    diagonal = np.diag(covariance) if np.all(np.isfinite(covariance)) else np.full(3, default**2)
-    return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
-
-
 def _finite_or(value: float, default: float) -> float:
     return float(value) if value is not None and math.isfinite(value) and value > 0.0 else default
 
 
-class MarvelEstimator:
+class MarvelEstimator(GroundPhase, Restarts, RevisedTrack):
     """Causal backscatter-inertial fusion: feed IMU samples and feature rows in time order.
 
     ``add_imu`` for every IMU sample, ``add_features`` for every feature row
@@ -281,20 +254,6 @@ class MarvelEstimator:
         self._baro_datum = float("nan")  # the barometer offset over the first seconds, m
         self._controller_fallback = np.zeros(3)  # where the first row put the controller, m
 
-    @property
-    def on_ground(self) -> bool:
-        """Whether the drone is (still) known to rest on the ground: the rest
-        test has not failed and no IMU sample or barometer window has shown
-        motion since. While the test is pending: whether the samples so far pass it."""
-        if self._rest_state == "pending":
-            return self._first_imu_time is None or self._provisional_rest()
-        return self._rest_state == "rest" and not self._left_ground
-
-    @property
-    def rest_state(self) -> str:
-        """``"pending"`` (the rest test's window is not complete), ``"rest"`` or ``"moving"``."""
-        return self._rest_state
-
     # --- IMU ---------------------------------------------------------------
 
     def add_imu(self, time_s: float, accel, gyro, baro_z: float = float("nan")) -> None:
@@ -362,71 +321,6 @@ class MarvelEstimator:
         return np.asarray(state.position(), dtype=float), np.asarray(state.velocity(), dtype=float), np.asarray(
             state.attitude().matrix(), dtype=float
         )
-
-    def _collect_rest(self, time_s: float, accel: np.ndarray, gyro: np.ndarray, baro_z) -> None:
-        """Gathers the rest test's window (the first ``tilt_window_s`` of IMU
-        samples) and gives the verdict at the first sample past it."""
-        p = self.params
-        first = self._rest_samples[0][0] if self._rest_samples else time_s
-        if time_s <= first + p.tilt_window_s:
-            self._rest_samples.append((time_s, accel, gyro))
-            if baro_z is not None and math.isfinite(baro_z):
-                self._rest_baro.append((time_s, float(baro_z)))
-            return
-        accel_window = np.array([a for _, a, _ in self._rest_samples])
-        gyro_window = np.array([g for _, _, g in self._rest_samples])
-        thresholds = rest.RestThresholds(
-            p.gravity_m_s2, p.rest_force_tolerance_m_s2, p.rest_accel_rms_m_s2, p.rest_gyro_rms_rad_s, p.rest_baro_rate_m_s
-        )
-        baro_t = [t for t, _ in self._rest_baro]
-        baro_z_window = [z for _, z in self._rest_baro]
-        self.rest_test = rest.rest_test(accel_window, gyro_window, thresholds, baro_t, baro_z_window)
-        # The anchor row placed the origin (the IMU began in motion, after the
-        # features): "at the origin" cannot hold then.
-        at_rest = self.rest_test.at_rest and not self._anchor_used
-        self._rest_samples = []
-        if at_rest:
-            self._rest_state = "rest"
-            self._rest_reference = self.rest_test.mean_force
-            self._rest_baro_mean = float(np.mean(baro_z_window)) if baro_z_window else float("nan")
-            self._watch_take_off(time_s, accel, gyro)
-        else:
-            self._rest_state = "moving"
-            self._left_ground = True
-            self.ground_end_reason = "not_at_rest"
-            self._ground_backlog = []
-
-    def _watch_take_off(self, time_s: float, accel: np.ndarray, gyro: np.ndarray) -> None:
-        """Ends the ground phase at the first sample that shows motion.
-
-        Motion: an angular rate above ``rest_gyro_threshold_rad_s``, or a
-        specific force that differs, as a VECTOR, from the mean of the rest
-        test's window (gravity seen at rest) by more than
-        ``rest_accel_threshold_m_s2``. Not the magnitude: a level body
-        accelerated horizontally (the paper's rail, sec. V-B) changes
-        ``|f| = sqrt(g^2 + a^2)`` only to second order (0.045 m/s^2 for
-        0.94 m/s^2), so a magnitude test would keep it "at the origin" for the
-        whole run.
-        """
-        p = self.params
-        if np.linalg.norm(gyro) > p.rest_gyro_threshold_rad_s or np.linalg.norm(accel - self._rest_reference) > p.rest_accel_threshold_m_s2:
-            # Each sample before this one was within the rest thresholds: the
-            # IMU contradicts the ground from now on, not before.
-            self._end_ground(time_s, "imu", 0.0)
-
-    def _end_ground(self, time_s: float, reason: str, release_s: float) -> None:
-        """The ground phase ends (IMU motion or the barometer at ``time_s``, s):
-        the ground factors of the epochs after ``time_s - release_s`` are
-        removed with the next update (dropped, not obeyed)."""
-        self._left_ground = True
-        self.ground_end_reason = reason
-        cut = time_s - release_s
-        for t, k in self._ground_epochs:
-            if t > cut:
-                indices = self._ground_factor_indices.pop(k, [])
-                self._pending_removals.extend(indices)
-                self.ground_factors_dropped += len(indices)
-        self._ground_epochs = []
 
     def _integrate_to(self, time_s: float) -> None:
         """Extends the preintegration to ``time_s`` holding the newest sample
@@ -666,11 +560,6 @@ class MarvelEstimator:
         self.cpu_times_s.append(time.thread_time() - cpu_started)
         return estimate
 
-    def finish(self) -> None:
-        """End of the stream: the states still in the window join :attr:`revised`
-        as the smoother holds them now. Rows added later continue the track."""
-        self._release(math.inf)
-
     def _lag_for(self, time_s: float) -> float:
         """The smoother's lag for the update at ``time_s`` (s): ``smoother_lag_s``,
         or longer than the flight so far while the heading is held
@@ -696,66 +585,6 @@ class MarvelEstimator:
         if every <= 0.0:
             return time_s
         return (math.floor(time_s / every) + 1.0) * every
-
-    def _prefetch(self, time_s: float) -> None:
-        """Reads the revised rows of the bucket that leaves at the next bucket
-        boundary, at the first epoch past the middle of the current bucket
-        (after its update).
-
-        Why: the first marginal covariance read after an update walks iSAM2's
-        tree from the oldest clique (8-10 ms at a 6 s lag), the following ones
-        reuse its cache; read just before the marginalising update, as
-        before, that walk fell on the same epoch as the marginalisation
-        (18 ms) next to the relinearisation epoch (30 ms). Half a bucket
-        earlier each row misses the last ``marginalize_every_s / 2`` of rows
-        (its lag is ``smoother_lag_s - T/2`` to ``smoother_lag_s + T/2``).
-        While the heading is held the horizon is before every state: nothing
-        is read ahead (the hold's end releases them as before)."""
-        every = self.params.marginalize_every_s
-        if every <= 0.0:
-            return
-        bucket_start = self._stamp(time_s) - every
-        if time_s - bucket_start < 0.5 * every:
-            return
-        horizon = self._stamp(time_s) + every - self._lag
-        for key in sorted(j for j, (stamp, _) in self._window.items() if stamp < horizon and j not in self._prefetched):
-            row = self._revise(key, self._window[key][1])
-            if row is not None:
-                self._prefetched[key] = row
-
-    def _release(self, before_s: float, revise: bool = True) -> None:
-        """Moves the window's states stamped before ``before_s`` (s) to
-        :attr:`revised`: the row read ahead (:meth:`_prefetch`) if there is
-        one, else read from the smoother when ``revise``, else (or when the
-        smoother no longer holds one) their causal estimate."""
-        for key in sorted(j for j, (stamp, _) in self._window.items() if stamp < before_s):
-            _, causal = self._window.pop(key)
-            row = self._prefetched.pop(key, None)
-            if row is None and revise:
-                row = self._revise(key, causal)
-            if row is None:
-                self.revised_fallbacks += 1
-                row = causal
-            self.revised.append(row)
-
-    def _revise(self, k: int, causal: Estimate) -> Estimate | None:
-        """State ``k`` as the smoother holds it now: the causal row with its
-        position, velocity, orientation and (with ``compute_sigma``) 1-sigma
-        position replaced; None if the smoother cannot give it."""
-        smoother = self._smoother
-        try:
-            pose = smoother.calculateEstimatePose3(X(k))
-            velocity = np.asarray(smoother.calculateEstimateVector(V(k)), dtype=float)
-            sigma = causal.sigma
-            if self.params.compute_sigma:
-                cov = _world_position_covariance(pose, smoother.marginalCovariance(X(k)))
-                sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        except (RuntimeError, IndexError):
-            return None
-        position = np.asarray(pose.translation(), dtype=float)
-        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
-            return None
-        return replace(causal, position=position, velocity=velocity, orientation=_quaternion(pose), sigma=sigma)
 
     def _add_multipath(self, graph, initial, stamps, time_s, sigma, previous_position, predicted) -> np.ndarray:
         """The epoch's multipath state ``M(k)`` (``multipath = "states"``) and
@@ -837,19 +666,6 @@ class MarvelEstimator:
 
     # --- graph building ----------------------------------------------------
 
-    def _provisional_rest(self) -> bool:
-        """Whether the IMU samples so far pass the rest test (the verdict when it
-        is in, else the test on the part of its window received)."""
-        if self._rest_state != "pending":
-            return self._rest_state == "rest"
-        p = self.params
-        thresholds = rest.RestThresholds(
-            p.gravity_m_s2, p.rest_force_tolerance_m_s2, p.rest_accel_rms_m_s2, p.rest_gyro_rms_rad_s, p.rest_baro_rate_m_s
-        )
-        accel = np.array([a for _, a, _ in self._rest_samples]).reshape(-1, 3)
-        gyro = np.array([g for _, _, g in self._rest_samples]).reshape(-1, 3)
-        return rest.rest_test(accel, gyro, thresholds, min_samples=1).at_rest
-
     def _take_off(self, graph, initial, stamps, yaw_rad: float, row=None) -> None:
         """State X(0) at the first IMU sample: at the origin, roll and pitch
         from the averaged accelerometer, yaw from the first yaw feature; the
@@ -911,176 +727,6 @@ class MarvelEstimator:
         # where iSAM2's Cholesky reports an indeterminate system.
         isam_params.setFactorization(p.factorization)
         return gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
-
-    def _restart(self, k: int, time_s: float, predicted) -> None:
-        """A fresh smoother holding state ``k`` (the IMU prediction ``predicted``), the bias and
-        the controller, each with a prior as wide as its last covariance (or a loose default):
-        the recovery from a failed solve, whose state was sound before it."""
-        pose_sigmas = np.concatenate([np.full(3, 0.05), _spread(self._cov_position, 1.0)])
-        self._restart_with(
-            k, time_s, predicted, pose_sigmas, _spread(self._cov_velocity, 0.5), self._bias,
-            self._controller, _spread(self._cov_controller, 5.0),
-        )
-
-    def _restart_from_features(self, k: int, time_s: float, predicted, row) -> None:
-        """A fresh smoother holding state ``k`` where the feature ``row`` and the
-        barometer put it (:mod:`scattertrack.fusion.divergence`): the recovery
-        from a diverged state, which the IMU's prediction would carry on.
-
-        ``row``: (range m, azimuth rad, elevation rad, yaw rad or None). The
-        controller stays where it was if that is plausible (within
-        ``max_controller_range_m`` of the take-off point), else it goes back
-        to where the first row put it. Position ``rho + d u``, its height from
-        the barometer's datum when there is one; velocity 0 with
-        ``moving_velocity_sigma_m_s``; roll and pitch kept, the yaw the row's
-        (else kept) with a loose sigma; the biases kept when plausible.
-        """
-        p = self.params
-        range_m, azimuth_rad, elevation_rad, yaw_rad = row
-        controller_ok = self._controller is not None and divergence.is_plausible_controller(
-            self._controller, np.zeros(3), p.max_controller_range_m
-        )
-        controller = self._controller if controller_ok else self._controller_fallback
-        controller_sigmas = _spread(self._cov_controller, 5.0) if controller_ok else np.full(3, 5.0)
-        position = divergence.position_from_features(controller, range_m, azimuth_rad, elevation_rad)
-        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
-        if p.use_baro and samples and math.isfinite(self._baro_datum):
-            position[2] = float(np.mean(samples)) - self._baro_datum
-        position_sigma = divergence.feature_position_sigmas(range_m, p.range_sigma_m, p.angle_sigma_rad) * 3.0
-        rotation = predicted.attitude() if np.all(np.isfinite(predicted.attitude().matrix())) else gtsam.Rot3()
-        ypr = rotation.ypr()
-        yaw_sigma = p.prior_yaw_sigma_rad
-        if yaw_rad is not None and math.isfinite(yaw_rad):
-            ypr = (float(yaw_rad), ypr[1], ypr[2])
-        rotation = gtsam.Rot3.Ypr(*ypr)
-        nav = gtsam.NavState(gtsam.Pose3(rotation, position), np.zeros(3))
-        pose_sigmas = np.array([0.1, 0.1, yaw_sigma] + [position_sigma] * 3)
-        bias = self._bias
-        accel_bias = np.asarray(bias.accelerometer(), dtype=float)
-        gyro_bias = np.asarray(bias.gyroscope(), dtype=float)
-        if not (np.all(np.abs(accel_bias) <= 10.0 * p.accel_bias_sigma) and np.all(np.abs(gyro_bias) <= 10.0 * p.gyro_bias_sigma)):
-            bias = gtsam.imuBias.ConstantBias()
-        self._restart_with(
-            k, time_s, nav, pose_sigmas, np.full(3, p.moving_velocity_sigma_m_s), bias, controller, controller_sigmas
-        )
-        # The gate's covariances: the restart's priors (the old ones belong to the diverged state).
-        self._cov_position = np.eye(3) * position_sigma**2
-        self._cov_velocity = np.eye(3) * p.moving_velocity_sigma_m_s**2
-        self._cov_controller = np.diag(controller_sigmas**2)
-        self._cov_yaw = yaw_sigma**2
-
-    def _restart_with(self, k, time_s, nav, pose_sigmas, velocity_sigmas, bias, controller, controller_sigmas) -> None:
-        """A fresh smoother holding state ``k`` = ``nav`` (a NavState), ``bias`` and the
-        ``controller`` (m) with the given 1-sigma priors (Pose3 tangent order:
-        rotation rad, then translation m)."""
-        p = self.params
-        self._smoother = self._new_smoother()
-        self._lag = self.params.smoother_lag_s
-        self._pending_removals = []
-        self._ground_factor_indices = {}
-        self._ground_epochs = []
-        graph = gtsam.NonlinearFactorGraph()
-        initial = gtsam.Values()
-        pose = nav.pose()
-        graph.add(gtsam.PriorFactorPose3(X(k), pose, gtsam.noiseModel.Diagonal.Sigmas(np.asarray(pose_sigmas, dtype=float))))
-        graph.add(gtsam.PriorFactorVector(V(k), nav.velocity(), gtsam.noiseModel.Diagonal.Sigmas(np.asarray(velocity_sigmas, dtype=float))))
-        bias_sigmas = np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3)
-        graph.add(gtsam.PriorFactorConstantBias(B(k), bias, gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
-        graph.add(gtsam.PriorFactorPoint3(CONTROLLER, controller, gtsam.noiseModel.Diagonal.Sigmas(np.asarray(controller_sigmas, dtype=float))))
-        if self._has_range_bias():
-            # Its prior sigma: its marginal is not kept (one more marginal per
-            # epoch for the rare restart).
-            graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, self._range_bias, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
-        initial.insert(X(k), pose)
-        initial.insert(V(k), nav.velocity())
-        initial.insert(B(k), bias)
-        initial.insert(CONTROLLER, controller)
-        stamps = {X(k): time_s, V(k): time_s, B(k): time_s, CONTROLLER: time_s}
-        if self._has_range_bias():
-            initial.insert(RANGE_BIAS, self._range_bias)
-            stamps[RANGE_BIAS] = time_s
-        self._baro_chain = False  # a new barometer offset chain starts with the next epoch
-        self._multipath_chain = False  # and a new multipath chain
-        self._smoother.update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
-        self._nav = nav
-        self._bias = bias
-        self._controller = np.asarray(controller, dtype=float).copy()
-
-    def _diverge(self, k: int, time_s: float, predicted, reason: str, row, detail: str = "") -> None:
-        """The state has diverged (``reason``: a key of :data:`DECLINE_REASONS`):
-        counted, the row refused, the smoother restarted from the features."""
-        self.divergences += 1
-        self.divergence_reasons.append(f"{time_s:.2f} s: {detail or reason}")
-        self._since_divergence = 0
-        self._release(math.inf, revise=False)
-        self._restart_from_features(k, time_s, predicted, row)
-        self._last_epoch_time = time_s
-        self._preintegrated.resetIntegrationAndSetBias(self._bias)
-        self.restarts += 1
-        self._gate_monitor.clear()
-        self._declined_run = 0
-        self._range_declined_run = 0
-        return self._decline(reason)
-
-    def _ground_for_epoch(self, graph, k: int, time_s: float) -> list:
-        """The ground factors of epoch ``k`` at ``time_s`` (s), added to ``graph``
-        only once the rest test has passed and while nothing contradicts it
-        (:mod:`scattertrack.fusion.rest`); epochs before the verdict get theirs
-        with the first epoch after it. Returns ``[(j, t_j, slots)]``: the
-        epochs given ground factors and their positions in ``graph``."""
-        p = self.params
-        if self._rest_state == "pending":
-            self._ground_backlog.append((k, time_s))
-            return []
-        if self._rest_state != "rest" or self._left_ground:
-            self._ground_backlog = []
-            return []
-        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
-        if p.use_baro and samples and rest.baro_contradicts_ground(float(np.mean(samples)), self._rest_baro_mean, p.ground_baro_rise_m):
-            # The barometer's window mean lags its rise, and the IMU missed
-            # it: the last ground_release_s of ground factors are suspect.
-            self._end_ground(time_s, "barometer", p.ground_release_s)
-            self._ground_backlog = []
-            return []
-        if not p.use_ground:
-            self._ground_backlog = []
-            return []
-        added = []
-        for j, t_j in [*self._ground_backlog, (k, time_s)]:
-            first = graph.size()
-            self._add_ground(graph, j)
-            added.append((j, t_j, list(range(first, graph.size()))))
-        self._ground_backlog = []
-        return added
-
-    def _record_ground(self, k: int, time_s: float, added) -> None:
-        """After the update that added them: the smoother's indices of the
-        ground factors in ``added`` (from :meth:`_ground_for_epoch`), so a
-        later contradiction can remove them; older than 2 ``ground_release_s``
-        (and 1 s) they are never removed and are forgotten."""
-        indices = list(self._smoother.getISAM2Result().getNewFactorsIndices())
-        for j, t_j, slots in added:
-            self._ground_factor_indices[j] = [int(indices[i]) for i in slots]
-            self._ground_epochs.append((t_j, j))
-        keep = time_s - max(2.0 * self.params.ground_release_s, 1.0)
-        for t_j, j in [e for e in self._ground_epochs if e[0] < keep]:
-            self._ground_factor_indices.pop(j, None)
-        self._ground_epochs = [e for e in self._ground_epochs if e[0] >= keep]
-
-    def _add_ground(self, graph, k: int) -> None:
-        """At rest at the origin before take-off: position, zero velocity and,
-        from the previous epoch, zero rotation (which pins the gyroscope bias)."""
-        p = self.params
-        # Pose3 tangent order is (rotation, translation): the position prior
-        # leaves the rotation free (its sigma is effectively infinite).
-        position_sigmas = np.array([1.0e3] * 3 + [p.ground_position_sigma_m] * 3)
-        graph.add(gtsam.PriorFactorPose3(X(k), gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(position_sigmas)))
-        graph.add(gtsam.PriorFactorVector(V(k), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, p.ground_velocity_sigma_m_s)))
-        if k > 0:
-            rotation_sigmas = np.array([p.ground_rotation_sigma_rad] * 3 + [1.0e3] * 3)
-            graph.add(
-                gtsam.BetweenFactorPose3(X(k - 1), X(k), gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(rotation_sigmas))
-            )
 
     def _add_imu_factor(self, graph, initial, previous: int) -> None:
         k = self._key
