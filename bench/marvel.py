@@ -15,8 +15,19 @@ Blocks:
    mean orientation error, the controller's error, and the time per sensing
    epoch (p50, p99) on this machine; beside the causal estimates (each row
    as the smoother gave it at its own time) the revised track (each state
-   as last revised, ``smoother_lag_s`` = 6 s to 7 s later).
-2. sensing (IQ level; needs the LoRa DSP): snapshot position error of the
+   as last revised, ``smoother_lag_s`` = 4 s to 5 s later, read half a
+   second ahead of their group's marginalisation).
+2. starts: the same estimator, every parameter at its default, on flights
+   that do not begin at rest: ``marvel-liftoff-circle`` (the log begins in
+   the climb), ``marvel-liftoff-circle-imu-late`` (its first 3 s of IMU
+   missing; error after 10 s against the full log's), ``marvel-liftoff-square``
+   (noisy features, the paper's Fig. 13 level: 0.53 m, 6.6 deg), beside the
+   rest start of ``marvel-circle-20m``; and the outside case
+   ``/work/shared/outside/drone-liftoff-circle`` (written by an independent
+   program; measured, never tuned on), whole and without its first 3 s of
+   IMU. Columns: mean 3D and orientation error, rows beyond 3 reported
+   sigmas on some axis, divergences (recovered), and the time per epoch.
+3. sensing (IQ level; needs the LoRa DSP): snapshot position error of the
    pose sensing against speed 0-3 m/s for Marvel and the Doppler-blind
    mu-locate baseline (Fig. 9), against distance 1-50 m and 0-3 walls
    (Fig. 10), and the heading error on the turntable (Fig. 11).
@@ -47,7 +58,20 @@ from scattertrack.fusion import MarvelParams  # noqa: E402
 from scattertrack.sim import load_scenario, simulate  # noqa: E402
 from scattertrack.track import marvel  # noqa: E402
 
-BLOCKS = ("fusion", "sensing")
+BLOCKS = ("fusion", "starts", "sensing")
+STARTS = (
+    # (scenario, what its start is, paper m / deg or None)
+    ("marvel-circle-20m", "rest 2 s", None),
+    ("marvel-liftoff-circle", "lift-off, no rest", None),
+    ("marvel-liftoff-circle-imu-late", "lift-off, first 3 s of IMU missing", None),
+    ("marvel-liftoff-square", "lift-off, noisy features", (0.5256, 6.64)),
+)
+OUTSIDE = Path("/work/shared/outside/drone-liftoff-circle")
+"""The outside lift-off case (shared/outside/README.md); skipped where absent."""
+IMU_LATE_S = 3.0
+"""Seconds of IMU removed from the start of the outside case for its second row."""
+SCORED_AFTER_S = 10.0
+"""The IMU-late rows are scored against the full log after this time (s)."""
 FLIGHTS = (
     ("marvel-circle-20m", "Fig. 12", 0.3366, 4.99),
     ("marvel-square-walls", "Fig. 13", 0.5256, 6.64),
@@ -83,9 +107,11 @@ def fuse_and_score(sim, **params) -> dict:
     else:
         aligned = np.zeros(0)
     revised = compare(sim.truth, track.revised).overall
-    controller = np.asarray(track.stats["drone"]["controller"], dtype=float)
+    stats = track.stats["drone"]
+    controller = np.asarray(stats["controller"] if stats["controller"] is not None else np.full(3, np.nan), dtype=float)
     truth_controller = np.asarray(sim.details["controller_position_m"], dtype=float)
     return {
+        **track_scores(sim.truth, track),
         "epochs": len(sim.features),
         "rows": len(track),
         "mean_3d_m": float(report.mean_3d_m),
@@ -102,8 +128,31 @@ def fuse_and_score(sim, **params) -> dict:
         "epoch_ns": np.asarray(track.stats["drone"].get("epoch_times_ns", []), dtype=float),
         "epoch_p50_ns": float(track.stats["drone"]["time_ns_p50"]),
         "epoch_p99_ns": float(track.stats["drone"]["time_ns_p99"]),
+        "epoch_max_ns": float(track.stats["drone"]["time_ns_max"]),
+        "cpu_p99_ns": float(track.stats["drone"]["cpu_time_ns_p99"]),
+        "cpu_max_ns": float(track.stats["drone"]["cpu_time_ns_max"]),
         "wall_s": wall,
         "duration_s": float(sim.scenario["duration_s"]),
+    }
+
+
+def track_scores(truth, track, after_s: float = 0.0) -> dict:
+    """Scores of a track against its truth that ``compare`` does not give: the
+    share of rows beyond 3 reported sigmas on some axis, the mean 3D error
+    (m) of the rows at or after ``after_s`` (s), divergences (and recovered)."""
+    stats = track.stats["drone"]
+    if not len(track):
+        return {"beyond_3_sigma": float("nan"), "mean_3d_after_m": float("nan"),
+                "divergences": int(stats["divergences"]), "divergences_recovered": int(stats["divergences_recovered"])}
+    truth_position = np.column_stack([np.interp(track.time_s, truth.time_s, truth.position[:, a]) for a in range(3)])
+    error = track.position - truth_position
+    beyond = np.any(np.abs(error) > 3.0 * track.sigma, axis=1)
+    after = track.time_s >= after_s
+    return {
+        "beyond_3_sigma": float(np.mean(beyond)),
+        "mean_3d_after_m": float(np.mean(np.linalg.norm(error[after], axis=1))) if np.any(after) else float("nan"),
+        "divergences": int(stats["divergences"]),
+        "divergences_recovered": int(stats["divergences_recovered"]),
     }
 
 
@@ -135,12 +184,126 @@ def fusion_block(seeds, show=True, params=None) -> list[dict]:
                 "declined": int(sum(r["declined"] for r in runs)),
                 "epoch_p50_ms": float(np.median(p50) / 1e6),
                 "epoch_p99_ms": float(np.max(p99) / 1e6),
+                "epoch_max_ms": float(np.max([r["epoch_max_ns"] for r in runs]) / 1e6),
+                "cpu_p99_ms": float(np.max([r["cpu_p99_ns"] for r in runs]) / 1e6),
+                "cpu_max_ms": float(np.max([r["cpu_max_ns"] for r in runs]) / 1e6),
+                "beyond_3_sigma": float(np.mean([r["beyond_3_sigma"] for r in runs])),
+                "worst_seed_beyond_3_sigma": float(np.max([r["beyond_3_sigma"] for r in runs])),
+                "divergences": int(sum(r["divergences"] for r in runs)),
+                "divergences_recovered": int(sum(r["divergences_recovered"] for r in runs)),
                 "real_time_factor": float(sum(r["duration_s"] for r in runs) / sum(r["wall_s"] for r in runs)),
                 "paper_mean_m": paper_m,
                 "paper_deg": paper_deg,
             }
         )
     return rows
+
+
+# --------------------------------------------------------------------------
+# block 2: starts that are not at rest, ours and the outside case
+
+
+def drop_first_imu(imu, seconds: float):
+    """``imu`` without its samples before ``imu.time_s[0] + seconds`` (a log that lost its first seconds)."""
+    from scattertrack.io.types import Imu
+
+    keep = np.asarray(imu.time_s) >= float(imu.time_s[0]) + seconds
+    return Imu(
+        time_s=np.asarray(imu.time_s)[keep],
+        accel=np.asarray(imu.accel)[keep],
+        gyro=np.asarray(imu.gyro)[keep],
+        baro_z=None if imu.baro_z is None else np.asarray(imu.baro_z)[keep],
+        gaps=imu.gaps,
+    )
+
+
+def score_start(truth, scene, imu, features, after_s: float = SCORED_AFTER_S) -> dict:
+    """One fused log: mean 3D (m) and orientation (deg) error, the mean 3D error
+    after ``after_s``, rows beyond 3 sigmas, divergences, time per epoch."""
+    track = marvel.run_features("marvel", scene, imu, features)
+    report = compare(truth, track).overall
+    stats = track.stats["drone"]
+    return {
+        **track_scores(truth, track, after_s),
+        "mean_3d_m": float(report.mean_3d_m),
+        "mean_orientation_deg": float(report.mean_orientation_deg),
+        "rest": stats["rest"]["state"],
+        "epoch_p99_ms": float(stats["time_ns_p99"]) / 1e6,
+        "epoch_max_ms": float(stats["time_ns_max"]) / 1e6,
+        "cpu_p99_ms": float(stats["cpu_time_ns_p99"]) / 1e6,
+    }
+
+
+def _pool(runs: list[dict]) -> dict:
+    """Seed means of a start's runs (rates as shares; divergences summed; times the worst)."""
+    return {
+        "seeds": len(runs),
+        "mean_3d_m": float(np.mean([r["mean_3d_m"] for r in runs])),
+        "worst_seed_mean_3d_m": float(np.max([r["mean_3d_m"] for r in runs])),
+        "mean_3d_after_m": float(np.mean([r["mean_3d_after_m"] for r in runs])),
+        "mean_orientation_deg": float(np.nanmean([r["mean_orientation_deg"] for r in runs])),
+        "beyond_3_sigma": float(np.mean([r["beyond_3_sigma"] for r in runs])),
+        "worst_seed_beyond_3_sigma": float(np.max([r["beyond_3_sigma"] for r in runs])),
+        "divergences": int(sum(r["divergences"] for r in runs)),
+        "divergences_recovered": int(sum(r["divergences_recovered"] for r in runs)),
+        "rest": ",".join(sorted({r["rest"] for r in runs})),
+        "epoch_p99_ms": float(np.max([r["epoch_p99_ms"] for r in runs])),
+        "epoch_max_ms": float(np.max([r["epoch_max_ms"] for r in runs])),
+        "cpu_p99_ms": float(np.max([r["cpu_p99_ms"] for r in runs])),
+    }
+
+
+def starts_block(seeds, show=True) -> list[dict]:
+    """Our start conditions (:data:`STARTS`) over ``seeds``, then the outside case whole and IMU-late."""
+    rows = []
+    for name, start, paper in STARTS:
+        runs = []
+        for seed in seeds:
+            sim = simulate(load_scenario(name), seed=seed)
+            runs.append(score_start(sim.truth, sim.scene, sim.imu, sim.features))
+            progress(show, f"  start {name} seed {seed}: {runs[-1]['mean_3d_m']:.3f} m, {runs[-1]['mean_orientation_deg']:.2f} deg")
+        rows.append({"case": name, "start": start, "paper": paper, **_pool(runs)})
+    if (OUTSIDE / "truth.csv").is_file():
+        from scattertrack import io
+
+        scene = io.read_scene(OUTSIDE / "scene.toml")
+        imu = io.read_imu(OUTSIDE / "imu.csv")
+        features = io.read_features(OUTSIDE / "features.csv")
+        truth = io.read_truth(OUTSIDE / "truth.csv")
+        for label, log in (("whole", imu), (f"first {IMU_LATE_S:g} s of IMU removed", drop_first_imu(imu, IMU_LATE_S))):
+            run = score_start(truth, scene, log, features)
+            progress(show, f"  start outside {label}: {run['mean_3d_m']:.3f} m")
+            rows.append({"case": "outside/drone-liftoff-circle", "start": label, "paper": (0.3366, 4.99), **_pool([run])})
+    # The IMU-late logs against their full logs, after SCORED_AFTER_S.
+    by = {(r["case"], r["start"]): r for r in rows}
+    for late, full in (
+        (("marvel-liftoff-circle-imu-late", STARTS[2][1]), ("marvel-liftoff-circle", STARTS[1][1])),
+        (("outside/drone-liftoff-circle", f"first {IMU_LATE_S:g} s of IMU removed"), ("outside/drone-liftoff-circle", "whole")),
+    ):
+        if late in by and full in by:
+            by[late]["after_ratio"] = by[late]["mean_3d_after_m"] / by[full]["mean_3d_after_m"]
+    return rows
+
+
+def print_starts(rows: list[dict], command: str) -> None:
+    print(f"\n## 2. starts not at rest (defaults; ours and the outside case)\n$ {command}")
+    headers = ["case", "start", "seeds", "rest test", "mean 3D m", "worst seed m", f"after {SCORED_AFTER_S:g} s m",
+               "vs full log", "rot deg", ">3 sigma %", "worst seed %", "divergences (recovered)", "p99 ms", "max ms",
+               "cpu p99 ms", "paper m / deg"]
+    cells = [
+        [
+            r["case"], r["start"], str(r["seeds"]), r["rest"], f"{r['mean_3d_m']:.3f}", f"{r['worst_seed_mean_3d_m']:.3f}",
+            f"{r['mean_3d_after_m']:.3f}", f"{r['after_ratio']:.2f}x" if "after_ratio" in r else "-",
+            f"{r['mean_orientation_deg']:.2f}", f"{100 * r['beyond_3_sigma']:.1f}", f"{100 * r['worst_seed_beyond_3_sigma']:.1f}",
+            f"{r['divergences']} ({r['divergences_recovered']})", f"{r['epoch_p99_ms']:.1f}", f"{r['epoch_max_ms']:.1f}",
+            f"{r['cpu_p99_ms']:.1f}", f"{r['paper'][0]:.2f} / {r['paper'][1]:.2f}" if r["paper"] else "-",
+        ]
+        for r in rows
+    ]
+    print(text_table(headers, cells))
+    print(f"rest test: the verdict on the first tilt_window_s of IMU; after {SCORED_AFTER_S:g} s: rows at or after it; "
+          "vs full log: the IMU-late log's error after that time over the full log's; >3 sigma: rows beyond 3 reported "
+          "sigmas on some axis; outside: burn-in 0 s (the outside report skips 5 s); its paper column is the circle's Fig. 12")
 
 
 # --------------------------------------------------------------------------
@@ -157,7 +320,8 @@ def print_fusion(rows: list[dict], command: str, lag_s: float) -> None:
     print(f"\n## 1. fusion (feature-level flights)\n$ {command}")
     headers = ["scenario", "seeds", "mean 3D m", "worst seed m", "rel. ctrl m", "rot deg", "yaw deg",
                "revised m", "revised worst m", "revised rot deg",
-               "ctrl err m", "declined", "epoch p50 ms", "p99 ms", "x real time", "paper m / deg"]
+               "ctrl err m", "declined", ">3 sigma %", "div (rec)", "epoch p50 ms", "p99 ms", "max ms", "cpu p99 ms",
+               "cpu max ms", "x real time", "paper m / deg"]
     cells = [
         [
             r["scenario"],
@@ -172,8 +336,13 @@ def print_fusion(rows: list[dict], command: str, lag_s: float) -> None:
             f"{r['revised_mean_orientation_deg']:.2f}",
             f"{r['controller_error_m']:.2f}",
             str(r["declined"]),
+            f"{100 * r['beyond_3_sigma']:.1f}",
+            f"{r['divergences']} ({r['divergences_recovered']})",
             f"{r['epoch_p50_ms']:.1f}",
             f"{r['epoch_p99_ms']:.1f}",
+            f"{r['epoch_max_ms']:.1f}",
+            f"{r['cpu_p99_ms']:.1f}",
+            f"{r['cpu_max_ms']:.1f}",
             f"{r['real_time_factor']:.0f}",
             f"{r['paper_mean_m']:.2f} / {r['paper_deg']:.2f} ({r['figure']})",
         ]
@@ -184,6 +353,8 @@ def print_fusion(rows: list[dict], command: str, lag_s: float) -> None:
           "(the trajectory relative to the controller); revised: the fixed-lag smoothed track, each state "
           f"as last revised {lag_s:g}-{lag_s + MarvelParams().marginalize_every_s:g} s after its time (smoother_lag_s "
           "to smoother_lag_s + marginalize_every_s; the causal columns are each row at its own time); "
+          "p99 / max ms: the worst seed's wall-clock time per epoch (p99, max; target 30 / 100 ms); cpu: the same in "
+          "thread CPU time, which other processes on a shared machine do not inflate; "
           "x real time: simulated s per wall s")
 
 
@@ -214,7 +385,7 @@ def parse_args(argv=None):
     parser.add_argument("--skip", default="", help="comma-separated blocks to skip: " + ", ".join(BLOCKS))
     parser.add_argument(
         "--smoother-lag-s", type=float, default=None,
-        help="the fusion block's smoother_lag_s (default: the estimator's, 6 s); a longer lag improves the revised track and costs time per epoch",
+        help="the fusion block's smoother_lag_s (default: the estimator's, 4 s); a longer lag improves the revised track and costs time per epoch",
     )
     parser.add_argument("--out", type=Path, default=REPO / "out" / "bench-marvel", help="output folder")
     parser.add_argument("--no-progress", action="store_true", help="no progress lines on stderr")
@@ -238,6 +409,9 @@ def main(argv=None) -> int:
         result["fusion_params"] = params
         result["fusion"] = fusion_block(seeds, show, params)
         print_fusion(result["fusion"], command, params.get("smoother_lag_s", MarvelParams().smoother_lag_s))
+    if "starts" not in skip:
+        result["starts"] = starts_block(seeds, show)
+        print_starts(result["starts"], command)
     if "sensing" not in skip:
         from sensing_bench import sensing_block, print_sensing  # noqa: PLC0415 (bench/ sibling)
 

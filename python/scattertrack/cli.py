@@ -591,6 +591,19 @@ def track_marvel(args, scene, params: dict) -> int:
     controller = stats.get("controller")
     if controller is not None:
         say("  controller estimated at (" + ", ".join(f"{v:.2f}" for v in controller) + ") m")
+    elif stats.get("controller_refused"):
+        say(f"  controller estimate refused: {stats['controller_refused']}")
+    rest = stats.get("rest")
+    if rest:
+        start = "at rest (ground factors)" if rest["state"] == "rest" else f"not at rest (failed check: {rest['failed_check']}; wide velocity prior)"
+        dropped = f", {plural(rest['ground_factors_dropped'], 'ground factor')} dropped" if rest.get("ground_factors_dropped") else ""
+        say(f"  start: {start}{dropped}")
+    if "divergences" in stats:
+        unrecovered = stats["divergences"] - stats.get("divergences_recovered", 0)
+        say(
+            f"  divergences: {stats['divergences']} (restarted from the features), "
+            f"{stats.get('divergences_recovered', 0)} recovered, {unrecovered} not recovered"
+        )
     q = result.latency_quantiles_ns
     rate = epochs / wall_s if wall_s > 0 else math.inf
     say(

@@ -22,12 +22,19 @@ Causality: the estimate of a row uses only IMU samples and rows at or before
 its time; it is the smoother's estimate of the newest state just after that
 row, never a later smoothed value, so appending data cannot change it.
 
-Assumptions: the drone starts at rest at the world origin; gravity is
-9.80665 m/s^2 along -z; the IMU sits at the body origin.
+Assumptions: the drone starts at the world origin (at rest only if the rest
+test says so; or, when the features begin before the IMU, the origin is
+where the first feature row saw it); gravity is 9.80665 m/s^2 along -z;
+the IMU sits at the body origin.
 
 Modules: :mod:`.factors` (pure measurement models with Jacobians, and their
-GTSAM factors), :mod:`.estimator` (the causal fixed-lag smoother),
-:mod:`.run` (the batch loop).
+GTSAM factors), :mod:`.rest` (the rest test, pure), :mod:`.divergence`
+(physical bounds, persistent gating, positions from the features; pure),
+:mod:`.estimator` (the causal fixed-lag smoother) with its parts
+:mod:`.ground` (the ground phase), :mod:`.restart` (restarts after a failed
+solve or a divergence) and :mod:`.revised` (the revised track),
+:mod:`.keys`, :mod:`.params` (the typed parameters), :mod:`.latency` (the
+typed latency record), :mod:`.run` (the run helper behind both entry points).
 """
 
 from scattertrack.fusion.estimator import (

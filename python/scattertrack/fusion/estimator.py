@@ -32,20 +32,20 @@ import math
 import statistics
 import time
 from collections import deque
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import gtsam
 import numpy as np
-from gtsam.symbol_shorthand import B, L, M, O, V, W, X
+from gtsam.symbol_shorthand import B, M, O, V, X
 
-from scattertrack.fusion import factors
+from scattertrack.fusion import divergence, factors, rest
+from scattertrack.fusion.ground import GroundPhase
+from scattertrack.fusion.keys import CONTROLLER, RANGE_BIAS
+from scattertrack.fusion.latency import Latency
 from scattertrack.fusion.params import GRAVITY_M_S2, MarvelParams
+from scattertrack.fusion.restart import Diverged, Restarts
+from scattertrack.fusion.revised import RevisedTrack, _quaternion, _world_position_covariance
 
-
-CONTROLLER = L(0)
-"""Key of the controller's position in the graph."""
-RANGE_BIAS = W(0)
-"""Key of the constant range bias (``range_bias_sigma_m > 0``)."""
 
 # Reasons a feature row (or one of its measurements) is declined; the keys
 # are the counters in ``MarvelEstimator.declined``, the values the text of
@@ -60,12 +60,9 @@ DECLINE_REASONS = {
     "direction_gate": "direction outside the innovation gate (declined)",
     "yaw_gate": "yaw outside the innovation gate (declined)",
     "solver_failure": "feature row on which the smoother's linear system failed (declined; smoother restarted)",
-    "diverged": "feature row whose solve left the physical bounds, max_speed_m_s or max_controller_range_m (declined; smoother restarted)",
+    "diverged": "feature row whose solve left the physical bounds, max_speed_m_s, max_controller_range_m or max_position_m (refused; smoother restarted from the features)",
+    "persistently_gated": "feature row after persistent gating (divergence_gated_fraction of divergence_window_epochs; declined; smoother restarted from the features)",
 }
-
-class Diverged(RuntimeError):
-    """A solve whose state left the physical bounds (``MarvelParams.max_speed_m_s``,
-    ``max_controller_range_m``): handled like a failed solve."""
 
 
 # IMU samples the estimator ignores, counted in ``MarvelEstimator.imu_declined``.
@@ -125,25 +122,11 @@ def tilt_from_specific_force(specific_force) -> tuple[float, float]:
     return math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2]))
 
 
-def _quaternion(pose) -> np.ndarray:
-    """A Pose3's rotation as ``(qw, qx, qy, qz)`` with ``qw >= 0`` (one of the two equal quaternions)."""
-    quaternion = pose.rotation().toQuaternion()
-    q = np.array([quaternion.w(), quaternion.x(), quaternion.y(), quaternion.z()])
-    return -q if q[0] < 0.0 else q
-
-
-def _world_position_covariance(pose, pose_covariance) -> np.ndarray:
-    """The world-frame position covariance (3, 3) m^2 of a Pose3 marginal:
-    GTSAM's Pose3 tangent is [rotation, translation] in the body frame."""
-    rotation = pose.rotation().matrix()
-    return rotation @ np.asarray(pose_covariance)[3:, 3:] @ rotation.T
-
-
 def _finite_or(value: float, default: float) -> float:
     return float(value) if value is not None and math.isfinite(value) and value > 0.0 else default
 
 
-class MarvelEstimator:
+class MarvelEstimator(GroundPhase, Restarts, RevisedTrack):
     """Causal backscatter-inertial fusion: feed IMU samples and feature rows in time order.
 
     ``add_imu`` for every IMU sample, ``add_features`` for every feature row
@@ -161,6 +144,8 @@ class MarvelEstimator:
         self.declined: dict[str, int] = {key: 0 for key in DECLINE_REASONS}
         self.epochs = 0
         self.wall_times_s: list[float] = []
+        self.cpu_times_s: list[float] = []
+        """Thread CPU time per accepted row, s (see :mod:`scattertrack.fusion.latency`)."""
         self.imu_samples = 0
         self.imu_wall_time_s = 0.0
         """Wall time spent in :meth:`add_imu`, all samples together, s."""
@@ -220,6 +205,8 @@ class MarvelEstimator:
         """Times the smoother was restarted after a solver failure."""
         # The states in the smoother's window: key -> (time stamp s, causal Estimate).
         self._window: dict[int, tuple[float, Estimate]] = {}
+        # Revised rows read ahead of their bucket's marginalisation (see _prefetch).
+        self._prefetched: dict[int, Estimate] = {}
         self._lag = p.smoother_lag_s  # the smoother's lag now (longer while the heading is held)
         self._heading_held = p.heading_hold_sigma_rad > 0.0
         self._first_epoch_time: float | None = None
@@ -232,14 +219,40 @@ class MarvelEstimator:
         self.revised_fallbacks = 0
         """Revised rows that are the causal estimate: the smoother failed (and
         restarted) while the state was in its window."""
-        self._left_ground = not p.use_ground  # True once any IMU sample showed motion
-        self._rest_force_sum = np.zeros(3)  # specific force summed over the first tilt_window_s, m/s^2
-        self._rest_force_count = 0
-
-    @property
-    def on_ground(self) -> bool:
-        """Whether every IMU sample so far was at rest (the drone has not taken off)."""
-        return not self._left_ground
+        # Rest (fusion/rest.py): the first tilt_window_s of IMU samples are
+        # tested; until the verdict the state is "pending", then "rest" or
+        # "moving". Ground factors only while "rest" and not left.
+        self._rest_state = "pending"
+        self._rest_samples: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._rest_baro: list[tuple[float, float]] = []
+        self.rest_test: rest.RestTest | None = None
+        """The rest test's verdict on the first ``tilt_window_s`` of IMU samples (None while pending)."""
+        self._rest_reference = np.zeros(3)  # mean specific force at rest, m/s^2
+        self._rest_baro_mean = float("nan")  # mean barometer height at rest, m
+        self._left_ground = False  # True once the ground phase is over (or never began)
+        self.ground_end_reason = ""
+        """Why the ground phase ended: "imu" (motion), "barometer", "not_at_rest" (the test failed), or ""."""
+        self._ground_epochs: list[tuple[float, int]] = []  # (time s, k) of epochs whose ground factors are in the graph
+        self._ground_factor_indices: dict[int, list[int]] = {}  # k -> the smoother's indices of its ground factors
+        self._ground_backlog: list[int] = []  # epochs before the verdict, to get ground factors if at rest
+        self._pending_removals: list[int] = []  # factor indices to remove with the next update
+        self.ground_factors_dropped = 0
+        """Ground factors removed because the IMU or the barometer contradicted them."""
+        # Features before the first IMU sample (a log missing its first
+        # seconds of IMU): the first such row anchors the world frame.
+        self._anchor_row: tuple[float, float, float, float, float, float] | None = None
+        self._anchor_used = False  # whether the anchor row placed the origin (the IMU began in motion)
+        self._anchor_position_sigma = float("nan")  # m, the first state's spread about where the rows put it
+        self._gate_monitor = divergence.GateMonitor(p.divergence_window_epochs, p.divergence_gated_fraction)
+        self.divergences = 0
+        """Times the state was found diverged (bounds or persistent gating) and restarted from the features."""
+        self.divergences_recovered = 0
+        """Of those, the ones followed by ``recovery_epochs`` accepted epochs
+        without another (all since the last recovery count then)."""
+        self._since_divergence: int | None = None  # accepted epochs since the last divergence, None when recovered
+        self.divergence_reasons: list[str] = []
+        self._baro_datum = float("nan")  # the barometer offset over the first seconds, m
+        self._controller_fallback = np.zeros(3)  # where the first row put the controller, m
 
     # --- IMU ---------------------------------------------------------------
 
@@ -262,7 +275,9 @@ class MarvelEstimator:
             self.imu_declined["not_after_previous"] += 1
             return
         self.imu_samples += 1
-        if not self._left_ground:
+        if self._rest_state == "pending":
+            self._collect_rest(time_s, accel, gyro, baro_z)
+        elif self._rest_state == "rest" and not self._left_ground:
             self._watch_take_off(time_s, accel, gyro)
         if self._first_imu_time is None:
             self._first_imu_time = time_s
@@ -307,30 +322,6 @@ class MarvelEstimator:
             state.attitude().matrix(), dtype=float
         )
 
-    def _watch_take_off(self, time_s: float, accel: np.ndarray, gyro: np.ndarray) -> None:
-        """Ends the ground phase at the first sample that shows motion.
-
-        Motion: an angular rate above ``rest_gyro_threshold_rad_s``, or a
-        specific force that differs, as a VECTOR, from the mean of the first
-        ``tilt_window_s`` (gravity seen at rest) by more than
-        ``rest_accel_threshold_m_s2``. Not the magnitude: a level body
-        accelerated horizontally (the paper's rail, sec. V-B) changes
-        ``|f| = sqrt(g^2 + a^2)`` only to second order (0.045 m/s^2 for
-        0.94 m/s^2), so a magnitude test would keep it "at the origin" for the
-        whole run.
-        """
-        p = self.params
-        if np.linalg.norm(gyro) > p.rest_gyro_threshold_rad_s:
-            self._left_ground = True
-            return
-        if self._first_imu_time is None or time_s <= self._first_imu_time + p.tilt_window_s:
-            self._rest_force_sum += accel
-            self._rest_force_count += 1
-            return  # the reference is still being averaged (the ground may not be level)
-        reference = self._rest_force_sum / self._rest_force_count
-        if np.linalg.norm(accel - reference) > p.rest_accel_threshold_m_s2:
-            self._left_ground = True
-
     def _integrate_to(self, time_s: float) -> None:
         """Extends the preintegration to ``time_s`` holding the newest sample
         (the next one is not known yet: causal)."""
@@ -356,11 +347,19 @@ class MarvelEstimator:
         factors, updates the smoother and returns the newest state's estimate;
         ``None`` when the row is declined."""
         started = time.perf_counter()
+        cpu_started = time.thread_time()
         values = (time_s, range_m, azimuth_rad, elevation_rad)
         if not all(v is not None and math.isfinite(v) for v in values) or range_m <= 0.0:
             return self._decline("non_finite")
         time_s = float(time_s)
         if self._first_imu_time is None or time_s < self._first_imu_time:
+            if self._anchor_row is None:
+                # The world origin is where the drone was at the log's first
+                # row; without IMU yet, this row is all that ties the
+                # controller to it (see _take_off).
+                self._anchor_row = (time_s, float(range_m), float(azimuth_rad), float(elevation_rad),
+                                    _finite_or(range_sigma_m, self.params.range_sigma_m),
+                                    _finite_or(angle_sigma_rad, self.params.angle_sigma_rad))
             return self._decline("before_imu")
         if self._last_epoch_time is not None and time_s <= self._last_epoch_time:
             return self._decline("not_after_previous")
@@ -381,7 +380,8 @@ class MarvelEstimator:
         previous_position = None if self._nav is None else np.asarray(self._nav.position(), dtype=float)
 
         if self._key < 0:
-            self._take_off(graph, initial, stamps, float(yaw_rad) if has_yaw else 0.0)
+            self._take_off(graph, initial, stamps, float(yaw_rad) if has_yaw else 0.0,
+                           (float(range_m), float(azimuth_rad), float(elevation_rad), range_sigma, angle_sigma))
             # A row at the take-off instant itself measures X(0).
             if self._preintegrated.deltaTij() > 0.0:
                 self._key = 1
@@ -395,9 +395,8 @@ class MarvelEstimator:
         k = self._key
         for key in (X(k), V(k), B(k)):
             stamps[key] = time_s
-        if not self._left_ground:
-            self._add_ground(graph, k)
         predicted = self._nav
+        ground_slots = self._ground_for_epoch(graph, k, time_s)
 
         # Controller: initialised from the first row, rho = p - d u.
         # No gate on the ground: the controller is placed by the rest rows
@@ -406,10 +405,18 @@ class MarvelEstimator:
             self._controller is not None
             and self._gate is not None
             and self._declined_run < p.max_declined_epochs
-            and self._left_ground
+            and not self.on_ground
         )
         if self._controller is None:
             self._controller = predicted.position() - range_m * factors.direction(azimuth_rad, elevation_rad)
+            if self._anchor_used:
+                # Features before the IMU: the controller as the anchor row
+                # (drone at the origin) places it, with that row's spread.
+                _, d0, az0, el0, range_sigma0, angle_sigma0 = self._anchor_row
+                self._controller = divergence.controller_from_origin(d0, az0, el0)
+                spread = divergence.feature_position_sigmas(d0, range_sigma0, angle_sigma0)
+                graph.add(gtsam.PriorFactorPoint3(CONTROLLER, self._controller, gtsam.noiseModel.Isotropic.Sigma(3, spread)))
+            self._controller_fallback = self._controller.copy()
             initial.insert(CONTROLLER, self._controller)
             if self._has_range_bias():
                 graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, 0.0, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
@@ -450,6 +457,9 @@ class MarvelEstimator:
                 if (name != "yaw" or has_yaw) and not used[name]:
                     self.declined[f"{name}_gate"] += 1
             self._declined_run = 0 if (used["range"] or used["direction"] or used["yaw"]) else self._declined_run + 1
+            if self._gate_monitor.add(not (used["range"] and used["direction"])):
+                # Persistently beyond the gate: the state is wrong, not the rows.
+                return self._diverge(k, time_s, predicted, "persistently_gated", (range_m, azimuth_rad, elevation_rad, yaw_rad if has_yaw else None))
         else:
             self._declined_run = 0
 
@@ -505,11 +515,18 @@ class MarvelEstimator:
             self._smoother.setSmootherLag(lag)
             self._lag = lag
         self._release(self._stamp(time_s) - lag)
+        removals, self._pending_removals = self._pending_removals, []
         try:
-            self._smoother.update(graph, initial, stamps)
+            self._smoother.update(graph, initial, stamps, removals)
+            if ground_slots:
+                self._record_ground(k, time_s, ground_slots)
             for _ in range(p.extra_iterations):
                 self._smoother.update()
             estimate = self._read_estimate(time_s, used)
+        except Diverged as failure:
+            self._release(math.inf, revise=False)
+            self._last_epoch_time = time_s
+            return self._diverge(k, time_s, predicted, "diverged", (range_m, azimuth_rad, elevation_rad, yaw_rad if has_yaw else None), str(failure))
         except RuntimeError as failure:
             # GTSAM reports an ill-conditioned system (IndeterminateLinearSystem)
             # by throwing; the smoother's state is then unusable, and so is
@@ -523,20 +540,25 @@ class MarvelEstimator:
             self._last_epoch_time = time_s
             self._preintegrated.resetIntegrationAndSetBias(self._bias)
             self.restarts += 1
-            return self._decline("diverged" if isinstance(failure, Diverged) else "solver_failure")
+            del failure
+            return self._decline("solver_failure")
         self._window[k] = (float(stamps[X(k)]), estimate)
+        self._prefetch(time_s)
+        if self._since_divergence is not None:
+            self._since_divergence += 1
+            if self._since_divergence >= p.recovery_epochs:
+                # Every divergence since the last recovery is over (one that
+                # followed another within recovery_epochs superseded it).
+                self.divergences_recovered = self.divergences
+                self._since_divergence = None
         self._last_epoch_time = time_s
         # The next interval integrates against the newest bias estimate.
         self._preintegrated.resetIntegrationAndSetBias(self._bias)
         self.epochs += 1
         estimate.wall_time_s = time.perf_counter() - started
         self.wall_times_s.append(estimate.wall_time_s)
+        self.cpu_times_s.append(time.thread_time() - cpu_started)
         return estimate
-
-    def finish(self) -> None:
-        """End of the stream: the states still in the window join :attr:`revised`
-        as the smoother holds them now. Rows added later continue the track."""
-        self._release(math.inf)
 
     def _lag_for(self, time_s: float) -> float:
         """The smoother's lag for the update at ``time_s`` (s): ``smoother_lag_s``,
@@ -563,37 +585,6 @@ class MarvelEstimator:
         if every <= 0.0:
             return time_s
         return (math.floor(time_s / every) + 1.0) * every
-
-    def _release(self, before_s: float, revise: bool = True) -> None:
-        """Moves the window's states stamped before ``before_s`` (s) to
-        :attr:`revised`: read from the smoother when ``revise``, else (or
-        when the smoother no longer holds one) their causal estimate."""
-        for key in sorted(j for j, (stamp, _) in self._window.items() if stamp < before_s):
-            _, causal = self._window.pop(key)
-            row = self._revise(key, causal) if revise else None
-            if row is None:
-                self.revised_fallbacks += 1
-                row = causal
-            self.revised.append(row)
-
-    def _revise(self, k: int, causal: Estimate) -> Estimate | None:
-        """State ``k`` as the smoother holds it now: the causal row with its
-        position, velocity, orientation and (with ``compute_sigma``) 1-sigma
-        position replaced; None if the smoother cannot give it."""
-        smoother = self._smoother
-        try:
-            pose = smoother.calculateEstimatePose3(X(k))
-            velocity = np.asarray(smoother.calculateEstimateVector(V(k)), dtype=float)
-            sigma = causal.sigma
-            if self.params.compute_sigma:
-                cov = _world_position_covariance(pose, smoother.marginalCovariance(X(k)))
-                sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-        except (RuntimeError, IndexError):
-            return None
-        position = np.asarray(pose.translation(), dtype=float)
-        if not (np.all(np.isfinite(position)) and np.all(np.isfinite(velocity))):
-            return None
-        return replace(causal, position=position, velocity=velocity, orientation=_quaternion(pose), sigma=sigma)
 
     def _add_multipath(self, graph, initial, stamps, time_s, sigma, previous_position, predicted) -> np.ndarray:
         """The epoch's multipath state ``M(k)`` (``multipath = "states"``) and
@@ -675,18 +666,43 @@ class MarvelEstimator:
 
     # --- graph building ----------------------------------------------------
 
-    def _take_off(self, graph, initial, stamps, yaw_rad: float) -> None:
-        """State X(0) at the first IMU sample: at rest at the origin, roll and
-        pitch from the averaged accelerometer, yaw from the first yaw feature."""
+    def _take_off(self, graph, initial, stamps, yaw_rad: float, row=None) -> None:
+        """State X(0) at the first IMU sample: at the origin, roll and pitch
+        from the averaged accelerometer, yaw from the first yaw feature; the
+        velocity near zero if the IMU so far shows rest, else unknown.
+        ``row``: this epoch's (range m, azimuth rad, elevation rad, range
+        sigma m, angle sigma rad), for a log whose features began before its IMU."""
         p = self.params
         mean_force = self._tilt_sum / self._tilt_count if self._tilt_count else np.array([0.0, 0.0, 1.0])
         roll, pitch = tilt_from_specific_force(mean_force)
-        pose = gtsam.Pose3(gtsam.Rot3.Ypr(yaw_rad, pitch, roll), np.zeros(3))
+        position = np.zeros(3)
+        position_sigma = p.prior_position_sigma_m
+        provisional = self._provisional_rest()
+        # A row before the IMU matters only if the IMU begins in motion: at
+        # rest, the drone was where it is now (the origin) all along.
+        self._anchor_used = self._anchor_row is not None and row is not None and not provisional
+        if self._anchor_used:
+            # The IMU starts after the features: the origin is where the drone
+            # was at the anchor row, and this state is where this row puts it
+            # from there; loose (the controller's prior carries the anchor).
+            _, d0, az0, el0, range_sigma0, angle_sigma0 = self._anchor_row
+            controller = divergence.controller_from_origin(d0, az0, el0)
+            position = divergence.position_from_features(controller, *row[:3])
+            # The two rows' spreads together: how far this state can be from
+            # where they put it (the barometer's datum is checked against it).
+            self._anchor_position_sigma = math.hypot(divergence.feature_position_sigmas(row[0], row[3], row[4]),
+                                                     divergence.feature_position_sigmas(d0, range_sigma0, angle_sigma0))
+            position_sigma = 10.0 * self._anchor_position_sigma
+        pose = gtsam.Pose3(gtsam.Rot3.Ypr(yaw_rad, pitch, roll), position)
         # Pose3 tangent: rotation about body x, y, z then translation.
         pose_sigmas = np.array(
-            [p.prior_tilt_sigma_rad, p.prior_tilt_sigma_rad, p.prior_yaw_sigma_rad] + [p.prior_position_sigma_m] * 3
+            [p.prior_tilt_sigma_rad, p.prior_tilt_sigma_rad, p.prior_yaw_sigma_rad] + [position_sigma] * 3
         )
-        velocity_noise = gtsam.noiseModel.Isotropic.Sigma(3, p.prior_velocity_sigma_m_s)
+        # At rest (so far: the test's window may not be complete) the
+        # velocity is near zero; otherwise it is unknown (a lift-off, a log
+        # begun in flight): a wide zero-mean prior, the IMU and the rows find it.
+        velocity_sigma = p.prior_velocity_sigma_m_s if provisional else p.moving_velocity_sigma_m_s
+        velocity_noise = gtsam.noiseModel.Isotropic.Sigma(3, velocity_sigma)
         bias_noise = gtsam.noiseModel.Diagonal.Sigmas(np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3))
         graph.add(gtsam.PriorFactorPose3(X(0), pose, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
         graph.add(gtsam.PriorFactorVector(V(0), np.zeros(3), velocity_noise))
@@ -711,58 +727,6 @@ class MarvelEstimator:
         # where iSAM2's Cholesky reports an indeterminate system.
         isam_params.setFactorization(p.factorization)
         return gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
-
-    def _restart(self, k: int, time_s: float, predicted) -> None:
-        """A fresh smoother holding state ``k`` (the IMU prediction ``predicted``), the bias and
-        the controller, each with a prior as wide as its last covariance (or a loose default)."""
-        p = self.params
-
-        def spread(covariance: np.ndarray, default: float) -> np.ndarray:
-            diagonal = np.diag(covariance) if np.all(np.isfinite(covariance)) else np.full(3, default**2)
-            return np.sqrt(np.maximum(diagonal, 1e-4)) * 3.0
-
-        self._smoother = self._new_smoother()
-        self._lag = self.params.smoother_lag_s
-        graph = gtsam.NonlinearFactorGraph()
-        initial = gtsam.Values()
-        pose = predicted.pose()
-        pose_sigmas = np.concatenate([np.full(3, 0.05), spread(self._cov_position, 1.0)])
-        graph.add(gtsam.PriorFactorPose3(X(k), pose, gtsam.noiseModel.Diagonal.Sigmas(pose_sigmas)))
-        graph.add(gtsam.PriorFactorVector(V(k), predicted.velocity(), gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_velocity, 0.5))))
-        bias_sigmas = np.array([p.accel_bias_sigma] * 3 + [p.gyro_bias_sigma] * 3)
-        graph.add(gtsam.PriorFactorConstantBias(B(k), self._bias, gtsam.noiseModel.Diagonal.Sigmas(bias_sigmas)))
-        graph.add(gtsam.PriorFactorPoint3(CONTROLLER, self._controller, gtsam.noiseModel.Diagonal.Sigmas(spread(self._cov_controller, 5.0))))
-        if self._has_range_bias():
-            # Its prior sigma: its marginal is not kept (one more marginal per
-            # epoch for the rare restart).
-            graph.add(gtsam.PriorFactorDouble(RANGE_BIAS, self._range_bias, gtsam.noiseModel.Isotropic.Sigma(1, p.range_bias_sigma_m)))
-        initial.insert(X(k), pose)
-        initial.insert(V(k), predicted.velocity())
-        initial.insert(B(k), self._bias)
-        initial.insert(CONTROLLER, self._controller)
-        stamps = {X(k): time_s, V(k): time_s, B(k): time_s, CONTROLLER: time_s}
-        if self._has_range_bias():
-            initial.insert(RANGE_BIAS, self._range_bias)
-            stamps[RANGE_BIAS] = time_s
-        self._baro_chain = False  # a new barometer offset chain starts with the next epoch
-        self._multipath_chain = False  # and a new multipath chain
-        self._smoother.update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
-        self._nav = predicted
-
-    def _add_ground(self, graph, k: int) -> None:
-        """At rest at the origin before take-off: position, zero velocity and,
-        from the previous epoch, zero rotation (which pins the gyroscope bias)."""
-        p = self.params
-        # Pose3 tangent order is (rotation, translation): the position prior
-        # leaves the rotation free (its sigma is effectively infinite).
-        position_sigmas = np.array([1.0e3] * 3 + [p.ground_position_sigma_m] * 3)
-        graph.add(gtsam.PriorFactorPose3(X(k), gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(position_sigmas)))
-        graph.add(gtsam.PriorFactorVector(V(k), np.zeros(3), gtsam.noiseModel.Isotropic.Sigma(3, p.ground_velocity_sigma_m_s)))
-        if k > 0:
-            rotation_sigmas = np.array([p.ground_rotation_sigma_rad] * 3 + [1.0e3] * 3)
-            graph.add(
-                gtsam.BetweenFactorPose3(X(k - 1), X(k), gtsam.Pose3(), gtsam.noiseModel.Diagonal.Sigmas(rotation_sigmas))
-            )
 
     def _add_imu_factor(self, graph, initial, previous: int) -> None:
         k = self._key
@@ -803,6 +767,16 @@ class MarvelEstimator:
             walk = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_random_walk * math.sqrt(dt))
             graph.add(gtsam.BetweenFactorDouble(O(self._baro_key), O(k), 0.0, walk))
             initial.insert(O(k), self._baro_offset)
+        elif self._anchor_used and self.epochs == 0 and self.divergences == 0 and samples and self._datum_agrees(float(np.mean(samples)), predicted):
+            # No take-off pins the height (the IMU began in flight): the
+            # barometer's own datum, the take-off point, does, if the
+            # features agree with it (a barometer reading height above sea
+            # level, or zeroed elsewhere, keeps the loose prior).
+            self._baro_offset = 0.0
+            datum = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_datum_sigma_m)
+            graph.add(gtsam.PriorFactorDouble(O(k), 0.0, datum))
+            initial.insert(O(k), 0.0)
+            self._baro_chain = True
         else:
             self._baro_offset = float(np.mean(samples)) - predicted.position()[2]
             loose = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_offset_prior_sigma_m)
@@ -817,6 +791,15 @@ class MarvelEstimator:
         noise = gtsam.noiseModel.Isotropic.Sigma(1, p.baro_sigma_m / math.sqrt(len(samples)))
         graph.add(factors.height_factor(X(k), O(k), float(np.mean(samples)), noise))
         return True
+
+    def _datum_agrees(self, baro_m: float, predicted) -> bool:
+        """Whether a barometer height (m) is within 3 sigmas of the height the
+        features put the first state at (its sigma: the anchor row's and the
+        first row's spreads and the datum's)."""
+        if not self._anchor_used:
+            return False
+        sigma = math.hypot(self._anchor_position_sigma, self.params.baro_datum_sigma_m)
+        return abs(baro_m - float(predicted.position()[2])) <= 3.0 * sigma
 
     def _noise(self, sigmas: np.ndarray):
         model = gtsam.noiseModel.Diagonal.Sigmas(sigmas)
@@ -884,14 +867,21 @@ class MarvelEstimator:
             # level: a position of inf) is a solver failure like a thrown
             # one: the caller declines the row and restarts the smoother.
             raise RuntimeError("non-finite estimate")
-        speed = float(np.linalg.norm(velocity))
-        reach = float(np.linalg.norm(controller - np.asarray(pose.translation(), dtype=float)))
-        if speed > self.params.max_speed_m_s or reach > self.params.max_controller_range_m:
-            raise Diverged(f"drone at {speed:.3g} m/s, controller {reach:.3g} m away")
+        p = self.params
+        violation = divergence.physical_violation(
+            np.asarray(pose.translation(), dtype=float), velocity, controller,
+            max_speed_m_s=p.max_speed_m_s, max_controller_range_m=p.max_controller_range_m, max_position_m=p.max_position_m,
+        )
+        if violation is not None:
+            raise Diverged(violation)
         self._bias = smoother.calculateEstimateConstantBias(B(k))
         self._controller = controller
         if self._baro_chain:
             self._baro_offset = smoother.calculateEstimateDouble(O(self._baro_key))
+            if self.epochs < 20 and self.divergences == 0:
+                # The datum a restart from the features takes the height from:
+                # the offset while the take-off (or the first state's prior) pins it.
+                self._baro_datum = float(self._baro_offset)
         if self._multipath_chain:
             self._multipath = np.asarray(smoother.calculateEstimateVector(M(self._multipath_key)), dtype=float)
         if self._has_range_bias():
@@ -927,6 +917,14 @@ class MarvelEstimator:
         self.declined[reason] += 1
 
     # --- reporting ---------------------------------------------------------
+
+    def latency(self) -> Latency | None:
+        """The wall time per accepted row as a :class:`~scattertrack.fusion.latency.Latency` (None before any)."""
+        return Latency.of(self.wall_times_s)
+
+    def cpu_latency(self) -> Latency | None:
+        """The thread CPU time per accepted row as a :class:`~scattertrack.fusion.latency.Latency`."""
+        return Latency.of(self.cpu_times_s)
 
     def latency_ns(self) -> dict[str, float]:
         """Quantiles of the wall time per accepted feature row, ns (``p50``, ``p99``, ``mean``, ``max``)."""

@@ -28,11 +28,18 @@ GRAVITY_M_S2 = 9.80665
 class MarvelParams:
     """Tuning of :class:`MarvelEstimator`; SI units. IMU defaults: docs/marvel.md section 3."""
 
-    smoother_lag_s: float = parameter(6.0, "> 0", "s", "states older than this behind the newest epoch are marginalised (the revised track's lag)")
+    smoother_lag_s: float = parameter(4.0, "> 0", "s", "states older than this behind the newest epoch are marginalised (the revised track's lag)")
     """States older than this behind the newest epoch are marginalised, s.
     The causal rows barely depend on it; the revised track does (docs/marvel.md
     section 11: square through walls 0.470 m at 3 s, 0.411 m at 6 and 10 s,
-    dev seeds), and the time per epoch grows with it."""
+    dev seeds), and the time per epoch grows with it: the once-a-second
+    relinearisation (``relinearize_skip``) relinearises the whole window in
+    iSAM2's batch step, the slowest epoch of each second and so the p99.
+    4 s (was 6 s until issue 16): dev seeds 1000-1001, thread CPU time per
+    epoch on the 2-core VM, 6 s -> 4 s: 20 m circle p99 33.3 -> 21.0 ms,
+    causal 0.386 -> 0.386 m, revised 0.272 -> 0.280 m; square through walls
+    p99 29.2 -> 18.4 ms, causal 0.674 -> 0.673 m, revised 0.426 -> 0.448 m.
+    The 30 ms p99 budget is not met at 6 s on that machine."""
     marginalize_every_s: float = parameter(1.0, ">= 0", "s", "states leave the window in groups spanning this long (<= smoother_lag_s; 0: each alone)")
     """States leave the window in groups spanning this long, s: each state's
     time stamp in the smoother is the end of its bucket ``[n T, (n + 1) T)``,
@@ -126,6 +133,37 @@ class MarvelParams:
     """An IMU sample with a larger angular rate means the drone has left the ground, rad/s."""
     rest_accel_threshold_m_s2: float = parameter(0.3, "> 0", "m/s^2", "... or with a specific force whose magnitude differs from g by more")
     """... or with a specific force whose magnitude differs from g by more, m/s^2."""
+    rest_force_tolerance_m_s2: float = parameter(0.1, "> 0", "m/s^2", "rest test: | |mean specific force| - g | at most this over tilt_window_s")
+    """Rest test (:mod:`scattertrack.fusion.rest`): the mean specific force's
+    magnitude differs from g by at most this, m/s^2. Why 0.1: the
+    accelerometer bias's 1-sigma is 0.02 per axis (3 sigma 0.06); a
+    minimum-jerk lift-off to 2 m at 1 m/s accelerates by 0.3-0.8 m/s^2 in its
+    first half second."""
+    rest_accel_rms_m_s2: float = parameter(0.05, "> 0", "m/s^2", "rest test: RMS of the specific force about its mean at most this")
+    """Rest test: RMS of the specific force about its window mean, m/s^2 (white
+    noise alone: 0.017 at 1e-3 m/s^2/sqrt(Hz) and 100 Hz)."""
+    rest_gyro_rms_rad_s: float = parameter(0.02, "> 0", "rad/s", "rest test: RMS angular rate at most this (bias included)")
+    """Rest test: RMS angular rate over the window, bias included, rad/s (3
+    bias sigmas of 0.002 rad/s per axis and the noise: about 0.011)."""
+    rest_baro_rate_m_s: float = parameter(0.3, "> 0", "m/s", "rest test: |least-squares slope of baro_z| at most this")
+    """Rest test: the barometer's least-squares slope over the window, m/s
+    (3 sigma of the slope of 50 samples of 0.1 m noise over 0.5 s)."""
+    ground_baro_rise_m: float = parameter(0.3, "> 0", "m", "on the ground: a barometer window mean this far from the rest window's ends the ground phase")
+    """On the ground: a barometer window mean this far (m) from the rest
+    window's mean contradicts "on the ground"; the ground phase ends and the
+    last ``ground_release_s`` of ground factors are dropped (3 sigma of the
+    difference of two window means plus the offset's walk over seconds)."""
+    ground_release_s: float = parameter(0.3, ">= 0", "s", "ground factors of the epochs this long before the barometer contradicts the ground are removed")
+    """When the barometer contradicts the ground (a climb the IMU's
+    take-off detector missed), the ground factors of the epochs in the last
+    this many seconds are removed from the graph, not obeyed (the window
+    mean lags the rise). When the IMU ends the ground phase nothing is
+    removed: every sample before was within the rest thresholds. (Removing
+    0.3 s there too cost the 20 m circle 1 cm, seeds 0-2: 0.435 -> 0.444 m.)"""
+    moving_velocity_sigma_m_s: float = parameter(2.0, "> 0", "m/s", "velocity prior of a log that does not start at rest, and of a restart after divergence")
+    """1-sigma (m/s, per axis, zero mean) of the first state's velocity when
+    the rest test has not passed (a log that starts in flight or while lifting
+    off), and of the state a divergence restarts from."""
     ground_position_sigma_m: float = parameter(0.02, "> 0", "m", "1-sigma of 'at the origin' on the ground")
     """1-sigma of "at the origin" on the ground (the detector lags take-off by a few mm), m."""
     ground_velocity_sigma_m_s: float = parameter(0.01, "> 0", "m/s", "1-sigma of 'not moving' on the ground")
@@ -142,8 +180,10 @@ class MarvelParams:
     """Loose take-off yaw prior, rad: the yaw's value comes from the first
     yaw feature when there is one (0 otherwise), its information from the
     yaw factors."""
-    tilt_window_s: float = parameter(0.5, "> 0", "s", "accelerometer samples averaged for roll and pitch at take-off")
-    """Accelerometer samples averaged for roll and pitch at take-off, s."""
+    tilt_window_s: float = parameter(0.5, "> 0", "s", "the first IMU samples of the rest test (and averaged for roll and pitch at take-off)")
+    """The first IMU samples over this span (s) are the rest test's window
+    (:mod:`scattertrack.fusion.rest`) and, at rest, are averaged for roll
+    and pitch at take-off. Ground factors begin only once it passed."""
 
     use_baro: bool = parameter(True, "any", "", "barometer factors when the IMU has baro_z")
     """Barometer factors when ``baro_z`` is given."""
@@ -157,6 +197,13 @@ class MarvelParams:
     baro_offset_prior_sigma_m: float = parameter(100.0, "> 0", "m", "loose prior on the barometer's offset (an arbitrary datum)")
     """Loose prior on the offset (the barometer reads an arbitrary datum), m."""
 
+    baro_datum_sigma_m: float = parameter(0.3, "> 0", "m", "1-sigma of the barometer reading height above the take-off point, used when no take-off pins the height")
+    """1-sigma (m) of "the barometer reads height above the take-off point"
+    (a flight controller zeroes it on the ground), used instead of the loose
+    ``baro_offset_prior_sigma_m`` when no take-off state pins the height: a
+    log whose IMU (and barometer) begin in flight, after its features. 0.3
+    m: the offset's random walk (``baro_random_walk``, 0.02 m/sqrt(s) in the
+    simulator) over five minutes between zeroing and take-off."""
     gate_probability: float = parameter(0.999, "[0, 1)", "", "chi-square gate on each measurement's normalised innovation; 0: no gate")
     """Chi-square gate on each measurement's normalised innovation (0: no gate)."""
     min_epoch_interval_s: float = parameter(1.0e-3, ">= 0", "s", "rows closer than this to the previous epoch are declined")
@@ -179,6 +226,18 @@ class MarvelParams:
     """A solve with the controller farther than this from the drone has
     diverged, m (LoRa backscatter reaches tens of metres; paper: 50 m)."""
 
+    max_position_m: float = parameter(1000.0, "> 0", "m", "a solve with the drone farther than this from the take-off point has diverged")
+    """A solve with the drone farther than this from the take-off point has
+    diverged, m (a drone at -49169 m was once printed as a result)."""
+    divergence_window_epochs: int = parameter(20, ">= 0", "epochs", "epochs over which persistent gating is judged; 0: no such test")
+    """Epochs over which persistent gating is judged (:mod:`scattertrack.fusion.divergence`); 0: none."""
+    divergence_gated_fraction: float = parameter(0.8, "(0, 1]", "", "range or direction gated on this share of those epochs: diverged, restart from the features")
+    """Range or direction gated on at least this share of the last
+    ``divergence_window_epochs`` epochs means the state, not the rows, is
+    wrong: the smoother restarts from the features and the barometer."""
+    recovery_epochs: int = parameter(30, ">= 1", "epochs", "a divergence counts as recovered after this many epochs without another")
+    """A divergence counts as recovered after this many accepted epochs in a
+    row without another (3 s at 10 Hz)."""
     compute_sigma: bool = parameter(True, "any", "", "1-sigma position and controller in the output (marginal covariances; always with the gate on)")
     """1-sigma position and controller in the output, from iSAM2's marginal
     covariances of the newest pose, velocity and controller (about 0.4 ms of

@@ -66,7 +66,11 @@ at most :data:`MAX_SPEED`):
     ``altitude`` defaults to 0, ``attitude`` to ``"level"``.
 
 Common keys: ``altitude`` [1.5 m; 0 for rail and turntable], ``ground_s``
-[2 s], ``climb_speed`` [1 m/s], ``hover_s`` [1 s], ``attitude``
+[2 s; 0: the flight lifts off at once], ``climb_speed`` [1 m/s], ``hover_s`` [1 s],
+``log_start_s`` [0 s: the log begins this long into the flight, so with
+``ground_s = 0`` and ``log_start_s > 0`` it begins in the climb, already
+moving, as a log started late does; the world origin stays the take-off
+point], ``attitude``
 [``"quadrotor"``, or ``"level"``], ``yaw``, ``yaw_rad``
 [0: the heading at rest], ``max_yaw_rate`` [1 rad/s: the peak rate of the
 minimum-jerk turns], ``yaw_rate`` [0.5 rad/s], ``yaw_sweep`` (``[low,
@@ -159,6 +163,7 @@ COMMON_KEYS = (
     "sweep_s",
     "step_s",
     "spin_up_s",
+    "log_start_s",
 )
 """Keys every kind accepts."""
 REQUIRED_KEYS = {
@@ -189,6 +194,7 @@ COMMON_DEFAULTS = {
     "sweep_s": 52.0,  # s, one sweep of yaw = "rate" with yaw_sweep
     "step_s": 0.2,  # s, each step of the sweep
     "spin_up_s": 1.0,  # s, rate ramp from rest
+    "log_start_s": 0.0,  # s into the flight at which the log (time 0) begins
 }
 KIND_DEFAULTS = {
     "hover": {"yaw": "fixed", "attitude": "quadrotor"},
@@ -590,6 +596,7 @@ def resolve_flight(params: dict) -> dict:
     number("sweep_s", 0.0, strict=True)
     number("step_s", 0.0, strict=True)
     number("spin_up_s", 0.0, strict=True)
+    number("log_start_s", 0.0)
     if data["attitude"] not in ATTITUDES:
         raise FlightError("attitude", f"must be one of {', '.join(map(repr, ATTITUDES))}, got {data['attitude']!r}")
     if data["yaw"] not in YAW_PROFILES:
@@ -798,8 +805,9 @@ class _Plan:
     # --- evaluation -------------------------------------------------------
 
     def kinematics(self, t):
-        """(position, velocity, acceleration, yaw) at times ``t`` (s); t < 0 is at rest."""
-        t = np.maximum(t, 0.0)
+        """(position, velocity, acceleration, yaw) at log times ``t`` (s); flight time
+        ``t + log_start_s`` below 0 is at rest."""
+        t = np.maximum(np.asarray(t, dtype=float) + self.data["log_start_s"], 0.0)
         position, velocity, acceleration, heading = _evaluate_sequence(self.segments, t)
         profile = self.data["yaw"]
         if profile == "fixed":
@@ -871,8 +879,9 @@ def flight(params: dict, t) -> FlightTruth:
 
 
 def pattern_start_s(params: dict) -> float:
-    """Time (s) the pattern starts: after resting, climbing, hovering and any transit."""
-    return _Plan(resolve_flight(params)).pattern_start
+    """Log time (s) the pattern starts: after resting, climbing, hovering and any transit."""
+    plan = _Plan(resolve_flight(params))
+    return plan.pattern_start - plan.data["log_start_s"]
 
 
 def check_flight(params: dict, duration_s: float) -> dict:

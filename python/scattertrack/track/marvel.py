@@ -403,11 +403,10 @@ def sense_epochs(
     core = sensor._core
     shifts = [float(s) for s in sensor.shifts]
 
-    imu_time = np.asarray(imu.time_s, dtype=float)
-    accel = np.asarray(imu.accel, dtype=float)
-    gyro = np.asarray(imu.gyro, dtype=float)
-    baro = np.asarray(imu.baro_z, dtype=float) if imu.baro_z is not None else np.full(len(imu_time), np.nan)
-    next_imu = 0
+    from scattertrack.fusion.run import ImuFeed
+
+    feed = ImuFeed(imu)
+    gyro = feed.gyro
 
     rest_rows: list[np.ndarray] = []  # peak rows for the clock error
     flight_rows: list[np.ndarray] = []
@@ -439,10 +438,8 @@ def sense_epochs(
         processor = sensor.processor(np.asarray(epoch.chirp_start_s, dtype=float) - epoch.time_s)
         time_s = float(epoch.time_s + processor.reference_time_s)
         # Every IMU sample at or before the epoch's time first (causal).
-        end = int(np.searchsorted(imu_time, time_s, side="right"))
-        for i in range(next_imu, end):
-            estimator.add_imu(imu_time[i], accel[i], gyro[i], baro[i])
-        next_imu = max(next_imu, end)
+        feed.until(estimator, time_s)
+        end = feed.next
         on_ground = estimator.on_ground
         # Which peak rows this epoch adds to the clock error (None: it is fixed).
         collect = None
@@ -689,8 +686,10 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     :class:`~scattertrack.io.sigmf_lora.LoraRecording`; ``method``:
     ``marvel`` or ``ulocate`` (module docstring). ``params``: fusion
     (:class:`scattertrack.fusion.MarvelParams`) and sensing
-    (:data:`SENSING_DEFAULTS`) parameters, SI units. ``scene`` is accepted
-    for the common tracker signature (the controller's position is estimated).
+    (:data:`SENSING_DEFAULTS`) parameters, SI units. ``scene``: its region
+    refuses estimates outside it (the controller's position is estimated).
+    The end of the run is :func:`scattertrack.fusion.run.finish_run`, the
+    same as for features.
 
     The track carries orientation and 1-sigma position like
     :func:`scattertrack.fusion.run_marvel`; ``skipped`` counts the epochs the
@@ -706,14 +705,8 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     smoothed track, as for features.
     """
     _check_method(method)
-    del scene  # the controller is a state of the estimator; nothing in the scene is needed
-    from scattertrack.fusion import (
-        DECLINE_REASONS,
-        IMU_DECLINE_REASONS,
-        MarvelEstimator,
-        MarvelParams,
-    )
-    from scattertrack.fusion.run import attach_revised, track_from_estimates
+    from scattertrack.fusion import MarvelEstimator, MarvelParams
+    from scattertrack.fusion.run import _progress_bar, finish_run
 
     fusion, sensing = _split_params(params)
     # The DSP's sigmas are thermal plus floors: they say nothing about the
@@ -723,62 +716,36 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
     # inflation stayed at 0.7 m. The feature files' sigmas do include it.
     fusion.setdefault("multipath", "inflation")
     estimator = MarvelEstimator(MarvelParams.from_kwargs(**fusion))
-    bar = None
     epochs: list[SensedEpoch] = []
-    stream = sense_epochs(method, recording, imu, estimator, **sensing)
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(unit="epoch", desc=method, leave=False)
-    for sensed in stream:
+    bar = _progress_bar(progress, None, method)
+    for sensed in sense_epochs(method, recording, imu, estimator, **sensing):
         epochs.append(sensed)
         if bar is not None:
             bar.update(1)
     if bar is not None:
         bar.close()
-    estimator.finish()
     rows = [e.estimate for e in epochs if e.estimate is not None]
 
-    skipped = SkipReport()
-    for reason, n in imu.skipped.counts.items():
-        skipped.counts[reason] = skipped.counts.get(reason, 0) + n
-        skipped.examples.setdefault(reason, []).extend(imu.skipped.examples.get(reason, [])[:5])
     sensing_declined = {key: 0 for key in SENSING_DECLINE_REASONS}
     for e in epochs:
         if e.declined is not None:
             sensing_declined[e.declined] += 1
-    for counts, reasons in (
-        (sensing_declined, SENSING_DECLINE_REASONS),
-        (estimator.declined, DECLINE_REASONS),
-        (estimator.imu_declined, IMU_DECLINE_REASONS),
-    ):
-        for key, n in counts.items():
-            if n:
-                skipped.add(reasons[key], n=n)
-
-    n = len(rows)
-    fusion_latency = estimator.latency_ns()
     dsp = _quantiles_ns([e.dsp_time_s for e in epochs if e.declined not in ("non_finite_samples", "no_signal")])
     fused = [e for e in epochs if math.isfinite(e.fusion_time_s)]
     rest = [e for e in epochs if e.on_ground and math.isfinite(e.clock_error)]
     after = next((e for e in epochs if not e.on_ground and math.isfinite(e.clock_error)), None)
-    track = track_from_estimates(rows, skipped)
-    attach_revised(track, estimator)
-    track.stats = {
-        EPC: {
+    return finish_run(
+        estimator,
+        rows,
+        scene,
+        input_skips=(imu.skipped,),
+        extra_declines=((sensing_declined, SENSING_DECLINE_REASONS),),
+        stats={
             "method": method,
-            "revised_fallbacks": estimator.revised_fallbacks,
-            "heading_hold_end_s": estimator.heading_hold_end_s,
             "epochs": len(epochs),
             "rows": sum(e.sensed for e in epochs),
-            "fused": n,
-            "imu_samples": estimator.imu_samples,
+            "fused": len(rows),
             "sensing_declined": sensing_declined,
-            "declined": dict(estimator.declined),
-            "imu_declined": dict(estimator.imu_declined),
-            "controller": estimator.controller,
-            "controller_sigma": rows[-1].controller_sigma if rows else None,
-            "range_bias_m": estimator.range_bias,
             "fringe_from_timing": sum(e.fringe_from_timing for e in epochs),
             "clock": {
                 "clock_error": after.clock_error if after is not None else (epochs[-1].clock_error if epochs else None),
@@ -787,14 +754,9 @@ def run_sigmf(method: str, scene: Scene | None, recording, imu: Imu, *, progress
             },
             "features": features_of(epochs),
             "snr_db": np.array([e.snr_db for e in epochs], dtype=float),
-            "time_ns_p50": fusion_latency.get("p50", float("nan")),
-            "time_ns_p99": fusion_latency.get("p99", float("nan")),
             "dsp_time_ns_p50": dsp.get("p50", float("nan")),
             "dsp_time_ns_p99": dsp.get("p99", float("nan")),
+            # The DSP's and the fusion's time together, per fused epoch.
             "epoch_times_ns": np.array([(e.dsp_time_s + e.fusion_time_s) * 1e9 for e in fused], dtype=float),
-            "imu_time_ns_per_sample": estimator.imu_wall_time_s * 1e9 / max(estimator.imu_samples, 1),
-        }
-    }
-    track.latency_quantiles_ns = {k: fusion_latency[k] for k in ("p50", "p99")} if fusion_latency else {}
-    track.latency = (n, fusion_latency["mean"], fusion_latency["max"]) if fusion_latency else None
-    return track
+        },
+    )

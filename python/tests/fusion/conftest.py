@@ -206,3 +206,10 @@ def truncate_flight():
 def rotation_errors():
     """:func:`rotation_errors_deg`."""
     return rotation_errors_deg
+
+
+@pytest.fixture(scope="session")
+def lift_off_flight() -> Synthetic:
+    """20 s of the same flight whose log begins 0.3 s into the climb: no rest
+    on the ground, the drone already rising (the outside lift-off case's start)."""
+    return make_flight(duration_s=20.0, seed=3, flight=CircleFlight(rest_s=-0.3))

@@ -261,3 +261,17 @@ def test_rotation_helpers_agree():
     np.testing.assert_allclose(back[1], pitch, atol=1e-9)
     np.testing.assert_allclose(wrap_angle(back[2] - roll), 0, atol=1e-9)
     assert wrap_angle(-math.pi) == pytest.approx(math.pi)
+
+
+def test_a_log_can_begin_in_the_lift_off():
+    """``ground_s = 0`` and ``log_start_s``: the log's time 0 is that far into
+    the climb (already moving up); the origin stays the take-off point."""
+    from scattertrack.sim.drone import flight as drone_flight
+
+    table = {"kind": "hover", "altitude": 2.0, "ground_s": 0.0}
+    late = drone_flight({**table, "log_start_s": 0.3}, [0.0, 1.0])
+    early = drone_flight(table, [0.3, 1.3])
+    np.testing.assert_allclose(late.position, early.position)
+    np.testing.assert_allclose(late.velocity, early.velocity)
+    assert late.velocity[0, 2] > 0.05 and late.position[0, 2] > 0.0
+    np.testing.assert_allclose(drone_flight(table, [0.0]).position, 0.0)

@@ -27,6 +27,9 @@ MARVEL = [
     "marvel-circle-20m",
     "marvel-distance",
     "marvel-hover",
+    "marvel-liftoff-circle",
+    "marvel-liftoff-circle-imu-late",
+    "marvel-liftoff-square",
     "marvel-rail",
     "marvel-square-room",
     "marvel-square-walls",
@@ -63,11 +66,12 @@ def test_every_marvel_scenario_loads_and_simulates(name):
     assert sim.pipeline == "marvel"
     assert sim.reads is None and sim.frames is None
     duration = scenario["duration_s"]
-    assert len(sim.imu) == round(duration * 100)
+    dropped = sum(end - start for start, end in scenario.get("imu_model", {}).get("dropped_spans", []))
+    assert len(sim.imu) == round((duration - dropped) * 100)
     assert len(sim.truth) == round(duration * 100)
     assert set(sim.truth.epc) == {"drone"}
     assert sim.truth.orientation.shape == (len(sim.truth), 4)
-    np.testing.assert_array_equal(sim.imu.time_s, sim.truth.time_s)
+    np.testing.assert_array_equal(sim.imu.time_s, sim.truth.time_s[-len(sim.imu):])
     counts = sim.details["counts"]
     assert counts["rows"] + counts["rows_below_snr"] == counts["epochs"] == round(duration * 10)
     assert len(sim.features) == counts["rows"] > 0
