@@ -2,10 +2,10 @@
 
 Contract
 --------
-In: the drone's IMU samples (:class:`scattertrack.io.types.Imu`, FORMATS.md
+In: the drone's IMU samples (:class:`scattertrack.io.types.Imu`, docs/formats.md
 section 6: specific force m/s^2 and angular rate rad/s in the body frame x
 forward, y left, z up; optional barometric height m) and the backscatter
-pose features (:class:`scattertrack.io.types.Features`, FORMATS.md section 7:
+pose features (:class:`scattertrack.io.types.Features`, docs/formats.md section 7:
 range m, azimuth and elevation rad of the drone seen from the controller,
 optional yaw rad, optional 1-sigmas), on one clock in seconds.
 

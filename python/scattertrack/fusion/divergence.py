@@ -79,7 +79,7 @@ class GateMonitor:
 
 def position_from_features(controller, range_m: float, azimuth_rad: float, elevation_rad: float) -> np.ndarray:
     """The drone's position (m, world) a feature row gives from the controller:
-    ``p = rho + d u(az, el)`` (FORMATS.md section 7: the drone seen from the controller)."""
+    ``p = rho + d u(az, el)`` (docs/formats.md section 7: the drone seen from the controller)."""
     return np.asarray(controller, dtype=float) + float(range_m) * factors.direction(azimuth_rad, elevation_rad)
 
 

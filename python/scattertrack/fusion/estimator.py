@@ -343,7 +343,7 @@ class MarvelEstimator(GroundPhase, Restarts, RevisedTrack):
         angle_sigma_rad: float = float("nan"),
         yaw_sigma_rad: float = float("nan"),
     ) -> Estimate | None:
-        """One feature row (FORMATS.md section 7): adds the epoch's state and
+        """One feature row (docs/formats.md section 7): adds the epoch's state and
         factors, updates the smoother and returns the newest state's estimate;
         ``None`` when the row is declined."""
         started = time.perf_counter()

@@ -2,7 +2,7 @@
 
 :func:`simulate_imu` turns a :class:`~scattertrack.sim.drone.FlightTruth`
 sampled at the IMU's sample times into what the IMU reports
-(:class:`scattertrack.io.types.Imu`, FORMATS.md section 6):
+(:class:`scattertrack.io.types.Imu`, docs/formats.md section 6):
 
 - accelerometer: the specific force in the body frame,
   ``f_B = R^T (a_W - g_W) + b_a + n_a`` (m/s^2); at rest ``(0, 0, +9.81)``;

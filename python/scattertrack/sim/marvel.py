@@ -3,7 +3,7 @@
 :func:`simulate_marvel` runs a ``pipeline = "marvel"`` scenario: a drone
 flight (:mod:`scattertrack.sim.drone`), its IMU (:mod:`scattertrack.sim.imu`)
 and the pose features the controller's LoRa-backscatter sensing would give
-(``features.csv``, FORMATS.md section 7) with a physics-derived noise model,
+(``features.csv``, docs/formats.md section 7) with a physics-derived noise model,
 without simulating the chirps (the IQ-level chain is
 :mod:`scattertrack.sim.lora`). The controller's position is hidden from the
 estimator: it is only in ``Simulation.details``.
@@ -236,7 +236,7 @@ def decode_threshold_db(model: dict) -> float:
 def direction_angles(position, controller) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Range (m), azimuth and elevation (rad) of ``position`` (n, 3) seen from ``controller`` (3,).
 
-    FORMATS.md section 7: ``u = (p - rho) / |p - rho|``, azimuth
+    docs/formats.md section 7: ``u = (p - rho) / |p - rho|``, azimuth
     ``atan2(u_y, u_x)``, elevation ``asin(u_z)``.
     """
     delta = np.asarray(position, dtype=float) - np.asarray(controller, dtype=float)

@@ -55,7 +55,7 @@ because the sensing of an epoch needs the fusion's prediction for it:
 5. **Lever arm**: the feature row is about the body origin, so ``r u_body =
    r_c u_c - R c`` with the predicted attitude ``R`` (identity before the
    first estimate: the drone rests level on the ground); range ``|r u|``,
-   azimuth and elevation of ``u`` in the world frame (FORMATS.md section 7).
+   azimuth and elevation of ``u`` in the world frame (docs/formats.md section 7).
 6. **Sigmas**: range = the DSP's range sigma and ``range_sigma_floor_m`` in
    quadrature; angle = the phase-noise bound of the array (the DSP's phase
    sigmas over the 8 channels and the antennas' spread along each tangent
@@ -124,7 +124,7 @@ def default_params(method: str = "marvel") -> dict:
 
 
 def run_features(method: str, scene: Scene | None, imu: Imu, features: Features, *, progress: bool = False, **params) -> Track:
-    """Fuses ``features`` (FORMATS.md 7) with ``imu`` (FORMATS.md 6): one track row per accepted epoch.
+    """Fuses ``features`` (docs/formats.md 7) with ``imu`` (docs/formats.md 6): one track row per accepted epoch.
 
     ``params`` are :class:`scattertrack.fusion.MarvelParams` fields. Raises
     ValueError for a method outside :data:`MARVEL_METHODS`, an unknown
@@ -648,7 +648,7 @@ def sense_epochs(
 
 
 def features_of(epochs: list[SensedEpoch]) -> Features:
-    """The sensed rows (body origin, FORMATS.md section 7) as :class:`Features`: the epochs given
+    """The sensed rows (body origin, docs/formats.md section 7) as :class:`Features`: the epochs given
     to the fusion and those held back at rest while the clock error settled."""
     kept = [e for e in epochs if e.sensed]
 

@@ -24,7 +24,7 @@ def _live(sim, emulator, tmp_path, options: OutputOptions, before_run=None):
     outputs = LiveOutputs(options, sim.scene, tmp_path / "track.csv")
     if before_run is not None:
         before_run(outputs)
-    session = LiveSession(sim.scene, "127.0.0.1", emulator.port, tmp_path / "reads.csv", tmp_path / "track.csv", track.make("glac", sim.scene), duration_s=6.0 / SPEED + 1.5, outputs=outputs)
+    session = LiveSession(sim.scene, "127.0.0.1", emulator.port, tmp_path / "reads.csv", tmp_path / "track.csv", track.make("glac", sim.scene), duration_s=6.0 / SPEED + 6.0, outputs=outputs)  # generous: the subscription waits hold the loop on a busy machine
     summary = asyncio.run(session.run())
     return outputs, summary
 
@@ -103,7 +103,7 @@ def test_a_foxglove_client_receives_every_live_message(walls_simulation, tmp_pat
     store = ros2.Builder().store
     outputs = OutputsWithAClient(OutputOptions(foxglove=("127.0.0.1", 0)), sim.scene, tmp_path / "track.csv")
     with serve_reads(sim.reads, speed=SPEED) as emulator:
-        session = LiveSession(sim.scene, "127.0.0.1", emulator.port, tmp_path / "reads.csv", tmp_path / "track.csv", track.make("glac", sim.scene), duration_s=6.0 / SPEED + 1.5, outputs=outputs)
+        session = LiveSession(sim.scene, "127.0.0.1", emulator.port, tmp_path / "reads.csv", tmp_path / "track.csv", track.make("glac", sim.scene), duration_s=6.0 / SPEED + 6.0, outputs=outputs)  # generous: the subscription waits hold the loop on a busy machine
         asyncio.run(session.run())
     client = outputs.client
     live = read_track(tmp_path / "track.csv")
