@@ -1,5 +1,6 @@
-// online: a live source (the simulator replayed in real time) tracked as it
-// reads; the page polls for the estimates it has not drawn yet.
+// online: a live source tracked as it reads (the simulator replayed in real
+// time, or an LLRP reader through the server's LiveSession); the page polls
+// for the estimates it has not drawn yet.
 import { get, post } from "./api.js";
 import { fmt, h, mm, options, table } from "./views.js";
 import { antennaSeries, plot, COLORS } from "./plot.js";
@@ -9,16 +10,29 @@ let timer = null;
 export function leave() { clearTimeout(timer); timer = null; }
 
 export function render(panel) {
+  const source = h("select", { name: "source" },
+    h("option", { value: "replay", text: "simulated replay" }), h("option", { value: "llrp", text: "LLRP reader" }));
   const scenario = h("select", { name: "scenario" });
+  const scenePath = h("input", { type: "text", name: "scene_path", placeholder: "scene.toml on the server" });
+  const llrp = h("input", { type: "text", name: "llrp", placeholder: "HOST[:PORT]" });
+  const replayOnly = [h("label", {}, "scenario", scenario), h("label", {}, "speed (x real time)", null)];
+  const llrpOnly = [h("label", {}, "scene", scenePath), h("label", {}, "reader", llrp)];
   const speed = h("input", { name: "speed", type: "number", value: "1", step: "any", min: "0.1" });
   const duration = h("input", { name: "duration", type: "number", value: "10", min: "1" });
-  const start = h("button", { type: "submit", text: "start replay" });
+  const start = h("button", { type: "submit", text: "start" });
   const stop = h("button", { type: "button", text: "stop", disabled: "" });
   const status = h("div", { class: "status", "data-testid": "online-status" });
   const view = h("div", { class: "row" });
-  const form = h("form", {}, h("label", {}, "scenario", scenario), h("label", {}, "speed (x real time)", speed),
+  replayOnly[1].replaceChildren("speed (x real time)", speed);
+  const form = h("form", {}, h("label", {}, "source", source), ...replayOnly, ...llrpOnly,
     h("label", {}, "duration (s)", duration), start, stop);
-  panel.append(h("p", { text: "A simulated reader session replayed in real time: each read is tracked when it arrives." }), form, status, view);
+  const sourceChanged = () => {
+    replayOnly.forEach((e) => { e.hidden = source.value !== "replay"; });
+    llrpOnly.forEach((e) => { e.hidden = source.value !== "llrp"; });
+  };
+  source.addEventListener("change", sourceChanged);
+  sourceChanged();
+  panel.append(h("p", { text: "A live source, each read tracked when it arrives: a simulated reader session replayed in real time, or an LLRP reader (scattertrack emulate-reader, or a real one)." }), form, status, view);
   start.disabled = true; // until the scenarios are in
   get("/api/scenarios").then((list) => { options(scenario, list, "glac-3d-arm"); start.disabled = false; });
 
@@ -29,7 +43,10 @@ export function render(panel) {
     const points = {};
     status.className = "status";
     try {
-      job = (await post("/api/online/start", { scenario: scenario.value, speed: +speed.value, duration_s: +duration.value })).job;
+      const request = source.value === "llrp"
+        ? { source: "llrp", scene_path: scenePath.value, llrp: llrp.value, duration_s: +duration.value }
+        : { scenario: scenario.value, speed: +speed.value, duration_s: +duration.value };
+      job = (await post("/api/online/start", request)).job;
     } catch (error) {
       status.className = "status error";
       status.textContent = error.message;
@@ -62,8 +79,9 @@ function draw(view, state, points) {
   const series = Object.entries(points).map(([epc, p], i) =>
     ({ x: p.x, y: p.y, points: true, line: true, width: 0.7, radius: 1.6, color: COLORS[i % COLORS.length], cls: "estimate", label: epc.slice(-8) }));
   series.push(antennaSeries(state.scene));
+  const t0 = Math.min(...Object.values(points).map((p) => p.t[0]));
   const sigmas = Object.entries(points).map(([epc, p], i) =>
-    ({ x: p.t, y: p.sigma.map((v) => (v === null ? null : v * 1000)), line: true, color: COLORS[i % COLORS.length] }));
+    ({ x: p.t.map((t) => t - t0), y: p.sigma.map((v) => (v === null ? null : v * 1000)), line: true, color: COLORS[i % COLORS.length] }));
   const tags = table([
     { title: "tag", value: (r) => r.epc },
     { title: "reads", value: (r) => r.reads },
@@ -74,5 +92,5 @@ function draw(view, state, points) {
   ], state.tags, { "data-testid": "online-tags" });
   view.replaceChildren(
     h("div", {}, plot(series, { title: "live track (top view)", xlabel: "x (m)", ylabel: "y (m)", equal: true })),
-    h("div", {}, tags, plot(sigmas, { title: "position sigma", xlabel: "time (s)", ylabel: "sigma (mm)", height: 260 })));
+    h("div", {}, tags, plot(sigmas, { title: "position sigma", xlabel: "time since the first estimate (s)", ylabel: "sigma (mm)", height: 260 })));
 }

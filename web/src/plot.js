@@ -83,11 +83,13 @@ export function plot(series, { title = "", xlabel = "", ylabel = "", width = 520
       });
     }
   });
+  // The legend in the title row, right-aligned: it never hides a point.
   const named = series.filter((s) => s.label);
   named.forEach((s, i) => {
     const color = s.color ?? COLORS[series.indexOf(s) % COLORS.length];
-    el("rect", { x: m.l + w - 130, y: m.t + 6 + i * 14, width: 10, height: 10, fill: color }, svg);
-    el("text", { x: m.l + w - 116, y: m.t + 15 + i * 14, "font-size": 10 }, svg).textContent = s.label;
+    const x = m.l + w - (named.length - i) * 100;
+    el("rect", { x, y: 8, width: 10, height: 10, fill: color }, svg);
+    el("text", { x: x + 14, y: 17, "font-size": 10 }, svg).textContent = s.label;
   });
   return svg;
 }

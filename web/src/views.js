@@ -24,9 +24,11 @@ export function table(columns, rows, attrs = {}) {
 // Top view of the estimates (one circle per estimate, class "estimate"), the truth and the antennas.
 export function trackPlot(track, truth, scene, title = "track (top view)") {
   const series = [];
-  if (truth) Object.entries(truth.tags).forEach(([epc, t]) => series.push({ x: t.x, y: t.y, line: true, color: "#aaa", width: 2, cls: "truth" }));
   Object.entries(track.tags).forEach(([epc, t], i) =>
     series.push({ x: t.x, y: t.y, points: true, color: COLORS[i % COLORS.length], cls: "estimate", label: epc.slice(-8) }));
+  // The truth over the estimates, thin and dark: where they agree it still shows.
+  if (truth) Object.values(truth.tags).forEach((t, i) =>
+    series.push({ x: t.x, y: t.y, line: true, color: "#333", width: 1, cls: "truth", label: i === 0 ? "truth" : undefined }));
   if (scene) series.push(antennaSeries(scene));
   return plot(series, { title, xlabel: "x (m)", ylabel: "y (m)", equal: true });
 }

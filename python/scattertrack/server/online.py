@@ -1,16 +1,22 @@
 """The online tab: a live source tracked as it reads, drawn as estimates come.
 
-The source is the simulator replayed in real time (``speed`` times the
-recorded timing): each read is handed to a causal tracker
-(``scattertrack.track.make(...).step``) when its time comes, as
-``scattertrack live`` does with an LLRP reader's reports. The page polls
-``GET /api/online/{job}?since=N`` for the estimates after the N it has.
+Two sources: the simulator replayed in real time (``speed`` times the
+recorded timing: each read is handed to a causal tracker,
+``scattertrack.track.make(...).step``, when its time comes), or an LLRP
+reader (a real one or ``scattertrack emulate-reader``) through
+:class:`scattertrack.readers.live.LiveSession`, exactly as
+``scattertrack live`` runs it, journal and track files included. The page
+polls ``GET /api/online/{job}?since=N`` for the estimates after the N it has.
 """
 
 from __future__ import annotations
 
+import asyncio
 import math
+import tempfile
 import time
+from pathlib import Path
+from typing import Literal
 
 import numpy as np
 from fastapi import APIRouter
@@ -22,7 +28,14 @@ from scattertrack.server.simulation import load
 
 
 class OnlineRequest(BaseModel):
+    source: Literal["replay", "llrp"] = "replay"
     scenario: str = "glac-3d-arm"
+    scene_path: str | None = None
+    """llrp: the scene.toml whose antenna ids are the reader's ports."""
+    llrp: str | None = None
+    """llrp: HOST[:PORT] of the reader."""
+    out_dir: str | None = None
+    """llrp: where the journal (reads.csv) and track.csv go (default: a new temporary folder)."""
     method: str = "glac"
     speed: float = Field(1.0, gt=0, le=1000)
     duration_s: float | None = Field(None, gt=0, le=3600)
@@ -87,11 +100,77 @@ def replay(job: Job, request: OnlineRequest) -> dict:
     return {"reads": state.reads, "estimates": len(state.points)}
 
 
+class Recording:
+    """The tracker handed to a LiveSession: tracks, and tells the page's state each read and estimate."""
+
+    def __init__(self, tracker, state: Replay, job: Job):
+        self.tracker, self.state, self.job = tracker, state, job
+
+    def step(self, time_s, epc, antenna, frequency_hz, phase_rad):
+        estimate = self.tracker.step(time_s, epc, antenna, frequency_hz, phase_rad)
+        with self.job.lock:
+            self.state.read(epc)
+            if estimate is not None:
+                self.state.estimate(epc, estimate)
+        return estimate
+
+    def __getattr__(self, name):  # stats() and the rest: the tracker's own
+        return getattr(self.tracker, name)
+
+
+def from_reader(job: Job, request: OnlineRequest) -> dict:
+    """``scattertrack live`` inside the server: until ``duration_s`` or the user's stop."""
+    from scattertrack import io
+    from scattertrack import track as tracking
+    from scattertrack.live_command import host_and_port
+    from scattertrack.readers.live import LiveSession
+
+    if not request.scene_path or not request.llrp:
+        raise ValueError("an LLRP source needs the scene (a path on the server) and the reader's HOST[:PORT]")
+    try:
+        host, port = host_and_port(request.llrp.strip())
+    except Exception as error:  # argparse's error type: the message is what matters
+        raise ValueError(str(error)) from None
+    scene = io.read_scene(Path(request.scene_path).expanduser())
+    out = Path(request.out_dir).expanduser() if request.out_dir else Path(tempfile.mkdtemp(prefix="scattertrack-live-"))
+    out.mkdir(parents=True, exist_ok=True)
+    state = Replay(scene)
+    job.context = state
+    tracker = Recording(tracking.make(request.method, scene), state, job)
+    session = LiveSession(scene, host, port, out / "reads.csv", out / "track.csv", tracker,
+                          duration_s=request.duration_s)
+
+    async def run():
+        stop = asyncio.Event()
+        watcher = asyncio.create_task(watch(stop))
+        try:
+            return await session.run(stop)
+        finally:
+            watcher.cancel()
+
+    async def watch(stop: asyncio.Event):
+        # The user's stop (a thread-safe flag) becomes the session's stop event.
+        while not job.stopping:
+            elapsed = time.monotonic() - state.started
+            job.message = f"reading from {host}:{port}"
+            if request.duration_s:
+                job.progress = min(elapsed / request.duration_s, 1.0)
+            await asyncio.sleep(0.2)
+        stop.set()
+
+    job.message = f"connecting to {host}:{port}"
+    summary = asyncio.run(run())
+    return {"reads": summary.reads, "estimates": summary.estimates, "journal": str(out / "reads.csv"),
+            "track": str(out / "track.csv"), "declined": dict(summary.declined)}
+
+
 def router(jobs: Jobs) -> APIRouter:
     api = APIRouter(prefix="/api/online")
 
     @api.post("/start")
     def start(request: OnlineRequest) -> dict:
+        if request.source == "llrp":
+            return {"job": jobs.start("online", lambda job: from_reader(job, request)).id}
         load(request.scenario)  # an unknown scenario fails in the request, not later in the job
         return {"job": jobs.start("online", lambda job: replay(job, request)).id}
 

@@ -99,3 +99,40 @@ def test_online_replay_draws_every_estimate(client):
     assert state["total"] == len(state["points"]) > 0
     assert all(tag["reads"] > 0 and tag["reads_per_s"] > 0 for tag in state["tags"])
     assert client.get(f"/api/online/{job}", params={"since": state["total"]}).json()["points"] == []
+
+
+def test_online_from_an_llrp_reader(client, tmp_path):
+    """The reader emulator on loopback, read through the server's LiveSession."""
+    import socket
+    import subprocess
+    import sys
+
+    from scattertrack import sim
+
+    scenario = "glac-3d-arm"
+    out = sim.write_simulation(sim.simulate(sim.load_scenario(scenario)), tmp_path / "session")
+    with socket.socket() as free:
+        free.bind(("127.0.0.1", 0))
+        port = free.getsockname()[1]
+    emulator = subprocess.Popen([sys.executable, "-m", "scattertrack", "emulate-reader", "--scenario", scenario,
+                                 "--port", str(port), "--speed", "4"], stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        job = client.post("/api/online/start", json={
+            "source": "llrp", "scene_path": str(out / "scene.toml"), "llrp": f"127.0.0.1:{port}",
+            "duration_s": 8, "out_dir": str(tmp_path / "live")}).json()["job"]
+        # The session reconnects until the emulator listens; stop it once estimates came.
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline:
+            state = client.get(f"/api/online/{job}").json()
+            if state.get("total", 0) > 10 or state["state"] != "running":
+                break
+            time.sleep(0.2)
+        client.post(f"/api/jobs/{job}/stop")
+        result = finished(client, job)["result"]
+    finally:
+        emulator.terminate()
+        emulator.wait(timeout=20)
+    state = client.get(f"/api/online/{job}").json()
+    assert state["total"] == len(state["points"]) == result["estimates"] > 10
+    assert (tmp_path / "live" / "reads.csv").stat().st_size > 0
+    assert state["tags"][0]["reads"] == result["reads"]

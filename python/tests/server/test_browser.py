@@ -124,6 +124,7 @@ def test_offline_draws_every_estimate_of_the_track(server, page, tmp_path):
     assert page.locator("circle.estimate").count() == expected  # one drawn point per track row
     assert "converged:" in page.locator("[data-testid=report]").inner_text()
     assert page.locator("path.antenna").count() == len(scene.antennas)
+    assert page.locator("path.truth").count() == 1  # one tag's true trajectory
     screenshot(page, "offline", tmp_path)
 
 
