@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import html
 import os
+import re
+import urllib.parse
 from pathlib import Path
 
-from fastapi import FastAPI
+from fastapi import FastAPI, Request
 from fastapi.responses import HTMLResponse
 from fastapi.staticfiles import StaticFiles
 
@@ -35,6 +38,15 @@ The API under <code>/api/</code> works without it.</p>
 """
 
 
+ASSET = re.compile(r'((?:src|href)=")(\./assets/[^"?]+)"')
+
+
+def with_token(page: str, token: str) -> str:
+    """``index.html`` with ``?token=T`` on each of its assets."""
+    query = html.escape(urllib.parse.urlencode({"token": token}))
+    return ASSET.sub(lambda m: f'{m.group(1)}{m.group(2)}?{query}"', page)
+
+
 def create_app(token: str | None = None, web_dir: Path | None = None) -> FastAPI:
     """The dashboard; with ``token`` every request must carry it (:mod:`.auth`)."""
     app = FastAPI(title="scattertrack dashboard", docs_url=None, redoc_url=None, openapi_url=None)
@@ -58,6 +70,14 @@ def create_app(token: str | None = None, web_dir: Path | None = None) -> FastAPI
 
     web_dir = Path(web_dir) if web_dir is not None else default_web_dir()
     if (web_dir / "index.html").is_file():
+        if token is not None:
+            # The browser fetches the page's script and style without the
+            # token it was opened with (?token=T): the page names them with it.
+            @app.get("/", include_in_schema=False)
+            @app.get("/index.html", include_in_schema=False)
+            def index(request: Request) -> HTMLResponse:
+                return HTMLResponse(with_token((web_dir / "index.html").read_text(), token))
+
         app.mount("/", StaticFiles(directory=web_dir, html=True), name="web")
     else:
         # Checked at start: a build made later needs a restart, and the page says what to run.

@@ -38,6 +38,18 @@ def test_missing_build_is_a_clear_page(tmp_path):
         assert client.get("/api/health").json()["ok"]
 
 
+def test_with_a_token_the_page_names_its_assets_with_it(tmp_path):
+    (tmp_path / "index.html").write_text('<script type="module" src="./assets/index-1.js"></script>'
+                                         '<link rel="stylesheet" href="./assets/index-2.css">')
+    (tmp_path / "assets").mkdir()
+    (tmp_path / "assets" / "index-1.js").write_text("1")
+    with TestClient(create_app(token="a&b", web_dir=tmp_path)) as client:
+        page = client.get("/?token=a%26b").text
+        assert 'src="./assets/index-1.js?token=a%26b"' in page and 'index-2.css?token=a%26b"' in page
+        assert client.get("/assets/index-1.js?token=a%26b").status_code == 200
+        assert client.get("/assets/index-1.js").status_code == 401
+
+
 def test_methods_and_scenarios(client):
     names = [m["name"] for m in client.get("/api/methods").json()]
     assert "glac" in names and "turbotrack" not in names

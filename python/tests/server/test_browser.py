@@ -172,3 +172,15 @@ def test_online_draws_estimates_as_they_come(server, page, tmp_path):
     assert int(cells[1]) > 0 and float(cells[2]) > 0  # reads, reads/s
     assert cells[4] != "-"  # sigma
     screenshot(page, "online", tmp_path)
+
+
+def test_with_a_token_the_page_opened_with_it_works(serve, browser, tmp_path):
+    token = "br0wser-t0ken"
+    with serve("--token", token, token=token) as url:
+        page = browser.new_page()
+        page.set_default_timeout(TIMEOUT_MS)
+        assert page.goto(f"{url}/#config").status == 401
+        page.goto(f"{url}/?token={token}#config")  # assets and API requests carry it too
+        page.locator("[data-testid=config-status]").wait_for()
+        assert int(page.locator("[data-testid=config-status]").get_attribute("data-warnings")) >= 1
+        page.close()
