@@ -20,7 +20,7 @@ export RUSTFLAGS ?= -C target-cpu=$(RUST_TARGET_CPU)
 # One shared set-up: a virtualenv with pinned dependencies, the Rust
 # extension built in release mode and the package installed (editable), so
 # that afterwards the CLI is .venv/bin/scattertrack.
-setup: $(VENV)/.deps-installed
+setup: $(VENV)/.deps-installed web/dist/index.html
 	@echo "setup: building the Rust extension (release) into .venv"
 	VIRTUAL_ENV=$(VENV) PATH=$(VENV)/bin:$$PATH $(VENV)/bin/maturin develop --release -m python/Cargo.toml -q
 	@test -x $(VENV)/bin/scattertrack
@@ -31,6 +31,16 @@ $(VENV)/.deps-installed: requirements-dev.txt
 	$(PY) -m pip install -q --upgrade pip
 	$(PY) -m pip install -q -r requirements-dev.txt
 	touch $@
+
+# The dashboard's front end (docs/dashboard.md): npm installs the locked
+# packages, Vite builds web/dist, which `scattertrack dashboard` serves.
+# Rebuilt only when its sources or the lockfile change; never committed.
+WEB_SOURCES := web/index.html web/vite.config.js web/package.json $(wildcard web/src/*)
+web/node_modules/.package-lock.json: web/package-lock.json
+	cd web && npm ci --no-audit --no-fund --loglevel=error
+
+web/dist/index.html: web/node_modules/.package-lock.json $(WEB_SOURCES)
+	cd web && npm run --silent build
 
 demo: setup
 	$(VENV)/bin/scattertrack demo --out out/demo
@@ -72,4 +82,4 @@ bench: setup
 	$(PY) bench/calibration.py
 
 clean:
-	rm -rf target out $(VENV) python/scattertrack/*.so
+	rm -rf target out $(VENV) python/scattertrack/*.so web/dist web/node_modules

@@ -15,6 +15,7 @@ Subcommands::
     scattertrack emulate-reader --scenario NAME [--port P] [--speed X] [--drop-after S]
     scattertrack calibrate --scene S --reads R --reference EPC=x,y,z [...] [--truth T] --out C
     scattertrack locate --scene S --reads R --out positions.csv
+    scattertrack dashboard [--host 127.0.0.1] [--port 8050] [--token T]
 
 Bad input never ends in a traceback: a malformed file, an unknown method or
 parameter, or a missing file prints ``scattertrack: error: <message>`` on
@@ -38,6 +39,7 @@ import numpy as np
 
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
 from scattertrack import calibrate_command, live_command, locate_command, outputs_command
+from scattertrack.server import command as dashboard_command
 
 DEMO_SCENARIO = "glac-3d-arm"
 """The scenario ``scattertrack demo`` (and so ``make demo``) runs by default."""
@@ -972,6 +974,7 @@ def build_parser() -> argparse.ArgumentParser:
     live_command.add_parsers(commands)
     calibrate_command.add_parser(commands)
     locate_command.add_parser(commands)
+    dashboard_command.add_parser(commands)
 
     demo = commands.add_parser(
         "demo",
