@@ -6,42 +6,13 @@ import pytest
 
 from scattertrack.cli import main
 
-HELPER_SCENE = """\
-name = "helper"
-dimensions = 3
+from scene_texts import helper_scene
 
-[reader]
-kind = "sdr-helper"
-
-[[antennas]]
-id = 0
-position = [0.4, 0.4, 0.0]
-role = "tx"
-
-[[antennas]]
-id = 1
-position = [0.0, 0.4, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 2
-position = [0.8, 0.4, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 3
-position = [0.4, 0.0, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 4
-position = [0.4, 0.8, 0.0]
-role = "rx"
-
+HELPER_SCENE = helper_scene(4, """\
 [region]
 min = [-1.0, -1.0, 0.05]
 max = [2.0, 2.0, 2.0]
-"""
+""")
 
 DRONE_SCENE = """\
 name = "drone"

@@ -7,35 +7,11 @@ import pytest
 from scattertrack.io import FormatError, Frames, make_frames, read_frames, read_scene, read_truth, write_frames
 from scattertrack.io.types import SPEED_OF_LIGHT
 
+from scene_texts import helper_scene
+
 HEADER = "time_s,epc,tx,rx,frequency_hz,h_re,h_im"
 
-HELPER_SCENE = """\
-name = "helper"
-dimensions = 3
-
-[reader]
-kind = "sdr-helper"
-
-[[antennas]]
-id = 0
-position = [0.4, 0.4, 0.0]
-role = "tx"
-
-[[antennas]]
-id = 1
-position = [0.0, 0.4, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 2
-position = [0.8, 0.4, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 3
-position = [0.4, 0.0, 0.0]
-role = "rx"
-"""
+HELPER_SCENE = helper_scene(3)
 
 
 @pytest.fixture

@@ -13,33 +13,9 @@ import pytest
 
 from scattertrack.io import FormatError, read_features, read_frames, read_imu, read_scene
 
-HELPER_SCENE = """\
-name = "helper"
-dimensions = 3
+from scene_texts import helper_scene
 
-[reader]
-kind = "sdr-helper"
-
-[[antennas]]
-id = 0
-position = [0.4, 0.4, 0.0]
-role = "tx"
-
-[[antennas]]
-id = 1
-position = [0.0, 0.4, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 2
-position = [0.8, 0.4, 0.0]
-role = "rx"
-
-[[antennas]]
-id = 3
-position = [0.4, 0.0, 0.0]
-role = "rx"
-
+HELPER_SCENE = helper_scene(3, """\
 [helper]
 bandwidth_hz = 100e6
 n_subcarriers = 20
@@ -47,7 +23,7 @@ n_subcarriers = 20
 [region]
 min = [-1.0, -1.0, 0.05]
 max = [2.0, 2.0, 2.0]
-"""
+""")
 
 DRONE_SCENE = """\
 name = "drone"
