@@ -36,10 +36,9 @@ import numpy as np
 from scattertrack.calibrate.hop_table import assign_carriers
 from scattertrack.calibrate.path_loss import PathLoss, fit_path_loss
 from scattertrack.calibrate.phase import chance_coherence, fit_offsets, looks_mod_pi, round_trip_phase
+from scattertrack.io.hop_table import US_PLAN_HZ
 from scattertrack.io.types import ChannelOffset, Reads, Scene, Truth
 
-US_PLAN_HZ = 902.75e6 + 0.5e6 * np.arange(50)
-"""The US (FCC) channel plan: 50 carriers of 500 kHz, 902.75-927.25 MHz."""
 COHERENCE_USABLE = 0.8
 """Below this phase coherence (or below twice chance), phase is not usable for ranging here."""
 ROUNDS = 3

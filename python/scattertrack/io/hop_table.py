@@ -38,6 +38,11 @@ def us_channel_plan_hz(channel_index: np.ndarray) -> np.ndarray:
     return np.where(inside, US_FIRST_CHANNEL_HZ + US_CHANNEL_SPACING_HZ * (index - 1), np.nan)
 
 
+US_PLAN_HZ = us_channel_plan_hz(np.arange(1, US_CHANNELS + 1))
+"""The US plan's 50 carriers in frequency order, hertz: the one home of the plan
+(the simulator, the reader emulator and calibration take it from here)."""
+
+
 def hop_table_hz(channel_index: np.ndarray, hop_table: dict[int, float]) -> np.ndarray:
     """Carrier of each index in ``hop_table`` (index -> Hz), hertz; nan where the table has no entry."""
     index = np.asarray(channel_index, dtype=np.int64)

@@ -37,11 +37,12 @@ import numpy as np
 from llrpkit.emulator import LLRPEmulator
 from llrpkit.protocol import BitStr, impinj, messages, params
 
+from scattertrack.io.hop_table import US_PLAN_HZ
 from scattertrack.io.types import Reads
 from scattertrack.readers import impinj as encoding
 
-US_CHANNELS_KHZ = [902_750 + 500 * i for i in range(50)]
-"""The US band plan (FCC part 15.247): 50 channels of 500 kHz, in frequency order."""
+US_CHANNELS_KHZ = [round(f / 1e3) for f in US_PLAN_HZ]
+"""The US band plan (FCC part 15.247): 50 channels of 500 kHz, in frequency order, kHz."""
 
 BATCH = 256
 """At most this many tag reports per RO_ACCESS_REPORT message (readers batch too)."""

@@ -67,11 +67,12 @@ from __future__ import annotations
 
 import numpy as np
 
+from scattertrack.io.hop_table import US_PLAN_HZ
 from scattertrack.io.types import SPEED_OF_LIGHT, Reads
 from scattertrack.sim.trajectory import positions_velocities
 
-US_CHANNELS_HZ = 902.75e6 + 0.5e6 * np.arange(50)
-"""The 50 FCC UHF RFID channels, Hz: 902.75 + 0.5 k MHz, k = 0..49."""
+US_CHANNELS_HZ = US_PLAN_HZ
+"""The 50 FCC UHF RFID channels, Hz: 902.75 + 0.5 k MHz, k = 0..49 (io.hop_table's plan)."""
 
 PHASE_UNIT_RAD = 2.0 * np.pi / 4096.0
 """One Impinj phase unit (12 bits over 2 pi), radians."""
