@@ -86,15 +86,6 @@ def _region_box(scene: Scene, anchors: np.ndarray) -> tuple[np.ndarray, np.ndarr
     return low, high
 
 
-def _grid(low: np.ndarray, high: np.ndarray, step: float, limit: int = 400_000) -> np.ndarray:
-    """Points on a regular grid over the box (the step grows to keep at most ``limit`` points)."""
-    while True:
-        axes = [np.arange(lo, hi + 0.5 * step, step) if hi > lo else np.array([lo]) for lo, hi in zip(low, high)]
-        if np.prod([len(a) for a in axes]) <= limit:
-            return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-        step *= 1.25
-
-
 def _independent_reads(reads_time: np.ndarray, antenna: np.ndarray, wavenumber: np.ndarray) -> int:
     """Reads that carry independent errors: per antenna and channel, one per CORRELATION_S."""
     bins = np.floor(reads_time / CORRELATION_S).astype(np.int64)

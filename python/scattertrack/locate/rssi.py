@@ -23,21 +23,28 @@ def models(calibration: dict) -> dict:
     return found
 
 
-def log_likelihood(path_loss: dict, antenna: np.ndarray, rssi_dbm: np.ndarray, anchors: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """Σ_k log N(RSSI_k; P₀ − 10 n log₁₀ d_k(p), σ²) at each of ``points`` (reads without RSSI or model skipped)."""
+def _log_likelihood(path_loss: dict, antenna: np.ndarray, rssi_dbm: np.ndarray, anchors: np.ndarray, points: np.ndarray, per_read: bool) -> np.ndarray:
+    """Σ over antennas of −½ w (x̄ − μ(p))² / σ² at each of ``points``, with x̄ the
+    antenna's mean RSSI, μ(p) its path-loss prediction and w its number of
+    reads (``per_read``) or 1 (its reads count as one: see :func:`locate`).
+    Reads without RSSI or without a model are skipped.
+
+    Σ (x − μ)² = Σ (x − x̄)² + N (x̄ − μ)²: the first term does not depend on p."""
     keep = np.isfinite(rssi_dbm) & np.isin(antenna, list(path_loss))
     total = np.zeros(len(points))
-    if not keep.any():
-        return total
     for a in np.unique(antenna[keep]):
         rows = keep & (antenna == a)
         p0, n, sigma = path_loss[int(a)]
         distance = np.maximum(np.linalg.norm(points - anchors[rows][0][None, :], axis=1), 0.05)
-        predicted = p0 - 10.0 * n * np.log10(distance)
-        values = rssi_dbm[rows]
-        # Σ (x − μ)² = Σ (x − x̄)² + N (x̄ − μ)²: the first term does not depend on p.
-        total += -0.5 * len(values) * (values.mean() - predicted) ** 2 / sigma**2
+        weight = np.count_nonzero(rows) if per_read else 1.0
+        total += -0.5 * weight * (rssi_dbm[rows].mean() - (p0 - 10.0 * n * np.log10(distance))) ** 2 / sigma**2
     return total
+
+
+def log_likelihood(path_loss: dict, antenna: np.ndarray, rssi_dbm: np.ndarray, anchors: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Σ_k log N(RSSI_k; P₀ − 10 n log₁₀ d_k(p), σ²) at each of ``points``, up to a constant
+    (reads without RSSI or model skipped)."""
+    return _log_likelihood(path_loss, antenna, rssi_dbm, anchors, points, per_read=True)
 
 
 def locate(path_loss: dict, antenna: np.ndarray, rssi_dbm: np.ndarray, anchors: np.ndarray, low: np.ndarray, high: np.ndarray, dimensions: int):
@@ -51,13 +58,7 @@ def locate(path_loss: dict, antenna: np.ndarray, rssi_dbm: np.ndarray, anchors: 
 
     axes = [np.arange(lo, hi + 0.5 * GRID_STEP_M, GRID_STEP_M) if hi > lo else np.array([lo]) for lo, hi in zip(low, high)]
     points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
-    keep = np.isfinite(rssi_dbm) & np.isin(antenna, list(path_loss))
-    loglik = np.zeros(len(points))
-    for a in np.unique(antenna[keep]):
-        rows = keep & (antenna == a)
-        p0, n, sigma = path_loss[int(a)]
-        distance = np.maximum(np.linalg.norm(points - anchors[rows][0][None, :], axis=1), 0.05)
-        loglik += -0.5 * (rssi_dbm[rows].mean() - (p0 - 10.0 * n * np.log10(distance))) ** 2 / sigma**2
+    loglik = _log_likelihood(path_loss, antenna, rssi_dbm, anchors, points, per_read=False)
     weight = np.exp(loglik - loglik.max())
     weight /= weight.sum()
     mean = weight @ points
