@@ -453,44 +453,17 @@ def command_track(args) -> int:
     say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
     warn_about_geometry(scene, reads)
     ros2_out = bool(args.mcap or args.ros2_bag)
-    transform = ros2_transform(args)
+    transform = outputs_command.ros2_transform(args)
     result, wall_s = run_tracker(args.method, scene, reads, params, show_progress(args), covariance=ros2_out)
     out = Path(args.out)
     out.parent.mkdir(parents=True, exist_ok=True)
     io.write_track(out, result)
     say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
-    write_ros2_outputs(args, result, scene, transform)
+    outputs_command.write_ros2_files(args, result, scene, transform)
     if not len(result):
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
     print_tracker_summary(result, reads, wall_s)
     return 0
-
-
-def ros2_transform(args):
-    """The ``--transform`` of ``track`` (identity without one). A bad one, or a
-    ``--ros2-bag`` directory that exists, fails before tracking."""
-    from scattertrack.io import ros2
-
-    if getattr(args, "ros2_bag", None) and Path(args.ros2_bag).exists():
-        raise UsageError(f"--ros2-bag {args.ros2_bag}: already exists (a ROS 2 bag is a new directory)")
-    if getattr(args, "transform", None) is None:
-        return ros2.IDENTITY
-    try:
-        return ros2.Transform.parse(args.transform)
-    except ValueError as error:
-        raise UsageError(f"--transform: {error}") from None
-
-
-def write_ros2_outputs(args, result, scene, transform) -> None:
-    """``--mcap`` and ``--ros2-bag``: the track as ROS 2 messages, one pose and one odometry per row."""
-    from scattertrack.io import ros2
-
-    if args.mcap:
-        counts = ros2.write_mcap(args.mcap, result, scene, args.frame_id, transform)
-        say(f"  wrote {sum(counts.values())} ROS 2 messages on {len(counts)} topics to {args.mcap}")
-    if args.ros2_bag:
-        counts = ros2.write_ros2_bag(args.ros2_bag, result, scene, args.frame_id, transform)
-        say(f"  wrote {sum(counts.values())} ROS 2 messages on {len(counts)} topics to the bag {args.ros2_bag}")
 
 
 def warn_about_geometry(scene, reads) -> None:
@@ -895,10 +868,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME=VALUE",
         help="tracker parameter, repeatable (see 'scattertrack methods --params METHOD' or docs/parameters.md)",
     )
-    track.add_argument("--mcap", help="also write the track as MCAP with ROS 2 messages (pose and odometry per tag, antennas; Foxglove, ros2 bag)")
-    track.add_argument("--ros2-bag", help="also write the track as a ROS 2 bag directory (must not exist), without a ROS install")
-    track.add_argument("--frame-id", default="scattertrack", help="frame_id of the ROS 2 messages (default scattertrack: the scene's frame)")
-    track.add_argument("--transform", help="scene-to-robot transform x,y,z,qw,qx,qy,qz applied to the ROS 2 messages")
+    outputs_command.add_output_options(track, files=True, live=False)
     track.add_argument("--no-progress", action="store_true", help="no progress bar")
     track.set_defaults(run=command_track)
 

@@ -11,6 +11,7 @@ module only parses the options, starts them and says where they went.
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from scattertrack.arguments import ascii_int, plural, say
 
@@ -38,13 +39,17 @@ def foxglove_address(text: str) -> tuple[str, int]:
     return host, port
 
 
-def add_output_options(parser, files: bool) -> None:
-    """The ROS 2 and robot outputs of ``live`` (``files``) and ``stream``."""
+def add_output_options(parser, files: bool, live: bool = True) -> None:
+    """The ROS 2 and robot outputs of ``live`` (``files``, ``live``), ``stream``
+    (``live``) and ``track`` (``files`` only: written after the run)."""
+    when = " as it goes" if live else ""
     if files:
-        parser.add_argument("--mcap", help="also write the track as MCAP with ROS 2 messages as it goes (pose and odometry per row, antennas)")
-        parser.add_argument("--ros2-bag", help="also write the track as a ROS 2 bag directory (must not exist) as it goes")
+        parser.add_argument("--mcap", help=f"also write the track as MCAP with ROS 2 messages{when} (pose and odometry per row, antennas)")
+        parser.add_argument("--ros2-bag", help=f"also write the track as a ROS 2 bag directory (must not exist){when}, without a ROS install")
     parser.add_argument("--frame-id", default="scattertrack", help="frame_id of the ROS 2 messages (default scattertrack: the scene's frame)")
     parser.add_argument("--transform", help="scene-to-robot transform x,y,z,qw,qx,qy,qz applied to the ROS 2 messages")
+    if not live:
+        return
     parser.add_argument("--foxglove", type=foxglove_address, metavar="[HOST:]PORT", help="serve the ROS 2 messages live on a Foxglove WebSocket (host 127.0.0.1 unless given)")
     parser.add_argument("--mqtt-out", type=mqtt_address, metavar="HOST[:PORT]", help="publish every estimate as JSON to this MQTT broker (scattertrack/tags/<EPC>/estimate)")
 
@@ -52,7 +57,6 @@ def add_output_options(parser, files: bool) -> None:
 def output_options(args, parquet: str | None = None):
     """:class:`~scattertrack.readers.outputs.OutputOptions` from the options above.
     A bad --transform or an existing --ros2-bag fails before anything starts."""
-    from scattertrack.cli import ros2_transform
     from scattertrack.readers.outputs import OutputOptions
 
     return OutputOptions(
@@ -64,6 +68,33 @@ def output_options(args, parquet: str | None = None):
         frame_id=args.frame_id,
         transform=ros2_transform(args),
     )
+
+
+def ros2_transform(args):
+    """The ``--transform`` (identity without one). A bad one, or a
+    ``--ros2-bag`` directory that exists, fails (ValueError) before anything runs."""
+    from scattertrack.io import ros2
+
+    if getattr(args, "ros2_bag", None) and Path(args.ros2_bag).exists():
+        raise ValueError(f"--ros2-bag {args.ros2_bag}: already exists (a ROS 2 bag is a new directory)")
+    if getattr(args, "transform", None) is None:
+        return ros2.IDENTITY
+    try:
+        return ros2.Transform.parse(args.transform)
+    except ValueError as error:
+        raise ValueError(f"--transform: {error}") from None
+
+
+def write_ros2_files(args, result, scene, transform) -> None:
+    """``track``'s --mcap and --ros2-bag: the finished track as ROS 2 messages, one pose and one odometry per row."""
+    from scattertrack.io import ros2
+
+    if args.mcap:
+        counts = ros2.write_mcap(args.mcap, result, scene, args.frame_id, transform)
+        say(f"  wrote {sum(counts.values())} ROS 2 messages on {len(counts)} topics to {args.mcap}")
+    if args.ros2_bag:
+        counts = ros2.write_ros2_bag(args.ros2_bag, result, scene, args.frame_id, transform)
+        say(f"  wrote {sum(counts.values())} ROS 2 messages on {len(counts)} topics to the bag {args.ros2_bag}")
 
 
 def start_outputs(args, scene):
