@@ -17,10 +17,12 @@ from __future__ import annotations
 import math
 import os
 
+import numpy as np
+
 from scattertrack.io.csvutil import quote_text
 from scattertrack.io.reads import OPTIONAL as READ_OPTIONAL
 from scattertrack.io.reads import REQUIRED as READ_REQUIRED
-from scattertrack.io.reads import epc_problem
+from scattertrack.io.reads import epc_problem, phase_cells
 from scattertrack.io.track import REQUIRED as TRACK_REQUIRED
 from scattertrack.io.track import SIGMA
 
@@ -32,14 +34,6 @@ TRACK_HEADER = [*TRACK_REQUIRED, *SIGMA]
 def _cell(value: float, decimals: int) -> str:
     """A float with ``decimals`` places, ``""`` for nan."""
     return "" if math.isnan(value) else f"{value:.{decimals}f}"
-
-
-def _phase_cell(phase: float) -> str:
-    """6 decimals, never rounded up onto 2π (see ``io.reads._phase_cells``)."""
-    cell = f"{phase:.6f}"
-    if float(cell) >= 2.0 * math.pi:
-        cell = "%.6f" % (math.floor(phase * 1e6) / 1e6)
-    return cell
 
 
 class _Appender:
@@ -105,7 +99,8 @@ class ReadsAppender(_Appender):
             raise ValueError(f"{self.path}: cannot write {problem}")
         if not (math.isfinite(time_s) and math.isfinite(frequency_hz) and math.isfinite(phase_rad)):
             raise ValueError(f"{self.path}: cannot write a read with a non-finite time, frequency or phase")
-        time_cell, phase_cell = f"{time_s:.6f}", _phase_cell(phase_rad)
+        # As write_reads writes it: never rounded up onto π or 2π.
+        time_cell, phase_cell = f"{time_s:.6f}", phase_cells(np.array([phase_rad]))[0]
         self._write(
             [
                 time_cell,

@@ -231,7 +231,7 @@ def write_reads(path, reads: Reads) -> None:
         text_column(reads.epc),
         repeated_cells(np.asarray(reads.antenna, dtype=np.int64), str),
         repeated_cells(np.asarray(reads.frequency_hz, dtype=np.float64), repr),
-        _phase_cells(reads.phase_rad),
+        phase_cells(reads.phase_rad),
     ]
     for name in OPTIONAL:
         values = np.asarray(getattr(reads, name), dtype=np.float64)
@@ -264,7 +264,7 @@ def _require_readable(path, reads: Reads) -> None:
         raise ValueError(f"{path}: cannot write {units.frequency_message(repr(value), value)}")
 
 
-def _phase_cells(phase_rad: np.ndarray) -> list[str]:
+def phase_cells(phase_rad: np.ndarray) -> list[str]:
     """Phases with 6 decimals, never rounded up onto the period.
 
     A phase just below pi or 2*pi would round up to a value at or above the
