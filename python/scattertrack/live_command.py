@@ -168,13 +168,18 @@ def command_live(args) -> int:
     return 0
 
 
-async def _run_until_interrupted(session):
+def _stop_event() -> asyncio.Event:
+    """An event that Ctrl-C (SIGINT) or SIGTERM sets, for a clean end with a summary."""
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
-    with contextlib.suppress(NotImplementedError, RuntimeError):
+    with contextlib.suppress(NotImplementedError, RuntimeError):  # no signals off the main thread
         loop.add_signal_handler(signal.SIGINT, stop.set)
         loop.add_signal_handler(signal.SIGTERM, stop.set)
-    return await session.run(stop)
+    return stop
+
+
+async def _run_until_interrupted(session):
+    return await session.run(_stop_event())
 
 
 def print_live_summary(summary, args) -> None:
@@ -208,11 +213,7 @@ def command_emulate_reader(args) -> int:
 
 
 async def _serve(emulator, simulation, args) -> int:
-    stop = asyncio.Event()
-    loop = asyncio.get_running_loop()
-    with contextlib.suppress(NotImplementedError, RuntimeError):
-        loop.add_signal_handler(signal.SIGINT, stop.set)
-        loop.add_signal_handler(signal.SIGTERM, stop.set)
+    stop = _stop_event()
     await emulator.start()
     say(f"emulate-reader: LLRP on {args.host}:{emulator.port}, {plural(len(simulation.reads), 'read')} of {plural(len(simulation.reads.epcs()), 'tag')} over {simulation.reads.time_s.max():.1f} s at {args.speed:g}x")
     say(f"emulate-reader: reader clock = simulated time + {emulator.epoch_us / 1e6:.6f} s (Unix epoch)")

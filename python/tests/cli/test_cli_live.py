@@ -11,14 +11,9 @@ from pathlib import Path
 
 import pytest
 
+from robots import free_port
 from scattertrack.cli import main
 from scattertrack.io import read_reads, read_scene, read_track
-
-
-def free_port() -> int:
-    with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
-        return probe.getsockname()[1]
 
 
 def run(capsys, *argv):

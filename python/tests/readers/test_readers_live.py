@@ -4,11 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import dataclasses
-import socket
 import time
 
 import numpy as np
 import pytest
+from robots import free_port
 
 from scattertrack import track
 from scattertrack.io import read_reads, read_track
@@ -83,9 +83,7 @@ def _channel_of(summary, frequency_hz):
 
 
 def test_duration_is_a_hard_stop_when_the_reader_never_answers(walls_simulation, tmp_path):
-    with socket.socket() as probe:  # a port nobody listens on
-        probe.bind(("127.0.0.1", 0))
-        port = probe.getsockname()[1]
+    port = free_port()  # a port nobody listens on
     start = time.monotonic()
     _, summary = _live(walls_simulation.scene, port, tmp_path, duration_s=0.8, backoff_s=(0.05, 0.2))
     assert time.monotonic() - start < 0.8 + 1.5
