@@ -21,12 +21,16 @@ from __future__ import annotations
 import argparse
 import copy
 import dataclasses
+import math
+import subprocess
 import sys
+import tempfile
 import time
+from pathlib import Path
 
 import numpy as np
 
-from scattertrack import track
+from scattertrack import io, track
 from scattertrack.calibrate import calibrate
 from scattertrack.eval import compare
 from scattertrack.locate import locate
@@ -71,9 +75,12 @@ def tracking_block(block: dict, seed: int) -> tuple[float, float]:
 
 def locate_block(count: int, duration_s: float, seed: int, hopping: bool = True) -> str:
     sim, truth = static_tags("glac-3d-walls", count, duration_s, seed, hopping)
-    start = time.perf_counter()
-    locations = locate(sim.scene, sim.reads)
-    wall_s = time.perf_counter() - start
+    # Throughput: the best of three runs (the machine's other load only slows a run down).
+    wall_s = math.inf
+    for _ in range(3):
+        start = time.perf_counter()
+        locations = locate(sim.scene, sim.reads)
+        wall_s = min(wall_s, time.perf_counter() - start)
     errors, beyond, candidates = [], [], []
     for location in locations:
         best = location.candidates[0]
@@ -84,6 +91,28 @@ def locate_block(count: int, duration_s: float, seed: int, hopping: bool = True)
     reads = len(sim.reads) / count
     return (f"  {count} tags, {'hopping' if hopping else 'one channel'}, {duration_s:g} s (~{reads:.0f} reads a tag): median {np.median(errors) * 1e3:.1f} mm, "
             f"p90 {np.percentile(errors, 90) * 1e3:.1f} mm, beyond 3 sigma {np.mean(beyond) * 100:.0f} %, candidates {np.mean(candidates):.1f} a tag, {count / wall_s:.0f} tags/s")
+
+
+def cli_block(copies: int, duration_s: float, seed: int) -> str:
+    """``scattertrack locate`` end to end (parse reads.csv, locate, write
+    positions.csv) on ``copies`` × 40 static tags: the 40-tag room's reads
+    repeated under new EPCs, so each tag has a full room's reads."""
+    sim, _ = static_tags("glac-3d-walls", 40, duration_s, seed, True)
+    epc = np.asarray(sim.reads.epc).astype(str)
+    parts = [dataclasses.replace(sim.reads, epc=np.char.add(epc, f"{c:04X}")) for c in range(copies)]
+    many = dataclasses.replace(sim.reads, **{f.name: np.concatenate([getattr(p, f.name) for p in parts]) for f in dataclasses.fields(sim.reads) if isinstance(getattr(sim.reads, f.name), np.ndarray)})
+    with tempfile.TemporaryDirectory() as folder:
+        scene, reads, out = Path(folder, "scene.toml"), Path(folder, "reads.csv"), Path(folder, "positions.csv")
+        io.write_scene(scene, sim.scene)
+        io.write_reads(reads, many)
+        command = [str(Path(sys.executable).with_name("scattertrack")), "locate", "--scene", str(scene), "--reads", str(reads), "--out", str(out)]
+        start = time.perf_counter()
+        printed = subprocess.run(command, check=True, capture_output=True, text=True).stdout + ""
+        wall_s = time.perf_counter() - start
+        rows = sum(1 for line in out.read_text().splitlines()[1:] if line.split(",")[7] == "1")
+        located = next((line.strip() for line in printed.splitlines() if line.startswith("located")), "")
+    tags = 40 * copies
+    return f"  scattertrack locate, end to end: {tags} tags, {len(many.epc)} reads, {wall_s:.2f} s with start-up and parsing: {tags / wall_s:.0f} tags/s, {rows} best rows ({located})"
 
 
 def main() -> int:
@@ -105,6 +134,7 @@ def main() -> int:
     print(locate_block(40, 120.0, 2))
     print(locate_block(40, 40.0, 2))
     print(locate_block(3, 30.0, 3, hopping=False))
+    print(cli_block(25, 40.0, 2))
     return 0
 
 

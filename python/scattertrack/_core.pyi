@@ -382,20 +382,32 @@ def twin_positions(
 
 # --- static-tag phase search (python/src/locate.rs) ---------------------------
 
-def locate_search(
+def locate_batch(
     z_re: np.ndarray,
     z_im: np.ndarray,
     k: np.ndarray,
+    time_s: np.ndarray,
     antenna: np.ndarray,
     anchors: np.ndarray,
-    low: tuple[float, float, float],
-    high: tuple[float, float, float],
+    bounds: np.ndarray,
+    low: np.ndarray,
+    high: np.ndarray,
     axes: int,
+    *,
+    temperature: float,
+    bias_sigma_rad: float,
+    correlation_s: float,
+    max_candidates: int,
+    min_weight: float,
+    hopping_spread_hz: float,
     max_points: int = 100_000,
-    max_seeds: int = 20,
-) -> tuple[np.ndarray, np.ndarray]:
-    """One tag's candidates in the box: positions (c, 3) m and coherences (c,), best first
-    (``antenna`` indexes ``anchors``; ``k`` = m s 4 pi f / c, rad/m)."""
+    threads: int = 0,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Every tag's phase candidates, tag t in rows ``bounds[t]:bounds[t+1]`` searched in
+    ``low[t]..high[t]`` (``antenna`` indexes ``anchors``; ``k`` = m s 4 pi f / c, rad/m), on
+    ``threads`` threads (0: every core). Returns positions (c, 3) m, covariances (c, 3, 3) m²,
+    weights (c,), coherences (c,) and candidate_bounds (tags + 1,): tag t's candidates, best
+    first, are rows ``candidate_bounds[t]:candidate_bounds[t+1]``."""
 
 def locate_hop_range(z_re: np.ndarray, z_im: np.ndarray, k: np.ndarray, max_range_m: float) -> tuple[float, float] | None:
     """One antenna's range from its reads over several channels: (range m, 1-sigma m), or None."""

@@ -1,11 +1,12 @@
 //! Bindings of the static-tag phase search (`scattertrack_core::locate`):
-//! one call per tag for its candidates, one per antenna for its hop range.
+//! one call for every tag's candidates (threaded in the core), one per
+//! antenna for its hop range.
 
 use nalgebra::{Complex, Vector3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
-use scattertrack_core::locate::{self, PhaseReads};
+use scattertrack_core::locate::{self, batch::TagBatch, Settings};
 
 use crate::value_error;
 
@@ -17,49 +18,86 @@ fn phasors(re: &PyReadonlyArray1<f64>, im: &PyReadonlyArray1<f64>) -> PyResult<V
     Ok(re.iter().zip(im).map(|(a, b)| Complex::new(*a, *b)).collect())
 }
 
-/// Candidates of one tag inside the box [low, high]: positions (c, 3) m and
-/// their coherence (c,), best first.
+fn points(array: &PyReadonlyArray2<f64>, what: &str) -> PyResult<Vec<Vector3<f64>>> {
+    let view = array.as_array();
+    if view.ncols() != 3 {
+        return Err(value_error(format!("{what} must be (n, 3)")));
+    }
+    Ok(view.rows().into_iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect())
+}
+
+/// Every tag's phase candidates (`scattertrack_core::locate::phase_candidates`),
+/// tags in rows `bounds[t]..bounds[t+1]`, each searched in its box
+/// `low[t]..high[t]`, on `threads` threads (0: every core). Returns flat
+/// arrays over all candidates — positions (c, 3) m, covariances (c, 3, 3)
+/// m², weights (c,), coherences (c,) — and `candidate_bounds` (tags + 1,):
+/// tag t's candidates, best first, are rows `candidate_bounds[t]..[t+1]`.
 #[pyfunction]
-#[pyo3(signature = (z_re, z_im, k, antenna, anchors, low, high, axes, max_points=100_000, max_seeds=20))]
+#[pyo3(signature = (z_re, z_im, k, time_s, antenna, anchors, bounds, low, high, axes, *, temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points=100_000, threads=0))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
-fn locate_search<'py>(
+fn locate_batch<'py>(
     py: Python<'py>,
     z_re: PyReadonlyArray1<f64>,
     z_im: PyReadonlyArray1<f64>,
     k: PyReadonlyArray1<f64>,
+    time_s: PyReadonlyArray1<f64>,
     antenna: PyReadonlyArray1<i64>,
     anchors: PyReadonlyArray2<f64>,
-    low: [f64; 3],
-    high: [f64; 3],
+    bounds: PyReadonlyArray1<i64>,
+    low: PyReadonlyArray2<f64>,
+    high: PyReadonlyArray2<f64>,
     axes: usize,
+    temperature: f64,
+    bias_sigma_rad: f64,
+    correlation_s: f64,
+    max_candidates: usize,
+    min_weight: f64,
+    hopping_spread_hz: f64,
     max_points: usize,
-    max_seeds: usize,
-) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray1<f64>>)> {
+    threads: usize,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, numpy::PyArray3<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<i64>>)> {
     let z = phasors(&z_re, &z_im)?;
-    let k = k.as_slice()?.to_vec();
-    let anchors_array = anchors.as_array();
-    if anchors_array.ncols() != 3 {
-        return Err(value_error("anchors must be (m, 3)"));
+    let (k, time_s) = (k.as_slice()?, time_s.as_slice()?);
+    let anchor_points = points(&anchors, "anchors")?;
+    let antenna = anchor_indices(antenna.as_slice()?, anchor_points.len())?;
+    if k.len() != z.len() || time_s.len() != z.len() || antenna.len() != z.len() {
+        return Err(value_error("z, k, time_s and antenna must have one entry per read"));
     }
-    let anchor_points: Vec<Vector3<f64>> = anchors_array.rows().into_iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect();
-    let antenna: Vec<usize> = antenna
-        .as_slice()?
-        .iter()
-        .map(|&a| usize::try_from(a).ok().filter(|&a| a < anchor_points.len()).ok_or_else(|| value_error(format!("antenna index {a} is not an anchor"))))
-        .collect::<PyResult<_>>()?;
-    if k.len() != z.len() || antenna.len() != z.len() {
-        return Err(value_error("z, k and antenna must have one entry per read"));
+    let bounds: Vec<usize> = bounds.as_slice()?.iter().map(|&b| usize::try_from(b).unwrap_or(usize::MAX)).collect();
+    if bounds.first().is_some_and(|&b| b != 0) || bounds.windows(2).any(|w| w[0] > w[1]) || bounds.last().is_some_and(|&b| b != z.len()) {
+        return Err(value_error("bounds must rise from 0 to the number of reads"));
+    }
+    let (low, high) = (points(&low, "low")?, points(&high, "high")?);
+    let tags = bounds.len().saturating_sub(1);
+    if low.len() != tags || high.len() != tags {
+        return Err(value_error("low and high need one row per tag"));
     }
     if !(axes == 2 || axes == 3) {
         return Err(value_error("axes must be 2 or 3"));
     }
+    let settings = Settings { temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points };
+    let threads = if threads == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { threads };
     let found = py.detach(|| {
-        let reads = PhaseReads { z: &z, k: &k, antenna: &antenna, anchors: &anchor_points };
-        locate::search(&reads, Vector3::from(low), Vector3::from(high), axes, max_points, max_seeds)
+        let batch = TagBatch { z: &z, k, time_s, antenna: &antenna, anchors: &anchor_points, bounds: &bounds, low: &low, high: &high };
+        locate::locate_batch(&batch, axes, &settings, threads)
     });
-    let positions = numpy::ndarray::Array2::from_shape_fn((found.len(), 3), |(i, j)| found[i].0[j]);
-    let coherence: Vec<f64> = found.iter().map(|c| c.1).collect();
-    Ok((positions.into_pyarray(py), coherence.into_pyarray(py)))
+    let all: Vec<&locate::Candidate> = found.iter().flatten().collect();
+    let positions = numpy::ndarray::Array2::from_shape_fn((all.len(), 3), |(i, j)| all[i].position[j]);
+    let covariances = numpy::ndarray::Array3::from_shape_fn((all.len(), 3, 3), |(i, r, c)| all[i].covariance[(r, c)]);
+    let weights: Vec<f64> = all.iter().map(|c| c.weight).collect();
+    let coherences: Vec<f64> = all.iter().map(|c| c.coherence).collect();
+    let mut candidate_bounds = vec![0i64];
+    for tag in &found {
+        candidate_bounds.push(candidate_bounds.last().copied().unwrap_or(0) + tag.len() as i64);
+    }
+    Ok((positions.into_pyarray(py), covariances.into_pyarray(py), weights.into_pyarray(py), coherences.into_pyarray(py), candidate_bounds.into_pyarray(py)))
+}
+
+fn anchor_indices(antenna: &[i64], anchors: usize) -> PyResult<Vec<usize>> {
+    antenna
+        .iter()
+        .map(|&a| usize::try_from(a).ok().filter(|&a| a < anchors).ok_or_else(|| value_error(format!("antenna index {a} is not an anchor"))))
+        .collect()
 }
 
 /// One antenna's (range m, 1-sigma m) from its reads over several channels, or None.
@@ -70,11 +108,11 @@ fn locate_hop_range(z_re: PyReadonlyArray1<f64>, z_im: PyReadonlyArray1<f64>, k:
     if k.len() != z.len() {
         return Err(value_error("z and k must have one entry per read"));
     }
-    Ok(locate::hop_range(&z, k, max_range_m))
+    Ok(locate::hop_range(&z, k, None, max_range_m))
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    m.add_function(wrap_pyfunction!(locate_search, m)?)?;
+    m.add_function(wrap_pyfunction!(locate_batch, m)?)?;
     m.add_function(wrap_pyfunction!(locate_hop_range, m)?)?;
     Ok(())
 }

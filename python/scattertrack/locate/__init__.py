@@ -31,15 +31,15 @@ the competing candidates.
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from scattertrack import _core
 from scattertrack.io.types import Reads, Scene
 from scattertrack.locate import rssi as rssi_cue
-from scattertrack.locate.phase import FOUR_PI_OVER_C, fisher_covariance
+from scattertrack.locate.candidate import Candidate, Location
+from scattertrack.locate.phase import FOUR_PI_OVER_C
 
 TEMPERATURE = 1.0
 """Candidate weights ∝ exp(Δℓ / T): correlated phase errors overcount evidence (as in GLAC)."""
@@ -55,27 +55,6 @@ HOPPING_SPREAD_HZ = 2e6
 """Carriers spread (std) at least this wide: the reads range by frequency diversity."""
 
 
-@dataclass
-class Candidate:
-    position: np.ndarray
-    covariance: np.ndarray
-    """3×3, m²."""
-    weight: float
-    cue: str
-    """"phase", "phase+rssi", "rssi" or "region" (no usable cue)."""
-    coherence: float = math.nan
-
-
-@dataclass
-class Location:
-    epc: str
-    reads: int
-    candidates: list = field(default_factory=list)
-    """Best first; the first one's covariance covers the others."""
-    note: str = ""
-    """Why the phase was not used, when it was not."""
-
-
 def _region_box(scene: Scene, anchors: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if scene.region is not None:
         low, high = np.array(scene.region.min, float), np.array(scene.region.max, float)
@@ -84,111 +63,6 @@ def _region_box(scene: Scene, anchors: np.ndarray) -> tuple[np.ndarray, np.ndarr
     if scene.dimensions == 2:
         low[2] = high[2] = float(scene.plane_z)
     return low, high
-
-
-def _independent_reads(reads_time: np.ndarray, antenna: np.ndarray, wavenumber: np.ndarray) -> int:
-    """Reads that carry independent errors: per antenna and channel, one per CORRELATION_S."""
-    bins = np.floor(reads_time / CORRELATION_S).astype(np.int64)
-    return len(set(zip(antenna.tolist(), np.round(wavenumber, 6).tolist(), bins.tolist())))
-
-
-def _multilaterate(anchors: np.ndarray, ranges: np.ndarray, sigmas: np.ndarray, start: np.ndarray, axes: int) -> tuple[np.ndarray, np.ndarray]:
-    p = start.astype(np.float64).copy()
-    weight = 1.0 / sigmas**2
-    for _ in range(20):
-        offset = p[None, :] - anchors
-        d = np.linalg.norm(offset, axis=1)
-        u = (offset / d[:, None])[:, :axes]
-        h = u.T @ (u * weight[:, None])
-        step = np.linalg.lstsq(h, u.T @ (weight * (ranges - d)), rcond=None)[0]
-        p[:axes] += step
-        if np.linalg.norm(step) < 1e-7:
-            break
-    try:
-        covariance = np.linalg.inv(h)
-    except np.linalg.LinAlgError:
-        covariance = np.full((axes, axes), np.inf)
-    return p, covariance
-
-
-def _phase_candidates(z, k, anchors, time_s, antenna, scene, low, high) -> list[Candidate]:
-    axes = scene.dimensions
-    spacing = 2.0 * np.pi / float(np.mean(np.abs(k)))  # m: ψ turns once per this much range (λ/2, λ/4 mod π)
-    frequency_spread = float(np.std(np.abs(k))) / FOUR_PI_OVER_C
-    hopping = frequency_spread >= HOPPING_SPREAD_HZ and len(np.unique(np.round(np.abs(k), 6))) >= 4
-    box = (low, high)
-    if hopping:
-        centre, coarse = _hop_centre(z, k, anchors, antenna, low, high, axes)
-        hopping = centre is not None and bool(np.all(np.isfinite(coarse)))
-    if hopping:
-        # The carrier's lattice of maxima near the hop ranges' position: the
-        # box they allow (at least one lattice step each way).
-        half = np.minimum(np.maximum(3.0 * np.sqrt(np.clip(np.diag(coarse), 0, None)), 0.5 * spacing), 0.5)
-        half = np.r_[half, np.zeros(3 - axes)]
-        box = (np.maximum(centre - half, low - 0.05), np.minimum(centre + half, high + 0.05))
-    # The grid, its seeds and their refinement run in the Rust core
-    # (scattertrack_core::locate::search): one call per tag.
-    unique_anchors, anchor_index = np.unique(anchors, axis=0, return_inverse=True)
-    positions, coherences = _core.locate_search(
-        np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), np.ascontiguousarray(k),
-        anchor_index.reshape(-1).astype(np.int64), np.ascontiguousarray(unique_anchors),
-        tuple(float(v) for v in box[0]), tuple(float(v) for v in box[1]), axes, 100_000, 4 * MAX_CANDIDATES,
-    )
-    refined = [(positions[i], float(coherences[i])) for i in range(len(coherences))]
-    if not refined:
-        return []
-    best_r = refined[0][1]
-    sigma = math.sqrt(max(-2.0 * math.log(max(best_r, 1e-6)), 1e-6))
-    n = len(z)
-    independent = _independent_reads(time_s, antenna, k)
-    kappa_n = independent / (sigma * sigma)  # the log-likelihood per unit of coherence
-    loglik = np.array([kappa_n * r for _, r in refined])
-    weight = np.exp((loglik - loglik.max()) / TEMPERATURE)
-    weight /= weight.sum()
-    candidates = []
-    for (position, r), w in zip(refined, weight):
-        if w < MIN_WEIGHT:
-            continue
-        covariance = np.zeros((3, 3))
-        fisher = fisher_covariance(k, anchors, position, sigma, axes) * (n / max(independent, 1))
-        covariance[:axes, :axes] = fisher + _bias_consider(anchors, position, float(np.mean(np.abs(k))), axes)
-        candidates.append(Candidate(position, covariance, float(w), "phase", r))
-    total = sum(c.weight for c in candidates)
-    for c in candidates:
-        c.weight /= total
-    return candidates
-
-
-def _hop_centre(z, k, anchors, antenna, low, high, axes: int):
-    """Frequency diversity's position: per antenna its hop range (the phase
-    slope across channels; the carrier's own constant is the tag's offset,
-    common to all antennas, so one antenna alone has no lattice), then
-    multilateration. Returns (position, its covariance), or (None, None)."""
-    max_range = float(np.max(np.linalg.norm(np.stack([low, high])[:, None, :] - anchors[None, :, :], axis=2))) + 1.0
-    where, hop, sigma = [], [], []
-    for a in np.unique(antenna):
-        rows = antenna == a
-        found = _core.locate_hop_range(np.ascontiguousarray(z[rows].real), np.ascontiguousarray(z[rows].imag), np.ascontiguousarray(k[rows]), max_range)
-        d, s = found if found is not None else (math.nan, math.nan)
-        if math.isfinite(d) and math.isfinite(s):
-            where.append(anchors[np.flatnonzero(rows)[0]])
-            hop.append(d)
-            sigma.append(max(s, 1e-3))
-    if len(hop) < axes:
-        return None, None
-    return _multilaterate(np.array(where), np.array(hop), np.array(sigma), 0.5 * (low + high), axes)
-
-
-def _bias_consider(anchors: np.ndarray, position: np.ndarray, k_mean: float, axes: int) -> np.ndarray:
-    """σ_b² / k² (UᵀU)⁻¹ over the antennas: a per-antenna phase bias σ_b moves a
-    least-squares position by this covariance (U the unit vectors to the tag)."""
-    unique = np.unique(anchors, axis=0)
-    offset = position[None, :] - unique
-    u = (offset / np.linalg.norm(offset, axis=1)[:, None])[:, :axes]
-    try:
-        return np.linalg.inv(u.T @ u) * (BIAS_SIGMA_RAD / k_mean) ** 2
-    except np.linalg.LinAlgError:
-        return np.full((axes, axes), np.inf)
 
 
 COVER_WEIGHT = 0.005
@@ -234,37 +108,114 @@ def locate_tag(scene: Scene, reads: Reads, epc: str, rows: np.ndarray | None = N
     """One tag's :class:`Location` from its reads (``rows``: their indices, if known)."""
     if rows is None:
         rows = np.flatnonzero(np.asarray(reads.epc).astype(str) == epc)
-    location = Location(epc, int(len(rows)))
-    antennas = {a.id: a for a in scene.antennas}
-    rows = rows[np.isin(np.asarray(reads.antenna)[rows], list(antennas))]
-    antenna = np.asarray(reads.antenna)[rows]
-    anchors = np.array([antennas[int(a)].position for a in antenna]).reshape(-1, 3)
-    low, high = _region_box(scene, anchors if len(anchors) else np.array([a.position for a in scene.antennas]))
+    return _locate_tags(scene, reads, [(epc, np.asarray(rows))])[0]
+
+
+def locate(scene: Scene, reads: Reads) -> list[Location]:
+    """Every tag in ``reads`` (see the module docstring), in order of first appearance."""
+    names, first, tag = np.unique(np.asarray(reads.epc).astype(str), return_index=True, return_inverse=True)
+    order = np.argsort(tag, kind="stable")
+    bounds = np.searchsorted(tag[order], np.arange(len(names) + 1))
+    return _locate_tags(scene, reads, [(str(names[t]), order[bounds[t] : bounds[t + 1]]) for t in np.argsort(first)])
+
+
+@dataclass
+class _Phasors:
+    """Every read's calibrated phasor and wavenumber (the phase model in
+    :mod:`scattertrack.locate.phase`), computed once for all tags."""
+
+    known: np.ndarray
+    """Reads whose antenna is in the scene."""
+    anchor: np.ndarray
+    """Index into ``anchors`` (valid where ``known``)."""
+    anchors: np.ndarray
+    z: np.ndarray
+    k: np.ndarray
+
+    @classmethod
+    def of(cls, scene: Scene, reads: Reads) -> _Phasors:
+        ids = np.array(sorted(a.id for a in scene.antennas), dtype=np.int64)
+        by_id = {a.id: a for a in scene.antennas}
+        antenna = np.asarray(reads.antenna).astype(np.int64)
+        anchor = np.clip(np.searchsorted(ids, antenna), 0, max(len(ids) - 1, 0))
+        known = (ids[anchor] == antenna) if len(ids) else np.zeros(len(antenna), bool)
+        anchors = np.array([by_id[int(i)].position for i in ids], dtype=np.float64).reshape(-1, 3)
+        antenna_offsets = np.array([by_id[int(i)].phase_offset_rad for i in ids], dtype=np.float64)
+        m = 2 if scene.reader.phase_period == "pi" else 1
+        frequency = np.asarray(reads.frequency_hz, dtype=np.float64)
+        offsets = (antenna_offsets[anchor] if len(ids) else 0.0) + _channel_offsets(scene, frequency)
+        z = np.exp(1j * m * (np.asarray(reads.phase_rad, dtype=np.float64) - offsets))
+        return cls(known, anchor, anchors, z, m * scene.reader.phase_sign * FOUR_PI_OVER_C * frequency)
+
+
+def _locate_tags(scene: Scene, reads: Reads, tags: list[tuple[str, np.ndarray]]) -> list[Location]:
+    """The tags' locations: the phase search of every tag that can use it in
+    one threaded call to the core, then RSSI and the fallbacks per tag."""
+    phasors = _Phasors.of(scene, reads)
     calibration = scene.extra.get("calibration", {}) if isinstance(scene.extra.get("calibration"), dict) else {}
     path_loss = rssi_cue.models(calibration)
-    m = 2 if scene.reader.phase_period == "pi" else 1
-    frequency = np.asarray(reads.frequency_hz, dtype=np.float64)[rows]
-    offsets = np.array([antennas[int(a)].phase_offset_rad for a in antenna]) + _channel_offsets(scene, frequency)
-    z = np.exp(1j * m * (np.asarray(reads.phase_rad, dtype=np.float64)[rows] - offsets))
-    k = m * scene.reader.phase_sign * FOUR_PI_OVER_C * frequency
-    time_s = np.asarray(reads.time_s, dtype=np.float64)[rows]
-    phase_candidates = []
-    if calibration.get("phase_usable", True) is False:
-        location.note = "the scene's calibration found phase not usable in this room"
-    elif len(np.unique(antenna)) < scene.dimensions or len(rows) < 3 * scene.dimensions:
-        location.note = f"phase needs reads on at least {scene.dimensions} antennas"
-    else:
-        phase_candidates = _phase_candidates(z, k, anchors, time_s, antenna, scene, low, high)
-        if not phase_candidates:
-            location.note = "the tag's phases fit no position in the region"
-        elif phase_candidates[0].coherence < COHERENCE_USABLE:
-            location.note = f"the tag's phases reach a coherence of only {phase_candidates[0].coherence:.2f} at any position"
-            phase_candidates = []
-    rssi = np.asarray(reads.rssi_dbm, dtype=np.float64)[rows]
+    phase_usable = calibration.get("phase_usable", True) is not False
+    antenna_ids = np.asarray(reads.antenna)
+    rssi_all = np.asarray(reads.rssi_dbm, dtype=np.float64)
+    time_all = np.asarray(reads.time_s, dtype=np.float64)
+    fixed_box = _region_box(scene, phasors.anchors) if scene.region is not None or not len(phasors.anchors) else None
+    work = []  # (location, rows, low, high) per tag
+    searched = []  # indices into work of the tags the phase search takes
+    for epc, rows in tags:
+        location = Location(epc, int(len(rows)))
+        rows = rows[phasors.known[rows]]
+        used = np.unique(phasors.anchor[rows])
+        low, high = fixed_box if fixed_box is not None else _region_box(scene, phasors.anchors[used] if len(used) else phasors.anchors)
+        if not phase_usable:
+            location.note = "the scene's calibration found phase not usable in this room"
+        elif len(used) < scene.dimensions or len(rows) < 3 * scene.dimensions:
+            location.note = f"phase needs reads on at least {scene.dimensions} antennas"
+        else:
+            searched.append(len(work))
+        work.append((location, rows, low, high))
+    found = _phase_search(phasors, time_all, scene.dimensions, [work[i] for i in searched])
+    candidates_of = dict(zip(searched, found))
+    locations = []
+    for i, (location, rows, low, high) in enumerate(work):
+        antenna, rssi, anchors = antenna_ids[rows], rssi_all[rows], phasors.anchors[phasors.anchor[rows]]
+        phase_candidates = candidates_of.get(i, [])
+        if i in candidates_of:
+            if not phase_candidates:
+                location.note = "the tag's phases fit no position in the region"
+            elif phase_candidates[0].coherence < COHERENCE_USABLE:
+                location.note = f"the tag's phases reach a coherence of only {phase_candidates[0].coherence:.2f} at any position"
+                phase_candidates = []
+        locations.append(_choose(location, phase_candidates, path_loss, antenna, rssi, anchors, low, high, scene.dimensions))
+    return locations
+
+
+def _phase_search(phasors: _Phasors, time_s: np.ndarray, axes: int, work: list) -> list[list[Candidate]]:
+    """The phase candidates of every tag in ``work``: one call to the Rust
+    core (``scattertrack_core::locate``, threaded over tags)."""
+    if not work:
+        return []
+    rows = np.concatenate([w[1] for w in work])
+    bounds = np.r_[0, np.cumsum([len(w[1]) for w in work])].astype(np.int64)
+    z = phasors.z[rows]
+    positions, covariances, weights, coherences, candidate_bounds = _core.locate_batch(
+        np.ascontiguousarray(z.real), np.ascontiguousarray(z.imag), np.ascontiguousarray(phasors.k[rows]),
+        np.ascontiguousarray(time_s[rows]), phasors.anchor[rows].astype(np.int64), np.ascontiguousarray(phasors.anchors),
+        bounds, np.array([w[2] for w in work], dtype=np.float64).reshape(-1, 3), np.array([w[3] for w in work], dtype=np.float64).reshape(-1, 3), axes,
+        temperature=TEMPERATURE, bias_sigma_rad=BIAS_SIGMA_RAD, correlation_s=CORRELATION_S, max_candidates=MAX_CANDIDATES,
+        min_weight=MIN_WEIGHT, hopping_spread_hz=HOPPING_SPREAD_HZ,
+    )
+    return [
+        [Candidate(positions[c], covariances[c], float(weights[c]), "phase", float(coherences[c])) for c in range(candidate_bounds[t], candidate_bounds[t + 1])]
+        for t in range(len(work))
+    ]
+
+
+def _choose(location: Location, phase_candidates: list, path_loss: dict, antenna, rssi, anchors, low, high, dimensions: int) -> Location:
+    """The tag's rows from its usable cue: phase (re-weighed by RSSI when calibrated), else RSSI, else the region."""
     if phase_candidates:
         if path_loss:
             # RSSI re-weighs the phase candidates by its likelihood at each.
-            loglik = np.array([rssi_cue.log_likelihood(path_loss, antenna, rssi, anchors, c.position[None, :])[0] for c in phase_candidates])
+            loglik = rssi_cue.log_likelihood(path_loss, antenna, rssi, anchors, np.array([c.position for c in phase_candidates]))
             weights = np.array([c.weight for c in phase_candidates]) * np.exp((loglik - loglik.max()) / TEMPERATURE)
             for c, w in zip(phase_candidates, weights / weights.sum()):
                 c.weight, c.cue = float(w), "phase+rssi"
@@ -274,18 +225,10 @@ def locate_tag(scene: Scene, reads: Reads, epc: str, rows: np.ndarray | None = N
         location.candidates = [Candidate(best.position, _mixture(phase_candidates), best.weight, best.cue, best.coherence)] + phase_candidates[1:MAX_CANDIDATES]
         return location
     if path_loss and np.isfinite(rssi).any():
-        location.candidates = [rssi_cue.locate(path_loss, antenna, rssi, anchors, low, high, scene.dimensions)]
+        location.candidates = [rssi_cue.locate(path_loss, antenna, rssi, anchors, low, high, dimensions)]
         return location
     centre = 0.5 * (low + high)
     spread = np.diag(((high - low) ** 2) / 12.0)
     location.candidates = [Candidate(centre, spread, 1.0, "region")]
     location.note = (location.note + "; " if location.note else "") + "no usable cue: the region's centre, with the region's spread"
     return location
-
-
-def locate(scene: Scene, reads: Reads) -> list[Location]:
-    """Every tag in ``reads`` (see the module docstring), in order of first appearance."""
-    names, first, tag = np.unique(np.asarray(reads.epc).astype(str), return_index=True, return_inverse=True)
-    order = np.argsort(tag, kind="stable")
-    bounds = np.searchsorted(tag[order], np.arange(len(names) + 1))
-    return [locate_tag(scene, reads, str(names[t]), order[bounds[t] : bounds[t + 1]]) for t in np.argsort(first)]

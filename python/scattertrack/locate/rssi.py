@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from scattertrack.locate.candidate import Candidate
+
 GRID_STEP_M = 0.05
 
 
@@ -54,8 +56,6 @@ def locate(path_loss: dict, antenna: np.ndarray, rssi_dbm: np.ndarray, anchors: 
     orientation for a static tag), so an antenna's reads count as one
     independent reading per antenna: the spread σₐ, not σₐ/√N, sets the width.
     """
-    from scattertrack.locate import Candidate
-
     axes = [np.arange(lo, hi + 0.5 * GRID_STEP_M, GRID_STEP_M) if hi > lo else np.array([lo]) for lo, hi in zip(low, high)]
     points = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
     loglik = _log_likelihood(path_loss, antenna, rssi_dbm, anchors, points, per_read=False)
