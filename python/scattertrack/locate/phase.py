@@ -17,9 +17,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from scattertrack.io.types import SPEED_OF_LIGHT
-
-FOUR_PI_OVER_C = 4.0 * np.pi / SPEED_OF_LIGHT
+from scattertrack.physics import FOUR_PI_OVER_C
 
 
 def fisher_covariance(wavenumber: np.ndarray, anchors: np.ndarray, p: np.ndarray, sigma_rad: float, axes: int = 3) -> np.ndarray:

@@ -6,12 +6,12 @@ import shutil
 import numpy as np
 import pytest
 
-from scattertrack import io
+from scattertrack import dsp, io
 from scattertrack.io import FormatError
-from scattertrack.io.sigmf import SKIP_NO_PREAMBLE, SKIP_NON_FINITE, SKIP_RX
+from scattertrack.dsp.ofdm import SKIP_NO_PREAMBLE, SKIP_NON_FINITE, SKIP_RX
 from scattertrack.io.types import Antenna, Reader, Region, Scene
 from scattertrack.sim import iq
-from scattertrack.sim.wideband import bistatic_path_lengths, tag_channel
+from scattertrack.dsp.channel import bistatic_path_lengths, tag_channel
 
 C = 299_792_458.0
 TX = np.array([0.4, 0.4, 0.0])
@@ -61,7 +61,7 @@ def test_round_trip_of_metadata_and_samples(recording):
 
 def test_channels_match_the_true_tag_channel_within_the_noise(recording):
     sim, out = recording
-    estimate = io.estimate_sigmf(out / "recording", sim.scene, calibration=out / "calibration")
+    estimate = dsp.estimate_sigmf(out / "recording", sim.scene, calibration=out / "calibration")
     frames = estimate.frames
     assert frames.n_frames == 4 and frames.skipped.total == 0
     assert np.all(estimate.score > 0.8)
@@ -91,7 +91,7 @@ def test_replies_without_preamble_are_counted(tmp_path):
     sim, out = simulate(tmp_path, seed=3, duration_s=0.03, miss_probability=0.4)
     answered = np.array(sim.details["answered"])
     assert 0 < answered.sum() < len(answered)
-    frames = io.read_sigmf_frames(out / "recording", sim.scene, calibration=out / "calibration")
+    frames = dsp.read_sigmf_frames(out / "recording", sim.scene, calibration=out / "calibration")
     assert frames.skipped.counts == {SKIP_NO_PREAMBLE: int((~answered).sum())}
     assert frames.n_frames == answered.sum()
     assert frames.skipped.examples[SKIP_NO_PREAMBLE][:3] == np.flatnonzero(~answered)[:3].tolist()
@@ -105,7 +105,7 @@ def test_non_finite_windows_and_antennas_are_counted(tmp_path):
     data[60_000:90_000, 2] = np.nan  # window 2: rx id 3 only
     data.flush()
     del data
-    frames = io.read_sigmf_frames(out / "recording", sim.scene, calibration=out / "calibration")
+    frames = dsp.read_sigmf_frames(out / "recording", sim.scene, calibration=out / "calibration")
     assert frames.skipped.counts == {SKIP_NON_FINITE: 1, SKIP_RX: 1}
     assert frames.n_frames == 3
     rx_ids, _, _ = frames.frame_grid(1)
@@ -115,8 +115,8 @@ def test_non_finite_windows_and_antennas_are_counted(tmp_path):
 
 def test_ema_and_uncalibrated_runs(recording):
     sim, out = recording
-    raw = io.read_sigmf_frames(out / "recording", sim.scene)
-    smooth = io.read_sigmf_frames(out / "recording", sim.scene, calibration=out / "calibration", ema_alpha=0.5)
+    raw = dsp.read_sigmf_frames(out / "recording", sim.scene)
+    smooth = dsp.read_sigmf_frames(out / "recording", sim.scene, calibration=out / "calibration", ema_alpha=0.5)
     assert raw.n_frames == smooth.n_frames == 4
     truth = tag_channel(TX, RX, np.array([TAG_POSITION]), smooth.frame_grid(0)[1])[0]
     # Uncalibrated channels carry the hardware response: far from the truth.
@@ -128,7 +128,7 @@ def test_a_scene_without_the_recorded_antennas_is_rejected(recording):
     scene = helper_scene()
     scene.antennas[2].role = "tx"
     with pytest.raises(FormatError, match="scattertrack:channels"):
-        io.read_sigmf_frames(out / "recording", scene)
+        dsp.read_sigmf_frames(out / "recording", scene)
 
 
 # --------------------------------------------------------------------------
