@@ -30,6 +30,21 @@ class Checker:
             self.fail(key, f"must be a table, got {value!r}")
         return value
 
+    def array(self, value, key: str) -> list:
+        """A non-empty array of tables ``[[key]]``."""
+        if not isinstance(value, list) or not value:
+            self.fail(key, f"must be a non-empty array of tables [[{key}]]")
+        return value
+
+    def entry(self, value, key: str, allowed, required) -> dict:
+        """One table of an array of tables (``[[tags]]``): a table, only ``allowed`` keys, every ``required`` one."""
+        self.table(value, key)
+        self.keys(value, allowed, key)
+        for name in required:
+            if name not in value:
+                self.fail(f"{key}.{name}", "missing")
+        return value
+
     def keys(self, table: dict, allowed, key: str):
         for name in table:
             if name not in allowed:

@@ -127,17 +127,12 @@ def _resolve_scene(check: Checker, data: dict, helper: bool) -> dict:
 
 def _resolve_antennas(check: Checker, scene: dict, helper: bool) -> set:
     """``[[scene.antennas]]`` in place (a helper: one ``tx``, two or more ``rx``). Returns the antenna ids."""
-    antennas = scene.get("antennas")
-    if not isinstance(antennas, list) or not antennas:
-        check.fail("scene.antennas", "must be a non-empty array of tables [[scene.antennas]]")
+    antennas = check.array(scene.get("antennas"), "scene.antennas")
     seen_ids = set()
     for index, antenna in enumerate(antennas):
         where = f"scene.antennas[{index}]"
-        check.table(antenna, where)
-        check.keys(antenna, _HELPER_ANTENNA_KEYS if helper else _ANTENNA_KEYS, where)
-        for required in ("id", "position", "role") if helper else ("id", "position"):
-            if required not in antenna:
-                check.fail(f"{where}.{required}", "missing")
+        required = ("id", "position", "role") if helper else ("id", "position")
+        check.entry(antenna, where, _HELPER_ANTENNA_KEYS if helper else _ANTENNA_KEYS, required)
         antenna_id = check.integer(antenna["id"], f"{where}.id")
         if antenna_id in seen_ids:
             check.fail(f"{where}.id", f"duplicate antenna id {antenna_id}")
@@ -160,17 +155,11 @@ def _resolve_antennas(check: Checker, scene: dict, helper: bool) -> set:
 
 def _resolve_tags(check: Checker, data: dict, helper: bool) -> None:
     """``[[tags]]`` in place: unique hex EPCs, offsets, and trajectories valid over the session."""
-    tags = data.get("tags")
-    if not isinstance(tags, list) or not tags:
-        check.fail("tags", "must be a non-empty array of tables [[tags]]")
+    tags = check.array(data.get("tags"), "tags")
     seen_epcs = set()
     for index, tag in enumerate(tags):
         where = f"tags[{index}]"
-        check.table(tag, where)
-        check.keys(tag, _HELPER_TAG_KEYS if helper else _TAG_KEYS, where)
-        for required in ("epc", "trajectory"):
-            if required not in tag:
-                check.fail(f"{where}.{required}", "missing")
+        check.entry(tag, where, _HELPER_TAG_KEYS if helper else _TAG_KEYS, ("epc", "trajectory"))
         epc = check.string(tag["epc"], f"{where}.epc")
         if not re.fullmatch(r"[0-9A-Fa-f]+", epc):
             check.fail(f"{where}.epc", f"must be a hex string such as 'E2000A01', got {epc!r}")
