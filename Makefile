@@ -83,3 +83,11 @@ bench: setup
 
 clean:
 	rm -rf target out $(VENV) python/scattertrack/*.so web/dist web/node_modules
+
+# The layers and the no-cycle contracts (python/pyproject.toml,
+# [tool.importlinter]; python/import_contracts.py): an import against the
+# layers, or any import cycle, fails the build.
+test: test-layers
+test-layers: setup
+	@echo "test: layers and import cycles (lint-imports)"
+	cd python && $(VENV)/bin/lint-imports

@@ -401,7 +401,8 @@ def runtime_block(duration_s=2.0, repeats=3, seed=0, progress=True) -> dict:
     speed (``repeats`` runs pooled), with the positions' accuracy."""
     import tempfile
 
-    from scattertrack.io.sigmf import calibrate_sigmf, read_sigmf
+    from scattertrack.dsp import calibrate_sigmf
+    from scattertrack.io.sigmf import read_sigmf
     from scattertrack.track.stream import stream_sigmf
 
     bar = Progress(7, f"runtime ({ARM} at IQ level, {duration_s:g} s, {repeats} + {repeats} runs)", 2 * repeats + 1, progress)
@@ -459,7 +460,7 @@ def static_iq(duration_s, seeds) -> dict:
     leaves."""
     import tempfile
 
-    from scattertrack.io.sigmf import calibrate_sigmf
+    from scattertrack.dsp import calibrate_sigmf
     from scattertrack.track.stream import stream_sigmf
 
     errors = []

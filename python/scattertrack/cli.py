@@ -595,10 +595,10 @@ def track_frames(args, scene, params: dict) -> int:
     from scattertrack.io import summary
 
     if args.sigmf:
-        from scattertrack.io import sigmf
+        from scattertrack.dsp import read_sigmf_frames
 
         calibration = calibration_for(args)
-        frames = sigmf.read_sigmf_frames(args.sigmf, scene, calibration)
+        frames = read_sigmf_frames(args.sigmf, scene, calibration)
         source = args.sigmf
     else:
         frames = io.read_frames(args.frames, scene)

@@ -28,26 +28,7 @@ import time
 from pathlib import Path
 
 from scattertrack import outputs_command
-from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
-
-LLRP_PORT = 5084
-"""The IANA port of LLRP (5085 with TLS)."""
-
-
-def host_and_port(text: str, default_port: int = LLRP_PORT) -> tuple[str, int]:
-    """``HOST[:PORT]`` (an IPv6 address in brackets: ``[::1]:5084``)."""
-    host, port = text, default_port
-    if text.startswith("["):
-        host, _, rest = text[1:].partition("]")
-        if rest.startswith(":"):
-            port = ascii_int(rest[1:])
-    elif text.count(":") == 1:
-        host, _, number = text.partition(":")
-        port = ascii_int(number)
-    if not host or not 1 <= port <= 65535:
-        raise argparse.ArgumentTypeError(f"expected HOST[:PORT] with a port from 1 to 65535, got {text!r}")
-    return host, port
-
+from scattertrack.arguments import LLRP_PORT, ascii_float, ascii_int, host_and_port, parse_parameter, plural, say, tracker_parameters
 
 def antenna_list(text: str) -> tuple[int, ...]:
     """``1,2,3,4``: antenna ports, 1-based."""

@@ -21,7 +21,7 @@ MQTT_PORT = 1883
 
 def mqtt_address(text: str) -> tuple[str, int]:
     """``HOST[:PORT]`` of an MQTT broker (port 1883 by default)."""
-    from scattertrack.live_command import host_and_port
+    from scattertrack.arguments import host_and_port
 
     return host_and_port(text, MQTT_PORT)
 

@@ -1,6 +1,6 @@
 //! Angle wrapping: the one shared function for every phase in the crate.
 
-use std::f64::consts::PI;
+use std::f64::consts::{PI, TAU};
 
 /// Wraps `angle` (radians) into `[0, period)`.
 ///
@@ -24,12 +24,43 @@ pub fn wrap_signed(angle: f64, period: f64) -> f64 {
     wrap(angle + 0.5 * period, period) - 0.5 * period
 }
 
+/// Wraps an angle to `(-pi, pi]`, rad (docs/marvel.md section 1: one shared
+/// function for every angle of the pipeline, the LoRa DSP's too, which
+/// re-exports it). Idempotent; non-finite input stays non-finite.
+#[inline]
+pub fn wrap_angle(angle: f64) -> f64 {
+    let w = angle - TAU * (angle / TAU).round();
+    // round() leaves w in [-pi, pi]; map -pi (and rounding spill) into range.
+    if w <= -PI {
+        w + TAU
+    } else if w > PI {
+        w - TAU
+    } else {
+        w
+    }
+}
+
 /// 2π, the phase period of most readers (radians).
 pub const TWO_PI: f64 = 2.0 * PI;
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn wrap_angle_is_in_range_and_idempotent() {
+        for i in -2000..2000 {
+            let x = i as f64 * 0.0137 - 0.5;
+            let w = wrap_angle(x);
+            assert!(w > -PI && w <= PI, "{x} -> {w}");
+            assert_eq!(wrap_angle(w), w);
+            assert!(((x - w) / TAU - ((x - w) / TAU).round()).abs() < 1e-9);
+        }
+        assert_eq!(wrap_angle(PI), PI);
+        assert_eq!(wrap_angle(-PI), PI);
+        assert_eq!(wrap_angle(3.0 * PI), PI);
+        assert!(wrap_angle(f64::NAN).is_nan());
+    }
 
     #[test]
     fn wrap_is_in_range_and_idempotent() {

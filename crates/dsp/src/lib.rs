@@ -54,5 +54,6 @@ pub mod reply;
 pub use error::{Error, Result};
 pub use num_complex::{Complex32, Complex64};
 
-/// Speed of light in vacuum, m/s.
-pub const SPEED_OF_LIGHT: f64 = 299_792_458.0;
+/// Speed of light in vacuum, m/s: the workspace's one definition, in the core
+/// (re-exported so the DSP's formulas read `crate::SPEED_OF_LIGHT`).
+pub use scattertrack_core::scene::SPEED_OF_LIGHT;

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from scattertrack.io.types import SPEED_OF_LIGHT
+from scattertrack.physics import SPEED_OF_LIGHT
 
 ITERATIONS = 30
 """Coordinate-ascent sweeps over the offsets (converged well before on our cases)."""

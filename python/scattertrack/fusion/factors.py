@@ -28,16 +28,9 @@ import math
 import gtsam
 import numpy as np
 
+from scattertrack.physics import wrap_angle  # noqa: F401 - factors.wrap_angle: the estimator's name for it
+
 # --- pure models -------------------------------------------------------------
-
-
-def wrap_angle(angle_rad):
-    """Angle(s) wrapped to (-pi, pi], radians (docs/marvel.md section 1).
-
-    ``pi - ((pi - a) mod 2 pi)`` maps -pi to +pi, so the interval is closed
-    at +pi as the contract states.
-    """
-    return np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=float), 2.0 * np.pi)
 
 
 def direction(azimuth_rad: float, elevation_rad: float) -> np.ndarray:

@@ -7,6 +7,11 @@ valid input (a clock jump, an implausible prior) issues an
 returned object's ``skipped`` report, never dropped silently; rows out of
 time order are sorted (and counted in ``reordered``). Writers produce files the readers (and outside programs)
 accept.
+
+The DSP that turns a SigMF recording into frames (``read_sigmf_frames``,
+``estimate_sigmf``, ``calibrate_sigmf``) is :mod:`scattertrack.dsp`, one
+layer up: this package knows formats only and imports nothing above it
+(python/pyproject.toml, ``[tool.importlinter]``).
 """
 
 from scattertrack.io.types import (
@@ -27,16 +32,7 @@ from scattertrack.io.types import (
 from scattertrack.io.reads import read_reads, write_reads
 from scattertrack.io.frames import Frames, make_frames, read_frames, write_frames
 from scattertrack.io.scene import read_scene, write_scene
-from scattertrack.io.sigmf import (
-    Recording,
-    SigmfCalibration,
-    SigmfEstimate,
-    calibrate_sigmf,
-    estimate_sigmf,
-    read_sigmf,
-    read_sigmf_frames,
-    write_sigmf,
-)
+from scattertrack.io.sigmf import Recording, read_sigmf, write_sigmf
 from scattertrack.io.track import read_track, write_track
 from scattertrack.io.imu import read_imu, write_imu
 from scattertrack.io.features import read_features, write_features
@@ -55,13 +51,9 @@ __all__ = [
     "Recording",
     "Region",
     "Scene",
-    "SigmfCalibration",
-    "SigmfEstimate",
     "SkipReport",
     "Track",
     "Truth",
-    "calibrate_sigmf",
-    "estimate_sigmf",
     "make_frames",
     "read_features",
     "read_frames",
@@ -69,7 +61,6 @@ __all__ = [
     "read_reads",
     "read_scene",
     "read_sigmf",
-    "read_sigmf_frames",
     "read_track",
     "read_truth",
     "write_features",

@@ -20,25 +20,18 @@ is written, found by scanning the text (tomllib does not report positions).
 
 from __future__ import annotations
 
-import datetime
 import math
 import re
 import tomllib
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from scattertrack.io import units
 from scattertrack.io.cells import INT64_MAX, INT64_MIN
-from scattertrack.io.types import (
-    Antenna,
-    ChannelOffset,
-    FormatError,
-    Reader,
-    Region,
-    Scene,
-    warn_input,
-)
+from scattertrack.io.errors import FormatError, warn_input
+from scattertrack.io.scene_toml import write_scene
 
 READER_KINDS = ("cots", "sdr-helper", "lora-backscatter")
 KINDS_WITH_ANTENNAS = ("cots", "sdr-helper")
@@ -73,6 +66,94 @@ KNOWN_TOP_LEVEL = (
     "channel_offsets",
     "hop_table",
 )
+
+
+@dataclass
+class Antenna:
+    """One reader or helper antenna port."""
+
+    id: int
+    """Port number as the reader reports it."""
+    position: np.ndarray
+    """Phase centre in the world frame, metres, shape (3,)."""
+    phase_offset_rad: float = 0.0
+    """Calibrated cable/port phase offset, radians."""
+    role: str = "txrx"
+    """"txrx" (monostatic), "tx" or "rx" (bistatic helper)."""
+
+
+@dataclass
+class Reader:
+    kind: str = "cots"
+    """"cots", "sdr-helper" or "lora-backscatter"."""
+    phase_sign: int = 1
+    """+1: phase grows with distance; -1: it shrinks."""
+    phase_period: str = "2pi"
+    """"2pi", or "pi" for readers that report phase mod pi."""
+    phase_noise_rad: float | None = None
+    """Optional 1-sigma phase noise prior for filters, radians."""
+
+    @property
+    def period_rad(self) -> float:
+        """The phase period P in radians: 2*pi or pi."""
+        return np.pi if self.phase_period == "pi" else 2.0 * np.pi
+
+
+@dataclass
+class Region:
+    """Axis-aligned box where tags can be, metres."""
+
+    min: np.ndarray
+    max: np.ndarray
+
+
+@dataclass
+class ChannelOffset:
+    frequency_hz: float
+    phase_offset_rad: float
+
+
+@dataclass
+class Scene:
+    """A hardware set-up (``scene.toml``)."""
+
+    name: str
+    dimensions: int
+    """2 (tag moves in the plane z = plane_z) or 3."""
+    reader: Reader
+    antennas: list[Antenna]
+    plane_z: float | None = None
+    """Height of the motion plane, metres; required when dimensions == 2."""
+    region: Region | None = None
+    channel_offsets: list[ChannelOffset] = field(default_factory=list)
+    extra: dict = field(default_factory=dict)
+    """Unknown top-level tables/keys, kept so that a round trip loses nothing."""
+    hop_table: dict[int, float] = field(default_factory=dict)
+    """The reader's hop table (``[[hop_table]]``): its 1-based channel index -> carrier, hertz.
+    Empty when the scene gives none. LLRP readers report this index, not a frequency."""
+
+    def antenna_index(self, antenna_id: int) -> int:
+        """Index into ``antennas`` of the antenna with this port id (KeyError if none)."""
+        for i, a in enumerate(self.antennas):
+            if a.id == antenna_id:
+                return i
+        raise KeyError(antenna_id)
+
+    def channel_offset(self, frequency_hz: float) -> float:
+        """Calibrated offset of the channel matched within 1 kHz; 0 if none (docs/formats.md 1)."""
+        for c in self.channel_offsets:
+            if abs(c.frequency_hz - frequency_hz) <= 1e3:
+                return c.phase_offset_rad
+        return 0.0
+
+    @staticmethod
+    def load(path) -> "Scene":
+        """Read and validate a ``scene.toml`` (see :func:`scattertrack.io.read_scene`)."""
+        return read_scene(path)
+
+    def save(self, path) -> None:
+        """Write it as ``scene.toml`` (see :func:`scattertrack.io.write_scene`)."""
+        write_scene(path, self)
 
 
 def read_scene(path) -> Scene:
@@ -450,105 +531,3 @@ class _SceneChecker:
                 raise self.fail(f"{where}.frequency_hz", units.frequency_message(repr(entry["frequency_hz"]), frequency))
             table[index] = frequency
         return table
-
-
-# --- writing ----------------------------------------------------------------
-
-_BARE_KEY = re.compile(r"^[A-Za-z0-9_-]+$")
-_ESCAPES = {
-    '"': '\\"',
-    "\\": "\\\\",
-    "\b": "\\b",
-    "\t": "\\t",
-    "\n": "\\n",
-    "\f": "\\f",
-    "\r": "\\r",
-}
-
-
-def _toml_key(key: str) -> str:
-    return key if _BARE_KEY.match(key) else _toml_string(key)
-
-
-def _toml_string(value: str) -> str:
-    """A TOML basic string, escaping quotes, backslashes and control characters."""
-    out = []
-    for char in value:
-        if char in _ESCAPES:
-            out.append(_ESCAPES[char])
-        elif ord(char) < 0x20 or ord(char) == 0x7F:
-            out.append(f"\\u{ord(char):04x}")
-        else:
-            out.append(char)
-    return '"' + "".join(out) + '"'
-
-
-def _toml_value(value) -> str:
-    """One value in TOML syntax; floats with repr() so they read back exactly."""
-    if isinstance(value, np.generic):
-        value = value.item()
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, int):
-        return str(value)
-    if isinstance(value, float):
-        return repr(value)  # "0.1", "1e-05", "nan", "inf" are all valid TOML floats
-    if isinstance(value, str):
-        return _toml_string(value)
-    if isinstance(value, (datetime.datetime, datetime.date, datetime.time)):
-        return value.isoformat()
-    if isinstance(value, (list, tuple, np.ndarray)):
-        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
-    if isinstance(value, dict):
-        return "{" + ", ".join(f"{_toml_key(k)} = {_toml_value(v)}" for k, v in value.items()) + "}"
-    raise TypeError(f"cannot write {value!r} ({type(value).__name__}) to TOML")
-
-
-def _vector(values) -> str:
-    return "[" + ", ".join(repr(float(v)) for v in values) + "]"
-
-
-def write_scene(path, scene: Scene) -> None:
-    """Write ``scene`` as TOML that :func:`read_scene` reads back to an equal Scene.
-
-    Extra top-level values are written after the known keys; extra tables
-    each as their own ``[table]`` (nested values inline).
-    """
-    lines = [f"name = {_toml_string(scene.name)}", f"dimensions = {int(scene.dimensions)}"]
-    if scene.plane_z is not None:
-        lines.append(f"plane_z = {float(scene.plane_z)!r}")
-    extra_tables = {k: v for k, v in scene.extra.items() if isinstance(v, dict)}
-    for key, value in scene.extra.items():
-        if key not in extra_tables:
-            lines.append(f"{_toml_key(key)} = {_toml_value(value)}")
-
-    reader = scene.reader
-    lines += ["", "[reader]", f"kind = {_toml_string(reader.kind)}"]
-    lines.append(f"phase_sign = {int(reader.phase_sign)}")
-    lines.append(f"phase_period = {_toml_string(reader.phase_period)}")
-    if reader.phase_noise_rad is not None:
-        lines.append(f"phase_noise_rad = {float(reader.phase_noise_rad)!r}")
-
-    for antenna in scene.antennas:
-        lines += ["", "[[antennas]]", f"id = {int(antenna.id)}"]
-        lines.append(f"position = {_vector(antenna.position)}")
-        lines.append(f"phase_offset_rad = {float(antenna.phase_offset_rad)!r}")
-        lines.append(f"role = {_toml_string(antenna.role)}")
-
-    if scene.region is not None:
-        lines += ["", "[region]", f"min = {_vector(scene.region.min)}"]
-        lines.append(f"max = {_vector(scene.region.max)}")
-
-    for offset in scene.channel_offsets:
-        lines += ["", "[[channel_offsets]]"]
-        lines.append(f"frequency_hz = {float(offset.frequency_hz)!r}")
-        lines.append(f"phase_offset_rad = {float(offset.phase_offset_rad)!r}")
-
-    for index, frequency in sorted(scene.hop_table.items()):
-        lines += ["", "[[hop_table]]", f"channel_index = {int(index)}", f"frequency_hz = {float(frequency)!r}"]
-
-    for key, table in extra_tables.items():
-        lines += ["", f"[{_toml_key(key)}]"]
-        lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]
-
-    Path(path).write_text("\n".join(lines) + "\n", encoding="utf-8")

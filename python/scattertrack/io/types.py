@@ -4,151 +4,25 @@ Plain dataclasses and columnar numpy arrays: one array per column, one row
 per index. Readers in :mod:`scattertrack.io` build them from files and
 validate them; writers turn them back into files. Nothing here does I/O.
 
+The scene's types (:class:`Scene` and its parts) are defined with their
+format in :mod:`scattertrack.io.scene`, so that ``Scene.load`` and
+``Scene.save`` and the TOML reader need no import cycle; they are
+re-exported here, with :class:`FormatError` (:mod:`scattertrack.io.errors`).
+
 Units are SI: metres, seconds, radians, hertz, dBm.
 """
 
 from __future__ import annotations
 
-import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
 
-SPEED_OF_LIGHT = 299_792_458.0
-"""Speed of light in vacuum, m/s (docs/formats.md section 1: lambda = c / f)."""
+from scattertrack.physics import SPEED_OF_LIGHT  # noqa: F401 - track/ still imports it from here
 
 
-class FormatError(ValueError):
-    """A file that breaks its format.
-
-    ``path``, ``line`` (1-based, ``None`` when the whole file is at fault) and
-    ``column`` (the column name for CSV, the key for TOML, ``None`` if not
-    applicable) locate the fault; ``str(error)`` reads
-    ``"reads.csv:12: line 12, column 'phase_rad': not a finite number: 'nan'"``.
-    """
-
-    def __init__(self, path, line: int | None, column: str | None, message: str):
-        self.path = str(path)
-        self.line = line
-        self.column = column
-        self.message = message
-        # "file:N:" for editors and tools that jump to a location, and the
-        # words for people: "reads.csv:12: line 12, column 'phase_rad': ...".
-        where = self.path if line is None else f"{self.path}:{line}: line {line}"
-        col = (", " if line is not None else ": ") + f"column '{column}'" if column is not None else ""
-        super().__init__(f"{where}{col}: {message}")
-
-
-class InputWarning(UserWarning):
-    """Valid but suspicious input (a clock jump, an implausible prior...), issued with :func:`warnings.warn`.
-
-    The text reads like a :class:`FormatError`'s, ``"reads.csv:12: line 12,
-    column 'time_s': clock jumps back by 10 s ..."``; the command line prints it as
-    a line starting ``warning:``. ``path``, ``line`` and ``column`` locate it.
-    """
-
-    def __init__(self, path, line: int | None, column: str | None, message: str):
-        self.path = str(path)
-        self.line = line
-        self.column = column
-        self.message = message
-        super().__init__(str(FormatError(path, line, column, message)))
-
-
-def warn_input(path, line: int | None, column: str | None, message: str) -> None:
-    """Issue an :class:`InputWarning` (shown once per distinct text by Python's default filter)."""
-    warnings.warn(InputWarning(path, line, column, message), stacklevel=3)
-
-
-@dataclass
-class Antenna:
-    """One reader or helper antenna port."""
-
-    id: int
-    """Port number as the reader reports it."""
-    position: np.ndarray
-    """Phase centre in the world frame, metres, shape (3,)."""
-    phase_offset_rad: float = 0.0
-    """Calibrated cable/port phase offset, radians."""
-    role: str = "txrx"
-    """"txrx" (monostatic), "tx" or "rx" (bistatic helper)."""
-
-
-@dataclass
-class Reader:
-    kind: str = "cots"
-    """"cots", "sdr-helper" or "lora-backscatter"."""
-    phase_sign: int = 1
-    """+1: phase grows with distance; -1: it shrinks."""
-    phase_period: str = "2pi"
-    """"2pi", or "pi" for readers that report phase mod pi."""
-    phase_noise_rad: float | None = None
-    """Optional 1-sigma phase noise prior for filters, radians."""
-
-    @property
-    def period_rad(self) -> float:
-        """The phase period P in radians: 2*pi or pi."""
-        return np.pi if self.phase_period == "pi" else 2.0 * np.pi
-
-
-@dataclass
-class Region:
-    """Axis-aligned box where tags can be, metres."""
-
-    min: np.ndarray
-    max: np.ndarray
-
-
-@dataclass
-class ChannelOffset:
-    frequency_hz: float
-    phase_offset_rad: float
-
-
-@dataclass
-class Scene:
-    """A hardware set-up (``scene.toml``)."""
-
-    name: str
-    dimensions: int
-    """2 (tag moves in the plane z = plane_z) or 3."""
-    reader: Reader
-    antennas: list[Antenna]
-    plane_z: float | None = None
-    """Height of the motion plane, metres; required when dimensions == 2."""
-    region: Region | None = None
-    channel_offsets: list[ChannelOffset] = field(default_factory=list)
-    extra: dict = field(default_factory=dict)
-    """Unknown top-level tables/keys, kept so that a round trip loses nothing."""
-    hop_table: dict[int, float] = field(default_factory=dict)
-    """The reader's hop table (``[[hop_table]]``): its 1-based channel index -> carrier, hertz.
-    Empty when the scene gives none. LLRP readers report this index, not a frequency."""
-
-    def antenna_index(self, antenna_id: int) -> int:
-        """Index into ``antennas`` of the antenna with this port id (KeyError if none)."""
-        for i, a in enumerate(self.antennas):
-            if a.id == antenna_id:
-                return i
-        raise KeyError(antenna_id)
-
-    def channel_offset(self, frequency_hz: float) -> float:
-        """Calibrated offset of the channel matched within 1 kHz; 0 if none (docs/formats.md 1)."""
-        for c in self.channel_offsets:
-            if abs(c.frequency_hz - frequency_hz) <= 1e3:
-                return c.phase_offset_rad
-        return 0.0
-
-    @staticmethod
-    def load(path) -> "Scene":
-        """Read and validate a ``scene.toml`` (see :func:`scattertrack.io.read_scene`)."""
-        from scattertrack.io.scene import read_scene
-
-        return read_scene(path)
-
-    def save(self, path) -> None:
-        from scattertrack.io.scene import write_scene
-
-        write_scene(path, self)
+from scattertrack.io.errors import FormatError, InputWarning, warn_input  # noqa: F401 - the io contract's names
+from scattertrack.io.scene import Antenna, ChannelOffset, Reader, Region, Scene  # noqa: F401 - with its format
 
 
 @dataclass

@@ -6,7 +6,7 @@ the λ/2 ambiguity, a static tag has two other sources:
 
 * **frequency diversity** — over hop channels, each antenna's phase slope
   against frequency is its range, to a few centimetres
-  (:func:`~scattertrack.locate.phase.hop_range`); the ranges pick the
+  (``scattertrack_core::locate::hop_range``); the ranges pick the
   carrier-phase lattice point, which the carrier refines to millimetres;
 * **RSSI path loss** — the calibrated log-distance model per antenna
   (``[calibration] path_loss``), decimetres to a metre.
@@ -20,6 +20,15 @@ calibration says phase is not usable, or the tag's own reads reach no
 coherence above :data:`COHERENCE_USABLE`), the phase is not used and the
 position comes from RSSI alone — never a confident phase answer from
 phases that carry none.
+
+The phase model: the calibrated scene leaves, per read k of one tag, the
+phasor z_k = exp(j m (φ_k − θ_a − θ_ch)) ≈ exp(j (k_k d_k(p) + θ_tag)) with
+m = 2π/P (2 for a mod-π reader), k_k = m s 4π f_k / c (rad/m, s the phase
+sign) and θ_tag the tag's own, unknown offset; a position p explains the
+reads as well as their coherence R(p) = |Σ_k z_k exp(−j k_k d_k(p))| / n
+says, θ_tag profiled out. The search over p, the weights and covariances
+run in the Rust core (``scattertrack_core::locate``, one threaded call for
+every tag); this module adds RSSI, the fallbacks and the rows.
 
 Sigmas: the phase fit's Fisher covariance at the read-to-read noise the
 fit shows, scaled for the reads' correlation (the error of real readers
@@ -39,7 +48,7 @@ from scattertrack import _core
 from scattertrack.io.types import Reads, Scene
 from scattertrack.locate import rssi as rssi_cue
 from scattertrack.locate.candidate import Candidate, Location
-from scattertrack.locate.phase import FOUR_PI_OVER_C
+from scattertrack.physics import FOUR_PI_OVER_C
 
 TEMPERATURE = 1.0
 """Candidate weights ∝ exp(Δℓ / T): correlated phase errors overcount evidence (as in GLAC)."""
@@ -121,8 +130,8 @@ def locate(scene: Scene, reads: Reads) -> list[Location]:
 
 @dataclass
 class _Phasors:
-    """Every read's calibrated phasor and wavenumber (the phase model in
-    :mod:`scattertrack.locate.phase`), computed once for all tags."""
+    """Every read's calibrated phasor z and wavenumber k (the phase model in
+    the module docstring), computed once for all tags."""
 
     known: np.ndarray
     """Reads whose antenna is in the scene."""

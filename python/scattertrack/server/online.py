@@ -122,7 +122,7 @@ def from_reader(job: Job, request: OnlineRequest) -> dict:
     """``scattertrack live`` inside the server: until ``duration_s`` or the user's stop."""
     from scattertrack import io
     from scattertrack import track as tracking
-    from scattertrack.live_command import host_and_port
+    from scattertrack.arguments import host_and_port
     from scattertrack.readers.live import LiveSession
 
     if not request.scene_path or not request.llrp:

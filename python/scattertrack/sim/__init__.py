@@ -55,17 +55,11 @@ user guide, with the scenario schema and every default, is
 ``docs/simulator.md``.
 """
 
-from scattertrack.sim.scenario import (
-    SCENARIOS_DIR,
-    Simulation,
-    list_scenarios,
-    load_scenario,
-    resolve_scenario,
-    simulate,
-    write_simulation,
-)
+from scattertrack.sim.scenario import SCENARIOS_DIR, list_scenarios, load_scenario, simulate
+from scattertrack.sim.scenario_resolve import PIPELINES, resolve_scenario
+from scattertrack.sim.simulation import Simulation, write_simulation
 from scattertrack.sim.trajectory import positions_velocities
-from scattertrack.sim.scenario import PIPELINES, resolve_helper_model, scenario_pipeline
+from scattertrack.sim.scenario import scenario_pipeline
 from scattertrack.sim.iq import IQ_MODEL_DEFAULTS, IqSimulation, simulate_iq, simulate_iq_scenario, write_iq_simulation
 from scattertrack.sim.drone import DEFAULT_TAGS, FlightError, FlightTruth, TagLayout, flight, tag_positions
 from scattertrack.sim.imu import IMU_MODEL_DEFAULTS, simulate_imu
@@ -73,6 +67,7 @@ from scattertrack.sim.marvel import FEATURE_MODEL_DEFAULTS, simulate_marvel, sim
 from scattertrack.sim.wideband import (
     HELPER_MODEL_DEFAULTS,
     bistatic_path_lengths,
+    resolve_helper_model,
     helper_geometry,
     simulate_frames,
     static_channel,

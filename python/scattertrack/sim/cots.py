@@ -68,7 +68,8 @@ from __future__ import annotations
 import numpy as np
 
 from scattertrack.io.hop_table import US_PLAN_HZ
-from scattertrack.io.types import SPEED_OF_LIGHT, Reads
+from scattertrack.io.types import Reads
+from scattertrack.physics import SPEED_OF_LIGHT
 from scattertrack.sim.trajectory import positions_velocities
 
 US_CHANNELS_HZ = US_PLAN_HZ

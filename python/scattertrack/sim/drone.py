@@ -121,11 +121,23 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from scattertrack.sim.drone_segments import (
+    Circle,
+    Cruise,
+    Cycle,
+    Hold,
+    Leg,
+    Lemniscate,
+    Segment,
+    SequenceSegment,
+    evaluate_sequence,
+    min_jerk_integral,
+    turn_duration,
+)
 from scattertrack.sim.rotation import (
     angular_velocity_body,
     quat_from_euler_zyx,
     rotate,
-    wrap_angle,
     yaw_of_quat,
 )
 
@@ -314,232 +326,6 @@ def tag_positions(truth: FlightTruth, layout: TagLayout = DEFAULT_TAGS) -> tuple
 
 
 # --------------------------------------------------------------------------
-# profiles
-
-
-def _min_jerk(u):
-    """Minimum-jerk fraction h(u) = 10u^3 - 15u^4 + 6u^5 and its first two derivatives in u.
-
-    h(0) = 0, h(1) = 1, h' and h'' vanish at both ends: position, velocity
-    and acceleration stay continuous where segments join.
-    """
-    u = np.clip(u, 0.0, 1.0)
-    u2 = u * u
-    return (
-        u2 * u * (10.0 - 15.0 * u + 6.0 * u2),
-        30.0 * u2 * (1.0 - u) ** 2,
-        60.0 * u * (1.0 - u) * (1.0 - 2.0 * u),
-    )
-
-
-def _min_jerk_integral(u):
-    """S(u) = integral of h from 0 to u = 2.5u^4 - 3u^5 + u^6 for u in [0, 1]; S(1) = 1/2."""
-    u = np.clip(u, 0.0, 1.0)
-    u4 = u**4
-    return u4 * (2.5 - 3.0 * u + u * u)
-
-
-def _ramp(tau, speed: float, ramp_s: float):
-    """Distance (m), speed (m/s) and acceleration (m/s^2) of a speed ramp 0 -> ``speed`` over ``ramp_s``.
-
-    The speed is ``speed * h(tau / ramp_s)`` then constant: the distance is
-    ``speed * ramp_s * S(u)`` during the ramp and grows linearly after.
-    """
-    tau = np.maximum(tau, 0.0)
-    u = tau / ramp_s
-    fraction, slope, _ = _min_jerk(u)
-    distance = np.where(u < 1.0, speed * ramp_s * _min_jerk_integral(u), speed * (ramp_s / 2.0 + tau - ramp_s))
-    return distance, speed * fraction, speed * slope / ramp_s
-
-
-# --------------------------------------------------------------------------
-# segments: finite pieces of a flight, each exact at any local time tau in [0, duration)
-
-
-class _Segment:
-    duration = math.inf
-
-    def evaluate(self, tau):
-        """(position (n,3), velocity (n,3), acceleration (n,3), heading (n,)) at local times ``tau``."""
-        raise NotImplementedError
-
-    @property
-    def end_heading(self) -> float:
-        raise NotImplementedError
-
-
-class _Hold(_Segment):
-    """At rest at ``point``; the heading turns from ``heading_from`` to ``heading_to`` (minimum-jerk)."""
-
-    def __init__(self, point, duration: float, heading_from: float, heading_to: float | None = None):
-        self.point = np.asarray(point, dtype=float)
-        self.duration = duration
-        self.heading_from = heading_from
-        self.turn = 0.0 if heading_to is None else float(wrap_angle(heading_to - heading_from))
-
-    def evaluate(self, tau):
-        n = len(tau)
-        position = np.broadcast_to(self.point, (n, 3)).copy()
-        zeros = np.zeros((n, 3))
-        if self.turn == 0.0 or not math.isfinite(self.duration):
-            heading = np.full(n, self.heading_from)
-        else:
-            heading = self.heading_from + self.turn * _min_jerk(tau / self.duration)[0]
-        return position, zeros, zeros.copy(), heading
-
-    @property
-    def end_heading(self) -> float:
-        return self.heading_from + self.turn
-
-
-def _turn_duration(turn_rad: float, max_yaw_rate: float) -> float:
-    """Seconds a minimum-jerk turn of ``turn_rad`` needs at a peak rate ``max_yaw_rate`` (rad/s)."""
-    return 1.875 * abs(float(wrap_angle(turn_rad))) / max_yaw_rate
-
-
-class _Leg(_Segment):
-    """Straight minimum-jerk leg from ``start`` to ``end`` (rest at both ends) with peak speed ``speed``."""
-
-    def __init__(self, start, end, speed: float, heading: float):
-        self.start = np.asarray(start, dtype=float)
-        self.delta = np.asarray(end, dtype=float) - self.start
-        self.length = float(np.linalg.norm(self.delta))
-        self.duration = 1.875 * self.length / speed  # the peak speed of h is 1.875 L / T
-        self.heading = heading
-
-    def evaluate(self, tau):
-        fraction, slope, curvature = _min_jerk(tau / self.duration)
-        position = self.start + fraction[:, None] * self.delta
-        velocity = (slope / self.duration)[:, None] * self.delta
-        acceleration = (curvature / self.duration**2)[:, None] * self.delta
-        return position, velocity, acceleration, np.full(len(tau), self.heading)
-
-    @property
-    def end_heading(self) -> float:
-        return self.heading
-
-
-class _Cruise(_Segment):
-    """Straight leg of ``length`` along unit ``direction``: ramp up, constant ``speed``, ramp down."""
-
-    def __init__(self, start, direction, length: float, speed: float, ramp_s: float, heading: float):
-        self.start = np.asarray(start, dtype=float)
-        self.direction = np.asarray(direction, dtype=float)
-        self.length, self.speed, self.ramp_s = length, speed, ramp_s
-        # Each ramp covers speed * ramp_s / 2; the rest is at constant speed.
-        self.duration = ramp_s + length / speed
-        self.heading = heading
-
-    def evaluate(self, tau):
-        up_distance, up_speed, up_accel = _ramp(tau, self.speed, self.ramp_s)
-        remaining = self.duration - tau
-        down_distance, down_speed, down_accel = _ramp(remaining, self.speed, self.ramp_s)
-        braking = remaining < self.ramp_s
-        distance = np.where(braking, self.length - down_distance, up_distance)
-        speed = np.where(braking, down_speed, up_speed)
-        accel = np.where(braking, -down_accel, up_accel)
-        position = self.start + distance[:, None] * self.direction
-        return (
-            position,
-            speed[:, None] * self.direction,
-            accel[:, None] * self.direction,
-            np.full(len(tau), self.heading),
-        )
-
-    @property
-    def end_heading(self) -> float:
-        return self.heading
-
-
-class _Circle(_Segment):
-    """Circle at constant height from angle ``angle0``, speed ramped up from rest, for ever."""
-
-    def __init__(self, centre, radius: float, angle0: float, speed: float, ramp_s: float, clockwise: bool):
-        self.centre = np.asarray(centre, dtype=float)
-        self.radius, self.angle0, self.speed, self.ramp_s = radius, angle0, speed, ramp_s
-        self.sign = -1.0 if clockwise else 1.0
-
-    def start_heading(self) -> float:
-        return self.angle0 + self.sign * math.pi / 2.0
-
-    def evaluate(self, tau):
-        distance, speed, accel = _ramp(tau, self.speed, self.ramp_s)
-        angle = self.angle0 + self.sign * distance / self.radius
-        rate = self.sign * speed / self.radius  # rad/s
-        rate_dot = self.sign * accel / self.radius
-        radial = np.stack([np.cos(angle), np.sin(angle), np.zeros_like(angle)], axis=1)
-        tangent = np.stack([-np.sin(angle), np.cos(angle), np.zeros_like(angle)], axis=1)
-        position = self.centre + self.radius * radial
-        velocity = (self.radius * rate)[:, None] * tangent
-        acceleration = (self.radius * rate_dot)[:, None] * tangent - (self.radius * rate**2)[:, None] * radial
-        # Tangent heading: defined by the geometry even at rest, so it holds when slow.
-        return position, velocity, acceleration, angle + self.sign * math.pi / 2.0
-
-
-class _Lemniscate(_Segment):
-    """Gerono lemniscate ``centre + Rz(rotation) (A sin th, B sin th cos th, 0)``, th ramped up from 0."""
-
-    def __init__(self, centre, half_width: float, height: float, rotation: float, speed: float, ramp_s: float):
-        self.centre = np.asarray(centre, dtype=float)
-        self.a, self.b = half_width, height
-        self.rotation = rotation
-        # |dp/dth| = sqrt(A^2 cos^2 th + B^2 cos^2 2th) peaks at th = 0 with sqrt(A^2 + B^2).
-        self.phase_rate = speed / math.hypot(half_width, height)
-        self.ramp_s = ramp_s
-
-    def start_heading(self) -> float:
-        return self.rotation + math.atan2(self.b, self.a)
-
-    def evaluate(self, tau):
-        th, th_dot, th_ddot = _ramp(tau, self.phase_rate, self.ramp_s)
-        a, b = self.a, self.b
-        local = np.stack([a * np.sin(th), 0.5 * b * np.sin(2 * th)], axis=1)
-        d1 = np.stack([a * np.cos(th), b * np.cos(2 * th)], axis=1)  # dp/dth
-        d2 = np.stack([-a * np.sin(th), -2.0 * b * np.sin(2 * th)], axis=1)  # d2p/dth2
-        velocity_local = d1 * th_dot[:, None]
-        accel_local = d2 * (th_dot**2)[:, None] + d1 * th_ddot[:, None]
-        c, s = math.cos(self.rotation), math.sin(self.rotation)
-
-        def lift(xy):
-            # Element-wise (not a matrix product), so a sample's value does not depend on the batch.
-            return np.column_stack([c * xy[:, 0] - s * xy[:, 1], s * xy[:, 0] + c * xy[:, 1], np.zeros(len(xy))])
-
-        # dp/dth never vanishes (cos th = 0 makes cos 2th = -1), so the tangent heading is always defined.
-        heading = self.rotation + np.arctan2(d1[:, 1], d1[:, 0])
-        return self.centre + lift(local), lift(velocity_local), lift(accel_local), heading
-
-
-class _Cycle(_Segment):
-    """Finite segments repeated for ever (a closed pattern: square, rail back and forth)."""
-
-    def __init__(self, segments: list[_Segment]):
-        self.segments = segments
-        self.period = sum(s.duration for s in segments)
-
-    def evaluate(self, tau):
-        return _evaluate_sequence(self.segments, np.mod(tau, self.period))
-
-
-def _evaluate_sequence(segments: list[_Segment], tau: np.ndarray):
-    """Evaluate consecutive segments (the last may be infinite) at times from the first's start."""
-    n = len(tau)
-    position, velocity, acceleration = np.zeros((n, 3)), np.zeros((n, 3)), np.zeros((n, 3))
-    heading = np.zeros(n)
-    start = 0.0
-    for index, segment in enumerate(segments):
-        end = start + segment.duration
-        last = index == len(segments) - 1
-        pick = tau >= start if last else (tau >= start) & (tau < end)
-        if index == 0:
-            pick |= tau < start
-        if pick.any():
-            p, v, a, h = segment.evaluate(tau[pick] - start)
-            position[pick], velocity[pick], acceleration[pick], heading[pick] = p, v, a, h
-        start = end
-    return position, velocity, acceleration, heading
-
-
-# --------------------------------------------------------------------------
 # building a flight from its parameters
 
 
@@ -659,9 +445,9 @@ class _Plan:
         altitude = data["altitude"]
         hover_point = np.array([0.0, 0.0, altitude])
         yaw0 = data["yaw_rad"]
-        segments: list[_Segment] = [_Hold(np.zeros(3), data["ground_s"], yaw0)]
+        segments: list[Segment] = [Hold(np.zeros(3), data["ground_s"], yaw0)]
         if altitude > 0.0:
-            segments.append(_Leg(np.zeros(3), hover_point, data["climb_speed"], yaw0))
+            segments.append(Leg(np.zeros(3), hover_point, data["climb_speed"], yaw0))
         pattern, start_point, first_heading = self._pattern(hover_point)
         velocity_yaw = data["yaw"] == "velocity"
         max_rate = data["max_yaw_rate"]
@@ -670,16 +456,16 @@ class _Plan:
         if np.linalg.norm(transit) > 1e-9:
             # Fly to the pattern's start, facing the way there when yaw follows the velocity.
             transit_heading = math.atan2(transit[1], transit[0]) if velocity_yaw else yaw0
-            turn = _turn_duration(transit_heading - heading, max_rate) if velocity_yaw else 0.0
-            segments.append(_Hold(hover_point, max(data["hover_s"], turn), heading, transit_heading))
-            segments.append(_Leg(hover_point, start_point, data.get("speed", 1.0), transit_heading))
+            turn = turn_duration(transit_heading - heading, max_rate) if velocity_yaw else 0.0
+            segments.append(Hold(hover_point, max(data["hover_s"], turn), heading, transit_heading))
+            segments.append(Leg(hover_point, start_point, data.get("speed", 1.0), transit_heading))
             heading = transit_heading
             hover_before_pattern = 0.0
         else:
             hover_before_pattern = data["hover_s"]
         target = first_heading if velocity_yaw else heading
-        turn = _turn_duration(target - heading, max_rate) if velocity_yaw else 0.0
-        segments.append(_Hold(start_point, max(hover_before_pattern, turn), heading, target))
+        turn = turn_duration(target - heading, max_rate) if velocity_yaw else 0.0
+        segments.append(Hold(start_point, max(hover_before_pattern, turn), heading, target))
         self.pattern_start = sum(s.duration for s in segments)
         segments.append(pattern)
         self.segments = segments
@@ -694,18 +480,18 @@ class _Plan:
         velocity_yaw = d["yaw"] == "velocity"
         max_rate = d["max_yaw_rate"]
         if kind in ("hover", "turntable"):
-            return _Hold(hover_point, math.inf, yaw0), hover_point, yaw0
+            return Hold(hover_point, math.inf, yaw0), hover_point, yaw0
         if kind == "circle":
             radius = d["radius"]
             centre = np.array([*d.get("centre", [radius, 0.0]), altitude])
             away = hover_point - centre
             angle0 = math.atan2(away[1], away[0]) if np.linalg.norm(away[:2]) > 1e-9 else 0.0
             start = centre + radius * np.array([math.cos(angle0), math.sin(angle0), 0.0])
-            circle = _Circle(centre, radius, angle0, d["speed"], d["ramp_s"], d["clockwise"])
+            circle = Circle(centre, radius, angle0, d["speed"], d["ramp_s"], d["clockwise"])
             return circle, start, circle.start_heading()
         if kind == "figure-eight":
             centre = np.array([*d["centre"], altitude])
-            eight = _Lemniscate(centre, d["size"][0] / 2.0, d["size"][1], d["rotation_rad"], d["speed"], d["ramp_s"])
+            eight = Lemniscate(centre, d["size"][0] / 2.0, d["size"][1], d["rotation_rad"], d["speed"], d["ramp_s"])
             return eight, centre, eight.start_heading()
         if kind == "square":
             corner = np.array([*d["corner"], altitude])
@@ -717,17 +503,17 @@ class _Plan:
                 side = d["side"] if index % 2 == 0 else d["side_y"]
                 end = point + side * np.array([math.cos(heading), math.sin(heading), 0.0])
                 next_heading = heading + sign * math.pi / 2.0
-                leg = _Leg(point, end, d["speed"], heading)
+                leg = Leg(point, end, d["speed"], heading)
                 if velocity_yaw:
-                    pause = max(d["pause_s"], _turn_duration(next_heading - heading, max_rate))
-                    hold = _Hold(end, pause, heading, next_heading)
+                    pause = max(d["pause_s"], turn_duration(next_heading - heading, max_rate))
+                    hold = Hold(end, pause, heading, next_heading)
                 else:
                     leg.heading = yaw0
-                    hold = _Hold(end, d["pause_s"], yaw0)
+                    hold = Hold(end, d["pause_s"], yaw0)
                 legs += [leg, hold]
                 point = end
             first = d["rotation_rad"] if velocity_yaw else yaw0
-            return _Cycle(legs), corner, first
+            return Cycle(legs), corner, first
         if kind == "rail":
             direction = np.asarray(d["direction"], dtype=float)
             direction = direction / np.linalg.norm(direction)
@@ -736,20 +522,20 @@ class _Plan:
             if not velocity_yaw:
                 out_heading = back_heading = yaw0
             end = hover_point + d["length"] * direction
-            out = _Cruise(hover_point, direction, d["length"], d["speed"], d["ramp_s"], out_heading)
+            out = Cruise(hover_point, direction, d["length"], d["speed"], d["ramp_s"], out_heading)
             if not d["back_and_forth"]:
-                return _SequenceSegment([out, _Hold(end, math.inf, out_heading)]), hover_point, out_heading
+                return SequenceSegment([out, Hold(end, math.inf, out_heading)]), hover_point, out_heading
             pause = d["pause_s"]
             if velocity_yaw:
-                pause = max(pause, _turn_duration(math.pi, max_rate))
-            back = _Cruise(end, -direction, d["length"], d["speed"], d["ramp_s"], back_heading)
+                pause = max(pause, turn_duration(math.pi, max_rate))
+            back = Cruise(end, -direction, d["length"], d["speed"], d["ramp_s"], back_heading)
             cycle = [
                 out,
-                _Hold(end, pause, out_heading, back_heading),
+                Hold(end, pause, out_heading, back_heading),
                 back,
-                _Hold(hover_point, pause, back_heading, out_heading),
+                Hold(hover_point, pause, back_heading, out_heading),
             ]
-            return _Cycle(cycle), hover_point, out_heading
+            return Cycle(cycle), hover_point, out_heading
         raise FlightError("kind", f"unknown kind {kind!r}")
 
     # --- yaw = "rate" -----------------------------------------------------
@@ -783,7 +569,7 @@ class _Plan:
         tau = np.maximum(t - self.pattern_start, 0.0)
         first = self.levels[0]
         # Spin-up 0 -> first level: integral first * spin_up * S(u).
-        yaw = d["yaw_rad"] + first * spin_up * _min_jerk_integral(tau / spin_up)
+        yaw = d["yaw_rad"] + first * spin_up * min_jerk_integral(tau / spin_up)
         after = tau - spin_up
         running = after > 0.0
         if len(self.levels) == 1:
@@ -798,7 +584,7 @@ class _Plan:
         level = self.levels[index]
         jump = self.levels[index + 1] - level
         step_s = d["step_s"]
-        transition = step_s * _min_jerk_integral((local - (self.plateau_s - step_s)) / step_s)
+        transition = step_s * min_jerk_integral((local - (self.plateau_s - step_s)) / step_s)
         partial = self.cumulative[index] + level * local + jump * transition
         return yaw + np.where(running, cycles * period + partial, 0.0)
 
@@ -808,7 +594,7 @@ class _Plan:
         """(position, velocity, acceleration, yaw) at log times ``t`` (s); flight time
         ``t + log_start_s`` below 0 is at rest."""
         t = np.maximum(np.asarray(t, dtype=float) + self.data["log_start_s"], 0.0)
-        position, velocity, acceleration, heading = _evaluate_sequence(self.segments, t)
+        position, velocity, acceleration, heading = evaluate_sequence(self.segments, t)
         profile = self.data["yaw"]
         if profile == "fixed":
             yaw = np.full(len(t), self.data["yaw_rad"])
@@ -837,16 +623,6 @@ class _Plan:
         roll = np.arctan2(-y, np.hypot(x, z))
         pitch = np.arctan2(x, z)
         return quat_from_euler_zyx(yaw, pitch, roll)
-
-
-class _SequenceSegment(_Segment):
-    """Consecutive segments as one (the last infinite): a one-way rail."""
-
-    def __init__(self, segments):
-        self.segments = segments
-
-    def evaluate(self, tau):
-        return _evaluate_sequence(self.segments, tau)
 
 
 def flight(params: dict, t) -> FlightTruth:

@@ -3,7 +3,7 @@
 Where :mod:`scattertrack.sim.wideband` jumps straight to the channel
 estimates, this simulator produces what the helper's receivers sample
 (thesis ch. 4 and 6), so that the DSP (``crates/dsp``, reached through
-:func:`scattertrack.io.sigmf.read_sigmf_frames`) can be tested end to end.
+:func:`scattertrack.dsp.read_sigmf_frames`) can be tested end to end.
 
 What it models (every random draw from ``numpy.random.default_rng(seed)``,
 split into independent streams; defaults in :data:`IQ_MODEL_DEFAULTS`):
@@ -582,7 +582,8 @@ def simulate_iq_scenario(scenario: dict, seed: int | None = None, duration_s: fl
     it. ``duration_s``: default :data:`IQ_DEFAULT_DURATION_S` (not the
     scenario's, usually tens of seconds). Same inputs, same output.
     """
-    from scattertrack.sim.scenario import _simulate_helper, resolve_scenario
+    from scattertrack.sim.scenario import _simulate_helper
+    from scattertrack.sim.scenario_resolve import resolve_scenario
 
     if seed is not None:
         scenario = {**scenario, "seed": seed}

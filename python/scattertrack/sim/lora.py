@@ -112,10 +112,10 @@ from collections.abc import Callable
 
 import numpy as np
 
+from scattertrack.dsp.channel import bent_leg_lengths
 from scattertrack.io.sigmf_lora import LoraRecording
-from scattertrack.io.types import SPEED_OF_LIGHT
-from scattertrack.sim.rotation import quat_to_matrix, wrap_angle
-from scattertrack.sim.wideband import bent_leg_lengths
+from scattertrack.physics import SPEED_OF_LIGHT, wrap_angle
+from scattertrack.sim.rotation import quat_to_matrix
 
 BOLTZMANN = 1.380649e-23
 """Boltzmann constant, J/K."""

@@ -15,14 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
-
-def wrap_angle(angle_rad):
-    """Angle(s) wrapped to (-pi, pi], radians (docs/marvel.md section 1).
-
-    ``pi - ((pi - a) mod 2 pi)`` maps -pi to +pi, closing the interval at +pi
-    as the contract states (the same formula as the fusion's).
-    """
-    return np.pi - np.mod(np.pi - np.asarray(angle_rad, dtype=float), 2.0 * np.pi)
+from scattertrack.physics import wrap_angle
 
 
 def quat_multiply(p, q) -> np.ndarray:

@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scattertrack.io.sigmf import SigmfCalibration, calibrate_sigmf, read_sigmf, Recording, _dsp, _positions
+from scattertrack.dsp.ofdm import SigmfCalibration, calibrate_sigmf, helper_positions as _positions, ofdm_dsp as _dsp
+from scattertrack.io.sigmf import read_sigmf, Recording
 from scattertrack.io.sigmf_scene import check_calibration
 from scattertrack.io.types import Scene, SkipReport, Track
 from scattertrack.track import wideband

@@ -8,7 +8,7 @@ import warnings
 import numpy as np
 import pytest
 
-from scattertrack import io
+from scattertrack import dsp, io
 from scattertrack.io import FormatError, InputWarning
 from scattertrack.io.types import Antenna, Reader, Region, Scene
 from scattertrack.sim import iq
@@ -84,7 +84,7 @@ def test_a_scene_tx_named_as_an_rx_is_rejected(copy):
     scene = helper_scene()
     scene.antennas[0].role, scene.antennas[1].role = "rx", "tx"
     with pytest.raises(FormatError, match="antenna 0 is not a 'tx' antenna") as error:
-        io.read_sigmf_frames(copy / "recording.sigmf-meta", scene)
+        dsp.read_sigmf_frames(copy / "recording.sigmf-meta", scene)
     assert error.value.column == "global.scattertrack:tx_id"
 
 
@@ -93,7 +93,7 @@ def test_scene_positions_beyond_5_cm_of_the_recordings_warn(copy, moved_m, warne
     scene = helper_scene()
     scene.antennas[2].position = scene.antennas[2].position + [0.0, moved_m, 0.0]
     meta = copy / "recording.sigmf-meta"
-    found = input_warnings(lambda: io.estimate_sigmf(meta, scene))
+    found = input_warnings(lambda: dsp.estimate_sigmf(meta, scene))
     assert [(w.path, w.column) for w in found] == ([(str(meta), f"global.{ANTENNAS}[2].position")] if warned else [])
     if warned:
         assert "antenna 2 is at (0.800, 0.400, 0.000) m in the recording but at (0.800, 0.460, 0.000) m" in found[0].message
@@ -103,15 +103,15 @@ def test_scene_positions_beyond_5_cm_of_the_recordings_warn(copy, moved_m, warne
 def test_scene_helper_table_other_than_the_recordings_warns(copy):
     scene = helper_scene()
     scene.extra["helper"] = {"bandwidth_hz": 50e6, "n_subcarriers": 20}
-    (warning,) = input_warnings(lambda: io.estimate_sigmf(copy / "recording.sigmf-meta", scene))
+    (warning,) = input_warnings(lambda: dsp.estimate_sigmf(copy / "recording.sigmf-meta", scene))
     assert warning.column == "global.scattertrack:bandwidth_hz" and "[helper] bandwidth_hz = 50000000.0" in warning.message
 
 
 def test_a_calibration_of_other_receivers_is_rejected_naming_it(copy):
-    calibration = io.calibrate_sigmf(copy / "calibration.sigmf-meta", helper_scene())
+    calibration = dsp.calibrate_sigmf(copy / "calibration.sigmf-meta", helper_scene())
     calibration.rx_ids = [1, 2, 3]
     with pytest.raises(FormatError) as error:
-        io.estimate_sigmf(copy / "recording.sigmf-meta", helper_scene(), calibration)
+        dsp.estimate_sigmf(copy / "recording.sigmf-meta", helper_scene(), calibration)
     assert error.value.path == str(copy / "calibration.sigmf-meta")
     assert error.value.column == "global.scattertrack:channels" and "another set-up" in error.value.message
 
@@ -124,17 +124,17 @@ def test_a_calibration_without_its_tag_position_is_rejected(copy, value, fragmen
     else:
         edit_meta(meta, lambda g: g["scattertrack:calibration"].__setitem__("tag_position", value))
     with pytest.raises(FormatError) as error:
-        io.estimate_sigmf(copy / "recording.sigmf-meta", helper_scene(), meta)
+        dsp.estimate_sigmf(copy / "recording.sigmf-meta", helper_scene(), meta)
     assert (error.value.path, error.value.column) == (str(meta), "global.scattertrack:calibration.tag_position")
     assert fragment in error.value.message
 
 
 def test_a_missing_calibration_recording_is_rejected(copy):
     with pytest.raises(FormatError, match="metadata file not found") as error:
-        io.estimate_sigmf(copy / "recording.sigmf-meta", helper_scene(), copy / "elsewhere.sigmf-meta")
+        dsp.estimate_sigmf(copy / "recording.sigmf-meta", helper_scene(), copy / "elsewhere.sigmf-meta")
     assert error.value.path == str(copy / "elsewhere.sigmf-meta")
 
 
 def test_the_written_recording_is_quiet(written):
-    assert input_warnings(lambda: io.estimate_sigmf(written / "recording.sigmf-meta", helper_scene(),
+    assert input_warnings(lambda: dsp.estimate_sigmf(written / "recording.sigmf-meta", helper_scene(),
                                                     written / "calibration.sigmf-meta")) == []

@@ -7,7 +7,8 @@ import pytest
 
 from scattertrack import eval as evaluation
 from scattertrack import io
-from scattertrack.io.sigmf import calibrate_sigmf, read_sigmf, read_sigmf_frames
+from scattertrack.dsp import calibrate_sigmf, read_sigmf_frames
+from scattertrack.io.sigmf import read_sigmf
 from scattertrack.io.types import Antenna, Reader, Region, Scene
 from scattertrack.sim import iq
 from scattertrack.track import run
@@ -150,7 +151,7 @@ def test_a_window_that_cannot_be_read_is_counted(session, tmp_path):
 
 
 def test_the_binding_wants_exactly_one_source(session):
-    from scattertrack.io.sigmf import _dsp
+    from scattertrack.dsp.ofdm import ofdm_dsp as _dsp
     from scattertrack.track import wideband
 
     _, out = session

@@ -21,22 +21,10 @@
 //! 3 m/s, which biases the range by ~0.9 m (the Doppler-blind baseline's
 //! error, paper Fig. 9).
 
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::TAU;
 
-/// Wraps an angle to `(-pi, pi]`, rad (docs/marvel.md section 1: one shared
-/// function for every angle of the pipeline). Idempotent; non-finite input
-/// stays non-finite.
-pub fn wrap_angle(angle: f64) -> f64 {
-    let w = angle - TAU * (angle / TAU).round();
-    // round() leaves w in [-pi, pi]; map -pi (and rounding spill) into range.
-    if w <= -PI {
-        w + TAU
-    } else if w > PI {
-        w - TAU
-    } else {
-        w
-    }
-}
+/// Angles wrap to `(-pi, pi]`: the workspace's one function for it, in the core.
+pub use scattertrack_core::angle::wrap_angle;
 
 /// Phase `phase_rad` observed at time `from_s` moved to `to_s` (s) by
 /// removing a constant frequency offset's ramp, `phase - 2 pi offset (from -
@@ -91,21 +79,6 @@ pub fn channel_phase(
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn wrap_is_in_range_and_idempotent() {
-        for i in -2000..2000 {
-            let x = i as f64 * 0.0137 - 0.5;
-            let w = wrap_angle(x);
-            assert!(w > -PI && w <= PI, "{x} -> {w}");
-            assert_eq!(wrap_angle(w), w);
-            assert!(((x - w) / TAU - ((x - w) / TAU).round()).abs() < 1e-9);
-        }
-        assert_eq!(wrap_angle(PI), PI);
-        assert_eq!(wrap_angle(-PI), PI);
-        assert_eq!(wrap_angle(3.0 * PI), PI);
-        assert!(wrap_angle(f64::NAN).is_nan());
-    }
 
     #[test]
     fn ramp_removal_brings_both_chirps_to_one_time() {
