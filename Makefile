@@ -15,7 +15,7 @@ export CARGO_TERM_COLOR ?= never
 RUST_TARGET_CPU ?= native
 export RUSTFLAGS ?= -C target-cpu=$(RUST_TARGET_CPU)
 
-.PHONY: setup demo demo-live test test-rust test-python bench clean
+.PHONY: setup demo demo-live test test-rust test-python bench results clean
 
 # One shared set-up: a virtualenv with pinned dependencies, the Rust
 # extension built in release mode and the package installed (editable), so
@@ -69,17 +69,14 @@ test-python:
 	@echo "test: Python (python/tests and the examples in docs/)"
 	$(PY) -m pytest -q python/tests docs
 
+# The benchmarks (their list is bench/results.py's BENCHMARKS): each one's
+# output is shown and kept in out/bench/; `bench` renders them into
+# out/bench/results.md, `results` into docs/results.md (never edited by hand).
 bench: setup
-	cargo bench -p scattertrack-core --bench glac --bench turbotrack -- --quick
-	cargo bench -p scattertrack-dsp --bench dsp -- --quick
-	$(PY) bench/run.py
-	$(PY) bench/glac_ambiguity.py --seeds 100
-	$(PY) bench/glac_ambiguity.py --scenario glac-2d-40cms-modpi --seeds 100 --q 2
-	$(PY) bench/glac_robustness.py --seeds 100 --json out/bench/glac_robustness.json
-	$(PY) bench/turbotrack.py
-	$(PY) bench/marvel.py
-	$(PY) bench/live.py
-	$(PY) bench/calibration.py
+	$(PY) bench/results.py
+
+results: setup
+	$(PY) bench/results.py --write docs/results.md
 
 clean:
 	rm -rf target out $(VENV) python/scattertrack/*.so web/dist web/node_modules
