@@ -16,7 +16,9 @@ import math
 import numpy as np
 
 from scattertrack.fusion.divergence import is_plausible_controller
-from scattertrack.fusion.estimator import DECLINE_REASONS, IMU_DECLINE_REASONS, MarvelEstimator, MarvelParams
+from scattertrack.fusion.declines import DECLINE_REASONS, IMU_DECLINE_REASONS
+from scattertrack.fusion.estimator import MarvelEstimator
+from scattertrack.fusion.params import MarvelParams
 from scattertrack.io.types import Features, Imu, Scene, SkipReport, Track
 
 EPC = "drone"
