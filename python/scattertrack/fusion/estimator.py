@@ -30,7 +30,8 @@ sequence of named steps, each in the mixin of its concept: the IMU stream
 (:mod:`.imu`), the first state and the controller (:mod:`.take_off`), the
 ground phase (:mod:`.ground`), multipath (:mod:`.multipath`), gating
 (:mod:`.gating`), the measurement factors (:mod:`.measurements`), the
-barometer (:mod:`.barometer`), the window (:mod:`.window`), the read-out
+barometer (:mod:`.barometer`), the window (:mod:`.window`) and its work
+between epochs (:mod:`.between_epochs`), the read-out
 (:mod:`.readout`), restarts (:mod:`.restart`) and the revised track
 (:mod:`.revised`).
 """
@@ -45,6 +46,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, V, X
 
 from scattertrack.fusion.barometer import Barometer
+from scattertrack.fusion.between_epochs import BetweenEpochs
 from scattertrack.fusion.declines import DECLINE_REASONS, IMU_DECLINE_REASONS
 from scattertrack.fusion.estimate import Estimate, FeatureRow, finite_or
 from scattertrack.fusion.gating import Gating, chi_square_gate
@@ -73,7 +75,8 @@ __all__ = [
 
 
 class MarvelEstimator(
-    ImuStream, TakeOff, GroundPhase, Multipath, Gating, FeatureFactors, Barometer, Window, Readout, Restarts, RevisedTrack
+    ImuStream, TakeOff, GroundPhase, Multipath, Gating, FeatureFactors, Barometer, Window, BetweenEpochs, Readout, Restarts,
+    RevisedTrack,
 ):
     """Causal backscatter-inertial fusion: feed IMU samples and feature rows in time order.
 
@@ -110,6 +113,7 @@ class MarvelEstimator(
         self._init_multipath()
         self._init_gating()
         self._init_barometer()
+        self._init_between_epochs()
         self._init_window()
         self._init_restarts()
         self._init_revised()
@@ -141,6 +145,9 @@ class MarvelEstimator(
         """One feature row (docs/formats.md section 7): adds the epoch's state and
         factors, updates the smoother and returns the newest state's estimate;
         ``None`` when the row is declined."""
+        if self._between_epochs_due:
+            # No IMU sample since the last epoch: its work runs now.
+            self._run_between_epochs()
         started = time.perf_counter()
         cpu_started = time.thread_time()
         row = self._admit(time_s, range_m, azimuth_rad, elevation_rad, yaw_rad, range_sigma_m, angle_sigma_rad, yaw_sigma_rad)
@@ -182,7 +189,7 @@ class MarvelEstimator(
             if ground_slots:
                 self._record_ground(k, row.time_s, ground_slots)
             for _ in range(self.params.extra_iterations):
-                self._smoother.update()
+                self._smoother_update()
             estimate = self._read_estimate(row.time_s, used)
         except Diverged as failure:
             return self._diverge(k, row.time_s, predicted, "diverged", row.restart_row, str(failure))
@@ -248,15 +255,15 @@ class MarvelEstimator(
 
     def _accept(self, k: int, stamp: float, estimate: Estimate) -> None:
         """After a good update: state ``k`` joins the window at its ``stamp``
-        (s), the next bucket's revised rows are read ahead when it is time,
-        recovery is counted, and the next interval integrates against the
-        newest bias estimate."""
+        (s), recovery is counted, the next interval integrates against the
+        newest bias estimate, and the work between epochs is scheduled
+        (:mod:`scattertrack.fusion.between_epochs`)."""
         self._window[k] = (stamp, estimate)
-        self._prefetch(estimate.time_s)
         self._count_recovery()
         self._last_epoch_time = estimate.time_s
         self._restart_integration()
         self.epochs += 1
+        self._schedule_between_epochs(estimate.time_s)
 
     def _decline(self, reason: str) -> None:
         """Counts a declined row; returns None, the value add_features gives for it."""
@@ -271,6 +278,12 @@ class MarvelEstimator(
     def cpu_latency(self) -> Latency | None:
         """The thread CPU time per accepted row as a :class:`~scattertrack.fusion.latency.Latency`."""
         return Latency.of(self.cpu_times_s)
+
+    def between_epochs_latency(self) -> Latency | None:
+        """The wall time of each relinearisation between epochs as a
+        :class:`~scattertrack.fusion.latency.Latency` (None without any;
+        :mod:`scattertrack.fusion.window`)."""
+        return Latency.of(self.between_epochs_times_s)
 
     def latency_ns(self) -> dict[str, float]:
         """Quantiles of the wall time per accepted feature row, ns (``p50``, ``p99``, ``mean``, ``max``)."""

@@ -68,7 +68,12 @@ class ImuStream:
         """One IMU sample: specific force (m/s^2) and angular rate (rad/s) in
         the body frame, optional barometric height (m). Samples must come in
         increasing time; a sample not after the previous one, or with a
-        non-finite value, is ignored and counted in :attr:`imu_declined`."""
+        non-finite value, is ignored and counted in :attr:`imu_declined`.
+
+        The first sample after an epoch first runs the work between epochs
+        (timed apart: :mod:`scattertrack.fusion.between_epochs`)."""
+        if self._between_epochs_due:
+            self._run_between_epochs()
         started = time.perf_counter()
         try:
             self._add_imu(float(time_s), np.asarray(accel, dtype=float), np.asarray(gyro, dtype=float), baro_z)

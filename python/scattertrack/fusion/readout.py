@@ -24,12 +24,35 @@ class Readout:
     """Read-out methods of :class:`~scattertrack.fusion.estimator.MarvelEstimator`."""
 
     def _read_estimate(self, time_s: float, used: dict) -> Estimate:
-        """The :class:`Estimate` of the newest state ``k`` at ``time_s`` (s), with
-        the row's ``used`` measurements; the estimator's newest-state caches
-        (navigation state, bias, controller, covariances) follow it.
+        """The :class:`Estimate` of the newest state at ``time_s`` (s), with the
+        row's ``used`` measurements (:meth:`_read_state`)."""
+        pose, velocity = self._read_state()
+        if self.params.compute_sigma:
+            sigma = np.sqrt(np.clip(np.diag(self._cov_position), 0.0, None))
+            controller_sigma = np.sqrt(np.clip(np.diag(self._cov_controller), 0.0, None))
+        else:
+            sigma = np.full(3, np.nan)
+            controller_sigma = np.full(3, np.nan)
+        return Estimate(
+            time_s=time_s,
+            position=np.asarray(pose.translation(), dtype=float),
+            velocity=velocity,
+            orientation=_quaternion(pose),
+            sigma=sigma,
+            controller=self._controller.copy(),
+            controller_sigma=controller_sigma,
+            accel_bias=np.asarray(self._bias.accelerometer(), dtype=float),
+            gyro_bias=np.asarray(self._bias.gyroscope(), dtype=float),
+            used=used,
+        )
+
+    def _read_state(self):
+        """The newest state ``k``'s pose and velocity from the smoother; the
+        estimator's newest-state caches (navigation state, bias, controller,
+        barometer offset, multipath, covariances) follow it.
 
         Raises RuntimeError for a non-finite estimate and :class:`Diverged`
-        for one beyond the physical bounds."""
+        for one beyond the physical bounds, before any cache changes."""
         k = self._key
         smoother = self._smoother
         pose = smoother.calculateEstimatePose3(X(k))
@@ -54,24 +77,7 @@ class Readout:
         self._nav = gtsam.NavState(pose, velocity)
         if p.compute_sigma or self._gate is not None:
             self._read_covariances(k, pose)
-        if p.compute_sigma:
-            sigma = np.sqrt(np.clip(np.diag(self._cov_position), 0.0, None))
-            controller_sigma = np.sqrt(np.clip(np.diag(self._cov_controller), 0.0, None))
-        else:
-            sigma = np.full(3, np.nan)
-            controller_sigma = np.full(3, np.nan)
-        return Estimate(
-            time_s=time_s,
-            position=np.asarray(pose.translation(), dtype=float),
-            velocity=velocity,
-            orientation=_quaternion(pose),
-            sigma=sigma,
-            controller=self._controller.copy(),
-            controller_sigma=controller_sigma,
-            accel_bias=np.asarray(self._bias.accelerometer(), dtype=float),
-            gyro_bias=np.asarray(self._bias.gyroscope(), dtype=float),
-            used=used,
-        )
+        return pose, velocity
 
     def _read_covariances(self, k: int, pose) -> None:
         """The marginal covariances of state ``k`` (its ``pose``) and the

@@ -135,7 +135,7 @@ class Restarts:
             stamps[RANGE_BIAS] = time_s
         self._baro_chain = False  # a new barometer offset chain starts with the next epoch
         self._multipath_chain = False  # and a new multipath chain
-        self._smoother.update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
+        self._smoother_update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
         self._nav = nav
         self._bias = bias
         self._controller = np.asarray(controller, dtype=float).copy()

@@ -143,7 +143,9 @@ def finish_run(
     latency records ``latency`` (wall) and ``cpu_latency`` (thread CPU, both
     :class:`~scattertrack.fusion.latency.Latency`), their quantiles in ns
     (``time_ns_p50``, ``time_ns_p99``, ``time_ns_max``, ``cpu_time_ns_*``),
-    then the caller's ``stats``.
+    the work between epochs' record ``between_epochs_latency`` (wall; None
+    without any: :mod:`scattertrack.fusion.between_epochs`) and its
+    ``between_epochs_time_ns_max``, then the caller's ``stats``.
     """
     estimator.finish()
     skipped = SkipReport()
@@ -177,6 +179,7 @@ def finish_run(
 
     wall = estimator.latency()
     cpu = estimator.cpu_latency()
+    between = estimator.between_epochs_latency()
     track = track_from_estimates(rows, skipped)
     attach_revised(track, estimator)
     rest_test = estimator.rest_test
@@ -211,6 +214,8 @@ def finish_run(
             "cpu_time_ns_p50": cpu.p50_ns if cpu else math.nan,
             "cpu_time_ns_p99": cpu.p99_ns if cpu else math.nan,
             "cpu_time_ns_max": cpu.max_ns if cpu else math.nan,
+            "between_epochs_latency": between,
+            "between_epochs_time_ns_max": between.max_ns if between else math.nan,
             "epoch_times_ns": np.asarray(estimator.wall_times_s, dtype=float) * 1e9,
             "imu_time_ns_per_sample": estimator.imu_wall_time_s * 1e9 / max(estimator.imu_samples, 1),
             **(stats or {}),

@@ -6,7 +6,9 @@ than the lag) solves eq. 10 of the paper (sec. IV-D). Each state's stamp is
 the end of its ``marginalize_every_s`` bucket, so states leave in groups,
 once per bucket; the lag is ``smoother_lag_s``, longer while the heading is
 held (``heading_hold_sigma_rad``). The revised rows read before a state
-leaves are :mod:`scattertrack.fusion.revised`.
+leaves are :mod:`scattertrack.fusion.revised`; the updates that run between
+epochs (relinearisation, the end of the heading hold) are
+:mod:`scattertrack.fusion.between_epochs`.
 """
 
 from __future__ import annotations
@@ -34,13 +36,20 @@ class Window:
         p = self.params
         isam_params = gtsam.ISAM2Params()
         isam_params.setRelinearizeThreshold(p.relinearize_threshold)
-        isam_params.relinearizeSkip = p.relinearize_skip
+        isam_params.relinearizeSkip = self._relinearization_period()
         # QR on the Jacobian instead of Cholesky on J^T J: the bias random
         # walk between 0.1 s epochs (1/sigma ~ 2e5 for the gyroscope) next to
         # metre-level feature noise gives cond(J) ~ 1e6, cond(J^T J) ~ 1e12,
         # where iSAM2's Cholesky reports an indeterminate system.
         isam_params.setFactorization(p.factorization)
+        self._updates = 0  # updates of this smoother (iSAM2's update count)
+        self._lag_pending: float | None = None  # a shorter lag, applied between epochs
         return gtsam.IncrementalFixedLagSmoother(p.smoother_lag_s, isam_params)
+
+    def _smoother_update(self, *arguments) -> None:
+        """One update of the smoother (its arguments), counted."""
+        self._updates += 1
+        self._smoother.update(*arguments)
 
     def _stamp(self, time_s: float) -> float:
         """The smoother's time stamp of a state at ``time_s`` (s): the end of
@@ -68,6 +77,11 @@ class Window:
             self.heading_hold_end_s = time_s
         return p.smoother_lag_s
 
+    def _set_lag(self, lag: float) -> None:
+        if lag != self._lag:
+            self._smoother.setSmootherLag(lag)
+            self._lag = lag
+
     def _update_window(self, graph, initial, stamps: dict[int, float], time_s: float) -> dict[int, float]:
         """Adds this epoch's ``graph`` and ``initial`` values to the smoother,
         with the states' times ``stamps`` (s) turned into their bucket stamps
@@ -75,16 +89,19 @@ class Window:
 
         The update marginalises the states stamped before now - lag (a whole
         bucket at once: see ``marginalize_every_s``): their last revision is
-        the smoother's estimate now, before the update. Raises what the
-        smoother raises (RuntimeError for an indeterminate system)."""
+        the smoother's estimate now, before the update. A shorter lag (the
+        heading hold's end: seconds of states at once) waits for the update
+        between this epoch and the next. Raises what the smoother raises
+        (RuntimeError for an indeterminate system)."""
         stamps = {key: self._stamp(t) for key, t in stamps.items()}
         lag = self._lag_for(time_s)
-        if lag != self._lag:
-            self._smoother.setSmootherLag(lag)
-            self._lag = lag
-        self._release(self._stamp(time_s) - lag)
+        if lag < self._lag:
+            self._lag_pending = lag
+        else:
+            self._set_lag(lag)
+        self._release(self._stamp(time_s) - self._lag)
         removals, self._pending_removals = self._pending_removals, []
-        self._smoother.update(graph, initial, stamps, removals)
+        self._smoother_update(graph, initial, stamps, removals)
         return stamps
 
 
