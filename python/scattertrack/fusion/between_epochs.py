@@ -19,8 +19,7 @@ next row), else at the start of the next row, timed apart
 2. the end of the heading hold (``heading_hold_sigma_rad``): the lag drops
    from the seconds held to ``smoother_lag_s`` and those seconds of states
    leave the window in one update (45-80 ms of thread CPU time on the
-   circle, 7 s held, measured). Stepped down a bucket per run instead, the
-   rows between re-eliminated the held window on each update (35-115 ms);
+   circle, 7 s held, measured);
 3. the revised rows read ahead of their bucket's marginalisation
    (:meth:`RevisedTrack._prefetch`, 5-8 ms): read between epochs they are
    the same rows, the smoother being the same.
@@ -30,7 +29,8 @@ it orders last; its ordering then left the next rows' updates
 re-eliminating twice the variables (41-51 against 24 per update,
 measured). So these updates carry zero-information priors (sigma
 infinite: they change no estimate) on the keys the next row touches,
-removed with that row's update.
+removed with that row's update. Measurements and what was tried:
+docs/notes/marvel-epoch-budget.md.
 """
 
 from __future__ import annotations
