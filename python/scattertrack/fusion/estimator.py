@@ -47,11 +47,11 @@ from gtsam.symbol_shorthand import B, V, X
 
 from scattertrack.fusion.barometer import Barometer
 from scattertrack.fusion.between_epochs import BetweenEpochs
-from scattertrack.fusion.declines import DECLINE_REASONS, IMU_DECLINE_REASONS
+from scattertrack.fusion.declines import DECLINE_REASONS
 from scattertrack.fusion.estimate import Estimate, FeatureRow, finite_or
-from scattertrack.fusion.gating import Gating, chi_square_gate
+from scattertrack.fusion.gating import Gating
 from scattertrack.fusion.ground import GroundPhase
-from scattertrack.fusion.imu import ImuStream, tilt_from_specific_force
+from scattertrack.fusion.imu import ImuStream
 from scattertrack.fusion.keys import CONTROLLER, RANGE_BIAS
 from scattertrack.fusion.latency import Latency
 from scattertrack.fusion.measurements import FeatureFactors
@@ -63,15 +63,8 @@ from scattertrack.fusion.revised import RevisedTrack
 from scattertrack.fusion.take_off import TakeOff
 from scattertrack.fusion.window import Window
 
-__all__ = [
-    "DECLINE_REASONS",
-    "IMU_DECLINE_REASONS",
-    "Estimate",
-    "MarvelEstimator",
-    "MarvelParams",
-    "chi_square_gate",
-    "tilt_from_specific_force",
-]
+# MarvelParams and Estimate stay importable from here (their homes: .params, .estimate).
+__all__ = ["Estimate", "MarvelEstimator", "MarvelParams"]
 
 
 class MarvelEstimator(
