@@ -27,25 +27,31 @@ test says so; or, when the features begin before the IMU, the origin is
 where the first feature row saw it); gravity is 9.80665 m/s^2 along -z;
 the IMU sits at the body origin.
 
-Modules: :mod:`.factors` (pure measurement models with Jacobians, and their
-GTSAM factors), :mod:`.rest` (the rest test, pure), :mod:`.divergence`
-(physical bounds, persistent gating, positions from the features; pure),
-:mod:`.estimator` (the causal fixed-lag smoother) with its parts
-:mod:`.ground` (the ground phase), :mod:`.restart` (restarts after a failed
-solve or a divergence) and :mod:`.revised` (the revised track),
+Modules (layers point one way, each file one concept): the pure ones,
+:mod:`.factors` (measurement models with Jacobians, and their GTSAM
+factors), :mod:`.rest` (the rest test), :mod:`.divergence` (physical
+bounds, persistent gating, positions from the features), :mod:`.gating`
+(the chi-square innovation gate, then its mixin); the records
+:mod:`.estimate` (``Estimate``, ``FeatureRow``), :mod:`.declines`,
 :mod:`.keys`, :mod:`.params` (the typed parameters), :mod:`.latency` (the
-typed latency record), :mod:`.run` (the run helper behind both entry points).
+typed latency record); :mod:`.estimator`, the causal fixed-lag smoother,
+a short orchestration of named steps whose mixins hold one concept each:
+:mod:`.imu` (IMU stream, preintegration), :mod:`.take_off` (first state,
+anchor row, controller), :mod:`.ground` (the ground phase),
+:mod:`.multipath`, :mod:`.measurements` (the rows' factors),
+:mod:`.barometer`, :mod:`.window` (smoother, stamps, lag),
+:mod:`.between_epochs` (the once-a-second work off the rows' path),
+:mod:`.readout`, :mod:`.restart` (after a failed solve or a divergence),
+:mod:`.revised` (the revised track); and :mod:`.run`, the run helper
+behind both entry points.
 """
 
-from scattertrack.fusion.estimator import (
-    DECLINE_REASONS,
-    IMU_DECLINE_REASONS,
-    Estimate,
-    MarvelEstimator,
-    MarvelParams,
-    chi_square_gate,
-    tilt_from_specific_force,
-)
+from scattertrack.fusion.declines import DECLINE_REASONS, IMU_DECLINE_REASONS
+from scattertrack.fusion.estimate import Estimate
+from scattertrack.fusion.estimator import MarvelEstimator
+from scattertrack.fusion.gating import chi_square_gate
+from scattertrack.fusion.imu import tilt_from_specific_force
+from scattertrack.fusion.params import MarvelParams
 from scattertrack.fusion.run import run_marvel
 
 __all__ = [

@@ -22,6 +22,27 @@ from scattertrack.fusion import rest
 class GroundPhase:
     """Ground-phase methods of :class:`~scattertrack.fusion.estimator.MarvelEstimator`."""
 
+    def _init_ground(self) -> None:
+        # The first tilt_window_s of IMU samples are tested; until the
+        # verdict the state is "pending", then "rest" or "moving". Ground
+        # factors only while "rest" and not left.
+        self._rest_state = "pending"
+        self._rest_samples: list[tuple[float, np.ndarray, np.ndarray]] = []
+        self._rest_baro: list[tuple[float, float]] = []
+        self.rest_test: rest.RestTest | None = None
+        """The rest test's verdict on the first ``tilt_window_s`` of IMU samples (None while pending)."""
+        self._rest_reference = np.zeros(3)  # mean specific force at rest, m/s^2
+        self._rest_baro_mean = float("nan")  # mean barometer height at rest, m
+        self._left_ground = False  # True once the ground phase is over (or never began)
+        self.ground_end_reason = ""
+        """Why the ground phase ended: "imu" (motion), "barometer", "not_at_rest" (the test failed), or ""."""
+        self._ground_epochs: list[tuple[float, int]] = []  # (time s, k) of epochs whose ground factors are in the graph
+        self._ground_factor_indices: dict[int, list[int]] = {}  # k -> the smoother's indices of its ground factors
+        self._ground_backlog: list[int] = []  # epochs before the verdict, to get ground factors if at rest
+        self._pending_removals: list[int] = []  # factor indices to remove with the next update
+        self.ground_factors_dropped = 0
+        """Ground factors removed because the IMU or the barometer contradicted them."""
+
     @property
     def on_ground(self) -> bool:
         """Whether the drone is (still) known to rest on the ground: the rest
@@ -127,7 +148,7 @@ class GroundPhase:
         if self._rest_state != "rest" or self._left_ground:
             self._ground_backlog = []
             return []
-        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
+        samples = self._baro_samples(time_s)
         if p.use_baro and samples and rest.baro_contradicts_ground(float(np.mean(samples)), self._rest_baro_mean, p.ground_baro_rise_m):
             # The barometer's window mean lags its rise, and the IMU missed
             # it: the last ground_release_s of ground factors are suspect.

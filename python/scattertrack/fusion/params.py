@@ -34,7 +34,8 @@ class MarvelParams:
     section 11: square through walls 0.470 m at 3 s, 0.411 m at 6 and 10 s,
     dev seeds), and the time per epoch grows with it: the once-a-second
     relinearisation (``relinearize_skip``) relinearises the whole window in
-    iSAM2's batch step, the slowest epoch of each second and so the p99.
+    iSAM2's batch step, the slowest epoch of each second and so the p99
+    (since issue 16 it runs between epochs: fusion/between_epochs.py).
     4 s (was 6 s until issue 16): dev seeds 1000-1001, thread CPU time per
     epoch on the 2-core VM, 6 s -> 4 s: 20 m circle p99 33.3 -> 21.0 ms,
     causal 0.386 -> 0.386 m, revised 0.272 -> 0.280 m; square through walls
@@ -258,9 +259,10 @@ class MarvelParams:
     relinearize_threshold: float = parameter(0.01, ">= 0", "", "iSAM2 relinearises a variable whose update exceeds this (tangent units: rad, m, m/s)")
     """iSAM2 relinearises a variable whose update exceeds this (tangent units:
     rad, m, m/s)."""
-    relinearize_skip: int = parameter(10, ">= 1", "updates", "iSAM2 checks for relinearisation every this many updates")
-    """iSAM2 checks for relinearisation every this many updates: once per
-    ``marginalize_every_s`` at 10 epochs/s. The controller is in every
+    relinearize_skip: int = parameter(10, ">= 1", "epochs", "iSAM2 checks for relinearisation once every this many epochs (between epochs when > 1)")
+    """iSAM2 checks for relinearisation once every this many epochs: once per
+    ``marginalize_every_s`` at 10 epochs/s. Above 1 that check runs in an
+    update of its own between two epochs (fusion/between_epochs.py). The controller is in every
     range and direction factor, so relinearising it (or any state deep in
     the window) re-eliminates the whole window; checked on every update
     with the 0.01 threshold, that happened on nearly every one (p50 32 ms

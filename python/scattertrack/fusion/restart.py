@@ -35,6 +35,17 @@ def _spread(covariance: np.ndarray, default: float) -> np.ndarray:
 class Restarts:
     """Restart methods of :class:`~scattertrack.fusion.estimator.MarvelEstimator`."""
 
+    def _init_restarts(self) -> None:
+        self.restarts = 0
+        """Times the smoother was restarted after a solver failure."""
+        self.divergences = 0
+        """Times the state was found diverged (bounds or persistent gating) and restarted from the features."""
+        self.divergences_recovered = 0
+        """Of those, the ones followed by ``recovery_epochs`` accepted epochs
+        without another (all since the last recovery count then)."""
+        self._since_divergence: int | None = None  # accepted epochs since the last divergence, None when recovered
+        self.divergence_reasons: list[str] = []
+
     def _restart(self, k: int, time_s: float, predicted) -> None:
         """A fresh smoother holding state ``k`` (the IMU prediction ``predicted``), the bias and
         the controller, each with a prior as wide as its last covariance (or a loose default):
@@ -66,7 +77,7 @@ class Restarts:
         controller = self._controller if controller_ok else self._controller_fallback
         controller_sigmas = _spread(self._cov_controller, 5.0) if controller_ok else np.full(3, 5.0)
         position = divergence.position_from_features(controller, range_m, azimuth_rad, elevation_rad)
-        samples = [b for (t, b) in self._baro if time_s - p.baro_window_s < t <= time_s]
+        samples = self._baro_samples(time_s)
         if p.use_baro and samples and math.isfinite(self._baro_datum):
             position[2] = float(np.mean(samples)) - self._baro_datum
         position_sigma = divergence.feature_position_sigmas(range_m, p.range_sigma_m, p.angle_sigma_rad) * 3.0
@@ -124,7 +135,7 @@ class Restarts:
             stamps[RANGE_BIAS] = time_s
         self._baro_chain = False  # a new barometer offset chain starts with the next epoch
         self._multipath_chain = False  # and a new multipath chain
-        self._smoother.update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
+        self._smoother_update(graph, initial, {key: self._stamp(t) for key, t in stamps.items()})
         self._nav = nav
         self._bias = bias
         self._controller = np.asarray(controller, dtype=float).copy()
@@ -138,9 +149,33 @@ class Restarts:
         self._release(math.inf, revise=False)
         self._restart_from_features(k, time_s, predicted, row)
         self._last_epoch_time = time_s
-        self._preintegrated.resetIntegrationAndSetBias(self._bias)
+        self._restart_integration()
         self.restarts += 1
         self._gate_monitor.clear()
         self._declined_run = 0
         self._range_declined_run = 0
         return self._decline(reason)
+
+    def _solver_failed(self, k: int, time_s: float, predicted) -> None:
+        """The smoother's linear system failed (GTSAM throws on an
+        ill-conditioned, IndeterminateLinearSystem, one) or its solve was not
+        finite: its state is unusable. The row is declined and the smoother
+        restarts from the predicted state, with priors as wide as the last
+        covariances, so a bad row never ends the run; the states in the
+        failed smoother's window keep their causal estimates."""
+        self._release(math.inf, revise=False)
+        self._restart(k, time_s, predicted)
+        self._last_epoch_time = time_s
+        self._restart_integration()
+        self.restarts += 1
+        return self._decline("solver_failure")
+
+    def _count_recovery(self) -> None:
+        """After an accepted epoch: a divergence is recovered once
+        ``recovery_epochs`` accepted epochs followed it without another (one
+        that followed another within them superseded it)."""
+        if self._since_divergence is not None:
+            self._since_divergence += 1
+            if self._since_divergence >= self.params.recovery_epochs:
+                self.divergences_recovered = self.divergences
+                self._since_divergence = None

@@ -14,6 +14,8 @@ from dataclasses import replace
 import numpy as np
 from gtsam.symbol_shorthand import V, X
 
+from scattertrack.fusion.estimate import Estimate
+
 
 def _quaternion(pose) -> np.ndarray:
     """A Pose3's rotation as ``(qw, qx, qy, qz)`` with ``qw >= 0`` (one of the two equal quaternions)."""
@@ -31,6 +33,18 @@ def _world_position_covariance(pose, pose_covariance) -> np.ndarray:
 
 class RevisedTrack:
     """Revised-track methods of :class:`~scattertrack.fusion.estimator.MarvelEstimator`."""
+
+    def _init_revised(self) -> None:
+        # The states in the smoother's window: key -> (time stamp s, causal Estimate).
+        self._window: dict[int, tuple[float, Estimate]] = {}
+        # Revised rows read ahead of their bucket's marginalisation (see _prefetch).
+        self._prefetched: dict[int, Estimate] = {}
+        self.revised: list[Estimate] = []
+        """Each accepted epoch's state as last revised before it left the
+        window (fixed-lag smoothed, delayed by ``smoother_lag_s``), in time order."""
+        self.revised_fallbacks = 0
+        """Revised rows that are the causal estimate: the smoother failed (and
+        restarted) while the state was in its window."""
 
     def finish(self) -> None:
         """End of the stream: the states still in the window join :attr:`revised`

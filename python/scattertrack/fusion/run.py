@@ -3,8 +3,10 @@
 :func:`run_marvel` (``features.csv`` + ``imu.csv``) and
 :func:`scattertrack.track.marvel.run_sigmf` (a recording sensed epoch by
 epoch) differ only in where each epoch's feature row comes from. Everything
-around it is here, once: the IMU fed in time order up to each epoch
-(:class:`ImuFeed`), and the end of the run (:func:`finish_run`): the revised
+around it is here, once: the estimator from its parameters
+(:func:`new_estimator`), the IMU fed in time order up to each epoch
+(:class:`ImuFeed`), the loop over the epochs with its progress bar
+(:func:`drive`), and the end of the run (:func:`finish_run`): the revised
 track, the declined rows by reason, the refusal of implausible results, the
 counters, and the typed latency record (:class:`~scattertrack.fusion.latency.Latency`).
 """
@@ -16,7 +18,9 @@ import math
 import numpy as np
 
 from scattertrack.fusion.divergence import is_plausible_controller
-from scattertrack.fusion.estimator import DECLINE_REASONS, IMU_DECLINE_REASONS, MarvelEstimator, MarvelParams
+from scattertrack.fusion.declines import DECLINE_REASONS, IMU_DECLINE_REASONS
+from scattertrack.fusion.estimator import MarvelEstimator
+from scattertrack.fusion.params import MarvelParams
 from scattertrack.io.types import Features, Imu, Scene, SkipReport, Track
 
 EPC = "drone"
@@ -62,30 +66,50 @@ def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, prog
     declined or refused; ``stats["drone"]`` the counters (:func:`finish_run`);
     ``revised`` the fixed-lag smoothed track and ``smoothed["drone"]`` its positions.
     """
-    estimator = MarvelEstimator(MarvelParams.from_kwargs(**params))
+    estimator = new_estimator(params)
     feed = ImuFeed(imu)
     order = np.argsort(features.time_s, kind="stable")
-    rows: list = []
-    bar = _progress_bar(progress, len(order), "marvel")
-    for row in order:
-        feed.until(estimator, float(features.time_s[row]))
-        estimate = estimator.add_features(
-            features.time_s[row],
-            features.range_m[row],
-            features.azimuth_rad[row],
-            features.elevation_rad[row],
-            features.yaw_rad[row],
-            features.range_sigma_m[row],
-            features.angle_sigma_rad[row],
-            features.yaw_sigma_rad[row],
-        )
-        if estimate is not None:
-            rows.append(estimate)
+
+    def rows_in_time_order():
+        for row in order:
+            feed.until(estimator, float(features.time_s[row]))
+            yield estimator.add_features(
+                features.time_s[row],
+                features.range_m[row],
+                features.azimuth_rad[row],
+                features.elevation_rad[row],
+                features.yaw_rad[row],
+                features.range_sigma_m[row],
+                features.angle_sigma_rad[row],
+                features.yaw_sigma_rad[row],
+            )
+
+    estimates = drive(rows_in_time_order(), progress=progress, total=len(order), desc="marvel")
+    rows = [estimate for estimate in estimates if estimate is not None]
+    return finish_run(estimator, rows, scene, input_skips=(features.skipped, imu.skipped))
+
+
+def new_estimator(params: dict) -> MarvelEstimator:
+    """A :class:`MarvelEstimator` with the :class:`MarvelParams` fields ``params`` (SI units)."""
+    return MarvelEstimator(MarvelParams.from_kwargs(**params))
+
+
+def drive(epochs, *, progress: bool = False, total: int | None = None, desc: str = "marvel") -> list:
+    """Runs a fusion loop: every item of ``epochs``, an iterable whose each
+    step feeds the estimator one epoch (its IMU samples, then its row) and
+    yields what that epoch gave, collected in order, with a progress bar of
+    ``total`` epochs (None: unknown) when ``progress``. Both entry points'
+    loops: :func:`run_marvel` (rows of a features file) and
+    :func:`scattertrack.track.marvel.run_sigmf` (epochs sensed from a recording)."""
+    bar = _progress_bar(progress, total, desc)
+    collected = []
+    for item in epochs:
+        collected.append(item)
         if bar is not None:
             bar.update(1)
     if bar is not None:
         bar.close()
-    return finish_run(estimator, rows, scene, input_skips=(features.skipped, imu.skipped))
+    return collected
 
 
 def _progress_bar(enabled: bool, total: int | None, desc: str):
@@ -141,7 +165,9 @@ def finish_run(
     latency records ``latency`` (wall) and ``cpu_latency`` (thread CPU, both
     :class:`~scattertrack.fusion.latency.Latency`), their quantiles in ns
     (``time_ns_p50``, ``time_ns_p99``, ``time_ns_max``, ``cpu_time_ns_*``),
-    then the caller's ``stats``.
+    the work between epochs' record ``between_epochs_latency`` (wall; None
+    without any: :mod:`scattertrack.fusion.between_epochs`) and its
+    ``between_epochs_time_ns_max``, then the caller's ``stats``.
     """
     estimator.finish()
     skipped = SkipReport()
@@ -175,6 +201,7 @@ def finish_run(
 
     wall = estimator.latency()
     cpu = estimator.cpu_latency()
+    between = estimator.between_epochs_latency()
     track = track_from_estimates(rows, skipped)
     attach_revised(track, estimator)
     rest_test = estimator.rest_test
@@ -209,6 +236,8 @@ def finish_run(
             "cpu_time_ns_p50": cpu.p50_ns if cpu else math.nan,
             "cpu_time_ns_p99": cpu.p99_ns if cpu else math.nan,
             "cpu_time_ns_max": cpu.max_ns if cpu else math.nan,
+            "between_epochs_latency": between,
+            "between_epochs_time_ns_max": between.max_ns if between else math.nan,
             "epoch_times_ns": np.asarray(estimator.wall_times_s, dtype=float) * 1e9,
             "imu_time_ns_per_sample": estimator.imu_wall_time_s * 1e9 / max(estimator.imu_samples, 1),
             **(stats or {}),

@@ -119,3 +119,18 @@ def test_features_only_before_the_imu_keep_the_rest_start(circle_flight):
     )))
     track = run_marvel(data.imu, early, **WHITE)
     assert track.stats["drone"]["rest"]["state"] == "rest"
+
+
+def test_drive_collects_each_epoch_in_order_with_or_without_a_bar():
+    from scattertrack.fusion.run import drive, new_estimator
+
+    fed = []
+
+    def epochs():
+        for i in range(5):
+            fed.append(i)
+            yield None if i == 2 else i
+
+    assert drive(epochs()) == [0, 1, None, 3, 4] and fed == [0, 1, 2, 3, 4]
+    assert drive(iter(range(3)), progress=True, total=3, desc="test") == [0, 1, 2]
+    assert new_estimator({"smoother_lag_s": 2.0}).params.smoother_lag_s == 2.0

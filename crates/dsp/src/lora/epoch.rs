@@ -340,342 +340,66 @@ impl EpochProcessor {
         &self.config
     }
 
-    /// Runs the chain on one epoch's samples (layout in the module doc).
+    /// Runs the chain on one epoch's samples (layout in the module doc):
+    /// the steps of the module doc, each a function below.
     ///
     /// Errors: [`Error::Shape`] for a wrong length, [`Error::NonFinite`] for
     /// bad samples or corrections, and the steps' own errors.
     pub fn process<S: Sample>(&mut self, samples: &[S], corrections: &Corrections) -> Result<EpochFeatures> {
+        check_input(&self.config, samples.len(), corrections)?;
+        // 1. Peaks, and which clear the decoding threshold.
+        let peaks = self.find_peaks(samples)?;
         let c = &self.config;
-        let m_ant = c.antennas();
-        let n = c.chirp.samples();
-        if samples.len() != c.samples_per_epoch() {
-            return Err(Error::Shape(format!(
-                "an epoch is 2 x 4 x {m_ant} x {n} = {} samples, got {}",
-                c.samples_per_epoch(),
-                samples.len()
-            )));
-        }
-        if !corrections.clock_error.is_finite() {
-            return Err(Error::NonFinite("clock error".into()));
-        }
-        let idx = |j: usize, k: usize, m: usize| (j * TAGS + k) * m_ant + m;
+        let clear = clear_peaks(&peaks, c.min_peak_snr_db);
+        let grid = PeakGrid { peaks: &peaks, clear: &clear, antennas: c.antennas() };
 
-        // 1. Peaks.
-        let mut peaks = Vec::with_capacity(CHANNELS * TAGS * m_ant);
-        for chirp in samples.chunks_exact(n) {
-            peaks.push(self.finder.process(chirp)?);
-        }
-        let carriers: Vec<f64> =
-            (0..CHANNELS).flat_map(|j| (0..TAGS).map(move |k| (j, k))).map(|(j, k)| c.carrier_hz(j, k)).collect();
-        let centre_phase =
-            |j: usize, k: usize, m: usize| peaks[idx(j, k, m)].amplitude_centre.arg() - c.calibration(m, j, k);
-
-        // Peaks above the decoding threshold (`min_peak_snr_db`); if none
-        // is, all of them (the epoch's SNR test declines it anyway).
-        let min_snr = 10f64.powf(c.min_peak_snr_db / 10.0);
-        let mut clear: Vec<bool> = peaks.iter().map(|p| p.snr >= min_snr).collect();
-        if !clear.iter().any(|&b| b) {
-            clear.iter_mut().for_each(|b| *b = true);
-        }
-
-        // 2. Angle per tag (snapshots: the tag's channels whose peaks clear
-        // the threshold on every antenna; a snapshot needs all antennas).
-        let mut tag_angles = Vec::with_capacity(TAGS);
-        let mut tag_used = [false; TAGS];
-        for (k, used) in tag_used.iter_mut().enumerate() {
-            let clear_channels: Vec<usize> =
-                (0..CHANNELS).filter(|&j| (0..m_ant).all(|m| clear[idx(j, k, m)])).collect();
-            *used = !clear_channels.is_empty();
-            // A tag without a clear channel still gets its (reported, unused) angle from all channels.
-            let channels: Vec<usize> = if *used { clear_channels } else { (0..CHANNELS).collect() };
-            let phases: Vec<f64> = (0..m_ant)
-                .flat_map(|m| channels.iter().map(move |&j| (j, m)))
-                .map(|(j, m)| centre_phase(j, k, m))
-                .collect();
-            let freqs: Vec<f64> = channels.iter().map(|&j| c.carrier_hz(j, k)).collect();
-            tag_angles.push(music(&c.array, &c.music, &phases, &freqs)?);
-        }
-        if !tag_used.iter().any(|&u| u) {
-            tag_used = [true; TAGS];
-        }
+        // 2. Angle per tag, combined; the line of sight the Doppler uses.
+        let (tag_angles, tag_used) = tag_angles(c, &grid)?;
         let angles: Vec<(f64, f64)> =
             tag_angles.iter().zip(&tag_used).filter(|(_, &u)| u).map(|(e, _)| (e.azimuth, e.elevation)).collect();
         let (azimuth, elevation) = combine_angles(&angles, c.angle_combine)?;
         let direction = super::geometry::direction(azimuth, elevation);
-        let u = match corrections.direction {
-            Some(d) => normalize(&d).ok_or_else(|| Error::NonFinite("direction".into()))?,
-            None => direction,
-        };
+        let u = line_of_sight(corrections, direction)?;
 
-        // 3. CFO, translational and rotational Doppler.
+        // 3. CFO, translational and rotational Doppler; the chirp-timing range.
         let cfo: Vec<f64> = c.tag_shifts_hz.iter().map(|&s| cfo_hz(corrections.clock_error, s)).collect();
-        // Velocity of the tags' centroid: body velocity plus the lever arm
-        // R (omega x r_c) when the attitude and rate are known.
-        let centroid = c.tag_positions.iter().fold([0.0; 3], |s, r| add(&s, &r.map(|x| x / TAGS as f64)));
-        let v_gear = match (corrections.velocity, corrections.attitude, corrections.omega_body) {
-            (Some(v), Some(r), Some(w)) => add(&v, &mat_vec(&r, &cross(&w, &centroid))),
-            (Some(v), _, _) => v,
-            (None, _, _) => [0.0; 3],
-        };
-        if v_gear.iter().any(|x| !x.is_finite()) {
-            return Err(Error::NonFinite("velocity".into()));
-        }
+        let v_gear = gear_velocity(c, corrections)?;
+        let carriers = carriers_hz(c);
         let translational: Vec<f64> = carriers
             .iter()
             .map(|&f| if c.ignore_doppler { 0.0 } else { translational_doppler_hz(f, &u, &v_gear) })
             .collect();
-        let mut pair_mean_hz = vec![0.0; CHANNELS * m_ant * 2];
-        let mut rotational_hz = vec![0.0; CHANNELS * m_ant * 2];
-        // Each pair's timing term and its variance; `clear`: both peaks
-        // above the detection SNR.
-        let mut timing_terms: Vec<(f64, f64, bool)> = Vec::with_capacity(CHANNELS * m_ant * 2);
-        for j in 0..CHANNELS {
-            for m in 0..m_ant {
-                for (p, &(a, b)) in c.pairs.iter().enumerate() {
-                    let (pa, pb) = (&peaks[idx(j, a, m)], &peaks[idx(j, b, m)]);
-                    let i = (j * m_ant + m) * 2 + p;
-                    pair_mean_hz[i] = pair_mean(pa.frequency_hz, pb.frequency_hz);
-                    rotational_hz[i] = pair_half_difference(pa.frequency_hz, pb.frequency_hz) - 0.5 * (cfo[a] - cfo[b]);
-                    let t = pair_mean_hz[i]
-                        - 0.5 * (cfo[a] + cfo[b])
-                        - 0.5 * (translational[j * TAGS + a] + translational[j * TAGS + b]);
-                    let variance = 0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
-                    timing_terms.push((t, variance, clear[idx(j, a, m)] && clear[idx(j, b, m)]));
-                }
-            }
-        }
-        let (timing_hz, timing_sigma_hz) = timing_mean(&timing_terms);
-        let tau = delay_from_frequency_s(&c.chirp, timing_hz);
-        let timing_range_m = SPEED_OF_LIGHT * tau / 2.0;
-        let timing_range_sigma_m = SPEED_OF_LIGHT / 2.0 * timing_sigma_hz / c.chirp.chirp_rate_hz_per_s();
-
-        // Per-tag Doppler for the phase ramp: translation + the tag's
-        // rotational shift (sign + for a pair's first tag), averaged over
-        // the antennas where both of the pair's peaks are clear: one noise
-        // peak's half difference is up to 125 kHz, and its ramp scrambles
-        // the pair's phases on every antenna. No clear antenna: no
-        // rotational shift is removed.
-        let mut doppler = [0.0; CHANNELS * TAGS];
-        if !c.ignore_doppler {
-            for j in 0..CHANNELS {
-                for (p, &(a, b)) in c.pairs.iter().enumerate() {
-                    let clear_antennas: Vec<usize> =
-                        (0..m_ant).filter(|&m| clear[idx(j, a, m)] && clear[idx(j, b, m)]).collect();
-                    let rot = if clear_antennas.is_empty() {
-                        0.0
-                    } else {
-                        clear_antennas.iter().map(|&m| rotational_hz[(j * m_ant + m) * 2 + p]).sum::<f64>()
-                            / clear_antennas.len() as f64
-                    };
-                    doppler[j * TAGS + a] = translational[j * TAGS + a] + rot;
-                    doppler[j * TAGS + b] = translational[j * TAGS + b] - rot;
-                }
-            }
-        }
+        let pairs = pair_shifts(c, &grid, &cfo, &translational);
+        let timing = chirp_timing(c, &pairs.timing_terms);
+        let doppler = ramp_doppler(c, &grid, &translational, &pairs.rotational_hz);
 
         // 4. Channel phases at the reference time.
         let t_ref = c.reference_time_s();
-        let mut phases_rad = vec![0.0; peaks.len()];
-        for j in 0..CHANNELS {
-            for k in 0..TAGS {
-                let correction = PhaseCorrection {
-                    cfo_hz: cfo[k],
-                    doppler_hz: doppler[j * TAGS + k],
-                    epoch_time_s: corrections.epoch_time_s,
-                };
-                for m in 0..m_ant {
-                    let raw = peaks[idx(j, k, m)].amplitude_centre.arg();
-                    phases_rad[idx(j, k, m)] =
-                        channel_phase(raw, c.chirp_centre_s(j), t_ref, c.calibration(m, j, k), &correction);
-                }
-            }
-        }
+        let phases_rad = channel_phases(c, &grid, &cfo, &doppler, corrections.epoch_time_s);
 
-        // 5. Phase range.
-        let weight = |p: &Peak| if c.magnitude_weights { p.amplitude_centre.norm() } else { 1.0 };
-        // One antenna's phase groups from the peaks `mask` allows, each with
-        // its tag when it has one (per-tag groups); a group needs two peaks
-        // (one frequency carries no range).
-        let groups_of = |m: usize, mask: &[bool]| -> Result<Vec<(PhaseGroup, Option<usize>)>> {
-            let mut groups = Vec::new();
-            let mut push = |sel: Vec<(usize, usize)>, tag: Option<usize>| -> Result<()> {
-                if sel.len() >= 2 {
-                    groups.push((
-                        PhaseGroup::new(
-                            sel.iter().map(|&(j, k)| c.carrier_hz(j, k)).collect(),
-                            sel.iter().map(|&(j, k)| phases_rad[idx(j, k, m)]).collect(),
-                            sel.iter().map(|&(j, k)| weight(&peaks[idx(j, k, m)])).collect(),
-                            sel.iter().map(|&(j, k)| peaks[idx(j, k, m)].phase_sigma_rad).collect(),
-                        )?,
-                        tag,
-                    ));
-                }
-                Ok(())
-            };
-            match c.range_coherence {
-                RangeCoherence::AcrossTags => {
-                    push(
-                        (0..CHANNELS)
-                            .flat_map(|j| (0..TAGS).map(move |k| (j, k)))
-                            .filter(|&(j, k)| mask[idx(j, k, m)])
-                            .collect(),
-                        None,
-                    )?;
-                }
-                RangeCoherence::PerTag => {
-                    for k in 0..TAGS {
-                        push((0..CHANNELS).map(|j| (j, k)).filter(|&(j, k)| mask[idx(j, k, m)]).collect(), Some(k))?;
-                    }
-                }
-                RangeCoherence::PairSums => {
-                    let sel: Vec<(usize, (usize, usize))> = (0..CHANNELS)
-                        .flat_map(|j| c.pairs.iter().map(move |&p| (j, p)))
-                        .filter(|&(j, (a, b))| mask[idx(j, a, m)] && mask[idx(j, b, m)])
-                        .collect();
-                    if sel.len() >= 2 {
-                        groups.push((
-                            PhaseGroup::new(
-                                sel.iter().map(|&(j, (a, b))| c.carrier_hz(j, a) + c.carrier_hz(j, b)).collect(),
-                                sel.iter()
-                                    .map(|&(j, (a, b))| {
-                                        super::wrap_angle(phases_rad[idx(j, a, m)] + phases_rad[idx(j, b, m)])
-                                    })
-                                    .collect(),
-                                sel.iter()
-                                    .map(|&(j, (a, b))| weight(&peaks[idx(j, a, m)]) * weight(&peaks[idx(j, b, m)]))
-                                    .collect(),
-                                sel.iter()
-                                    .map(|&(j, (a, b))| {
-                                        peaks[idx(j, a, m)].phase_sigma_rad.hypot(peaks[idx(j, b, m)].phase_sigma_rad)
-                                    })
-                                    .collect(),
-                            )?,
-                            None,
-                        ));
-                    }
-                }
-            }
-            Ok(groups)
-        };
-        // The clear peaks' groups; where no group is left, every peak's.
-        let mut per_antenna: Vec<Vec<(PhaseGroup, Option<usize>)>> =
-            (0..m_ant).map(|m| groups_of(m, &clear)).collect::<Result<_>>()?;
-        if per_antenna.iter().all(|g| g.is_empty()) {
-            let all = vec![true; peaks.len()];
-            per_antenna = (0..m_ant).map(|m| groups_of(m, &all)).collect::<Result<_>>()?;
-        }
-        let mut range_config = c.range.clone();
-        if let RangeWindow::AroundTiming { half_width_m } = c.range_window {
-            let centre = timing_range_m.clamp(c.range.min_m, c.range.max_m);
-            range_config.min_m = (centre - half_width_m).max(c.range.min_m);
-            range_config.max_m = (centre + half_width_m).min(c.range.max_m);
-            if range_config.max_m <= range_config.min_m {
-                range_config.max_m = range_config.min_m + 2.0 * half_width_m;
-            }
-            range_config.select = RangeSelect::NearestTo(timing_range_m);
-        }
-        let mut all_groups = Vec::new();
-        // Each group's (antenna, tag) for its expected offset below.
-        let mut group_of = Vec::new();
-        let mut antenna_ranges_m = Vec::with_capacity(m_ant);
-        for (m, groups) in per_antenna.into_iter().enumerate() {
-            let (groups, tags): (Vec<PhaseGroup>, Vec<Option<usize>>) = groups.into_iter().unzip();
-            antenna_ranges_m.push(estimate_range(&groups, &range_config).map_or(f64::NAN, |e| e.range_m));
-            all_groups.extend(groups);
-            group_of.extend(tags.into_iter().map(|k| (m, k)));
-        }
-        let range = estimate_range(&all_groups, &range_config)?;
-
-        // Consistency spreads. A tag's direction and range differ from the
-        // centroid's by its lever arm `R (t_k - c)` (0.33 m: 3 degrees of
-        // direction at 6 m), which depends on the yaw — unobservable on a
-        // straight flight, and a yaw error left in the lever arm reads as
-        // scatter. An opposing pair's lever arms are opposite, so the pair's
-        // mean direction and mean range are the centroid's to first order
-        // whatever the attitude: the spreads are taken over pair means. An
-        // antenna's range differs by half its offset along the line of
-        // sight (the receive leg alone changes), which is removed.
-        let pair_directions: Vec<Vec3> = c
-            .pairs
-            .iter()
-            .filter(|&&(a, b)| tag_used[a] && tag_used[b])
-            .filter_map(|&(a, b)| normalize(&add(&tag_angles[a].direction, &tag_angles[b].direction)))
-            .collect();
-        let pair_mean = normalize(&pair_directions.iter().fold([0.0; 3], |s, d| add(&s, d))).unwrap_or(direction);
-        let angle_spread_rad = direction_spread(&pair_directions, &pair_mean);
-        let group_deviation = group_deviations_m(&all_groups, range.range_m);
-        let antenna_offset = |m: usize| -0.5 * dot(&c.array.elements()[m], &direction);
-        let of_tag = |m: usize, k: usize| {
-            group_of.iter().zip(&group_deviation).find(|(&(gm, gk), _)| gm == m && gk == Some(k)).and_then(|(_, &d)| d)
-        };
-        let mut deviations: Vec<f64> = group_of
-            .iter()
-            .zip(&group_deviation)
-            .filter(|(&(_, k), _)| k.is_none())
-            .filter_map(|(&(m, _), &d)| Some(d? - antenna_offset(m)))
-            .collect();
-        for m in 0..m_ant {
-            for &(a, b) in &c.pairs {
-                if let (Some(da), Some(db)) = (of_tag(m, a), of_tag(m, b)) {
-                    deviations.push(0.5 * (da + db) - antenna_offset(m));
-                }
-            }
-        }
-        let range_spread_m = rms_spread(&deviations);
+        // 5. Phase range and the consistency spreads.
+        let phase = phase_range(c, &grid, &phases_rad, timing.range_m)?;
+        let angle_spread_rad = angle_spread(c, &tag_angles, &tag_used, direction);
+        let range_spread_m = range_spread(c, &phase, direction);
 
         // 6. Heading.
-        let heading = match (corrections.attitude, corrections.omega_body) {
-            (Some(r), Some(w)) => {
-                let (_, roll_pitch) = split_yaw(&r);
-                let mut observations = Vec::with_capacity(CHANNELS * m_ant * 2);
-                for j in 0..CHANNELS {
-                    for m in 0..m_ant {
-                        for &(a, b) in &c.pairs {
-                            // Only pairs whose peaks are both clear (a noise
-                            // peak's frequency is no rotational shift).
-                            if !(clear[idx(j, a, m)] && clear[idx(j, b, m)]) {
-                                continue;
-                            }
-                            let (pa, pb) = (&peaks[idx(j, a, m)], &peaks[idx(j, b, m)]);
-                            observations.push(PairObservation {
-                                tag_a: c.tag_positions[a],
-                                tag_b: c.tag_positions[b],
-                                carrier_hz: 0.5 * (c.carrier_hz(j, a) + c.carrier_hz(j, b)),
-                                difference_hz: pa.frequency_hz - pb.frequency_hz - (cfo[a] - cfo[b]),
-                                sigma_hz: pa.frequency_sigma_hz.hypot(pb.frequency_sigma_hz),
-                            });
-                        }
-                    }
-                }
-                let geometry = YawGeometry {
-                    roll_pitch,
-                    omega_body: w,
-                    direction: u,
-                    velocity: corrections.velocity.map(|_| v_gear),
-                    range_m: Some(range.range_m),
-                };
-                solve_yaw(&observations, &geometry, &c.heading)
-            }
-            _ => None,
-        };
+        let heading = heading(c, &grid, &cfo, corrections, u, v_gear, phase.range.range_m);
 
-        let snrs: Vec<f64> = peaks.iter().map(|p| 10.0 * p.snr.max(1e-30).log10()).collect();
-        let snr_db = snrs.iter().sum::<f64>() / snrs.len() as f64;
-        let min_snr_db = snrs.iter().copied().fold(f64::INFINITY, f64::min);
+        let (snr_db, min_snr_db) = snr_summary(&peaks);
         Ok(EpochFeatures {
             peaks,
             phases_rad,
             carriers_hz: carriers,
             reference_time_s: t_ref,
-            pair_mean_hz,
-            rotational_hz,
+            pair_mean_hz: pairs.pair_mean_hz,
+            rotational_hz: pairs.rotational_hz,
             translational_hz: translational,
-            timing_hz,
-            timing_sigma_hz,
-            timing_range_m,
-            timing_range_sigma_m,
-            range,
-            antenna_ranges_m,
+            timing_hz: timing.hz,
+            timing_sigma_hz: timing.sigma_hz,
+            timing_range_m: timing.range_m,
+            timing_range_sigma_m: timing.range_sigma_m,
+            range: phase.range,
+            antenna_ranges_m: phase.antenna_ranges_m,
             tag_angles,
             tag_used: tag_used.to_vec(),
             angle_spread_rad,
@@ -688,6 +412,433 @@ impl EpochProcessor {
             min_snr_db,
         })
     }
+
+    /// Step 1: one peak per chirp, in the sample layout's order.
+    fn find_peaks<S: Sample>(&mut self, samples: &[S]) -> Result<Vec<Peak>> {
+        let n = self.config.chirp.samples();
+        let mut peaks = Vec::with_capacity(CHANNELS * TAGS * self.config.antennas());
+        for chirp in samples.chunks_exact(n) {
+            peaks.push(self.finder.process(chirp)?);
+        }
+        Ok(peaks)
+    }
+}
+
+/// The epoch's peaks in their layout (index `(j * 4 + k) * M + m`) and which
+/// of them clear the decoding threshold ([`clear_peaks`]).
+struct PeakGrid<'a> {
+    peaks: &'a [Peak],
+    clear: &'a [bool],
+    antennas: usize,
+}
+
+impl PeakGrid<'_> {
+    fn index(&self, j: usize, k: usize, m: usize) -> usize {
+        (j * TAGS + k) * self.antennas + m
+    }
+
+    fn peak(&self, j: usize, k: usize, m: usize) -> &Peak {
+        &self.peaks[self.index(j, k, m)]
+    }
+
+    fn clear(&self, j: usize, k: usize, m: usize) -> bool {
+        self.clear[self.index(j, k, m)]
+    }
+
+    /// Both peaks of the pair `(a, b)` on channel `j`, antenna `m` clear.
+    fn pair_clear(&self, j: usize, (a, b): (usize, usize), m: usize) -> bool {
+        self.clear(j, a, m) && self.clear(j, b, m)
+    }
+}
+
+/// The chain's input checks: the epoch's length and a finite clock error.
+fn check_input(c: &EpochConfig, samples: usize, corrections: &Corrections) -> Result<()> {
+    if samples != c.samples_per_epoch() {
+        return Err(Error::Shape(format!(
+            "an epoch is 2 x 4 x {} x {} = {} samples, got {samples}",
+            c.antennas(),
+            c.chirp.samples(),
+            c.samples_per_epoch(),
+        )));
+    }
+    if !corrections.clock_error.is_finite() {
+        return Err(Error::NonFinite("clock error".into()));
+    }
+    Ok(())
+}
+
+/// Which peaks clear the decoding threshold `min_peak_snr_db` (per-sample
+/// SNR, dB); if none does, all of them (the epoch's SNR test declines such
+/// an epoch anyway).
+fn clear_peaks(peaks: &[Peak], min_peak_snr_db: f64) -> Vec<bool> {
+    let min_snr = 10f64.powf(min_peak_snr_db / 10.0);
+    let mut clear: Vec<bool> = peaks.iter().map(|p| p.snr >= min_snr).collect();
+    if !clear.iter().any(|&b| b) {
+        clear.iter_mut().for_each(|b| *b = true);
+    }
+    clear
+}
+
+/// Received carriers `f_j + s_k/2`, index `j * 4 + k`, Hz.
+fn carriers_hz(c: &EpochConfig) -> Vec<f64> {
+    (0..CHANNELS).flat_map(|j| (0..TAGS).map(move |k| (j, k))).map(|(j, k)| c.carrier_hz(j, k)).collect()
+}
+
+/// Step 2: MUSIC per tag on the calibrated centre phases of its channels
+/// whose peaks clear the threshold on every antenna (a snapshot needs all
+/// antennas), and which tags enter the combined angle. A tag without a
+/// clear channel still gets its (reported, unused) angle from all channels;
+/// no tag in use: all are.
+fn tag_angles(c: &EpochConfig, grid: &PeakGrid) -> Result<(Vec<MusicEstimate>, [bool; TAGS])> {
+    let m_ant = grid.antennas;
+    let centre_phase = |j: usize, k: usize, m: usize| grid.peak(j, k, m).amplitude_centre.arg() - c.calibration(m, j, k);
+    let mut tag_angles = Vec::with_capacity(TAGS);
+    let mut tag_used = [false; TAGS];
+    for (k, used) in tag_used.iter_mut().enumerate() {
+        let clear_channels: Vec<usize> = (0..CHANNELS).filter(|&j| (0..m_ant).all(|m| grid.clear(j, k, m))).collect();
+        *used = !clear_channels.is_empty();
+        let channels: Vec<usize> = if *used { clear_channels } else { (0..CHANNELS).collect() };
+        let phases: Vec<f64> = (0..m_ant)
+            .flat_map(|m| channels.iter().map(move |&j| (j, m)))
+            .map(|(j, m)| centre_phase(j, k, m))
+            .collect();
+        let freqs: Vec<f64> = channels.iter().map(|&j| c.carrier_hz(j, k)).collect();
+        tag_angles.push(music(&c.array, &c.music, &phases, &freqs)?);
+    }
+    if !tag_used.iter().any(|&u| u) {
+        tag_used = [true; TAGS];
+    }
+    Ok((tag_angles, tag_used))
+}
+
+/// The direction the Doppler prediction and the heading use: the tracker's
+/// (normalised) when given, else this epoch's angle.
+fn line_of_sight(corrections: &Corrections, direction: Vec3) -> Result<Vec3> {
+    match corrections.direction {
+        Some(d) => normalize(&d).ok_or_else(|| Error::NonFinite("direction".into())),
+        None => Ok(direction),
+    }
+}
+
+/// Velocity of the tags' centroid, m/s (world): the body velocity plus the
+/// lever arm `R (omega x r_c)` when the attitude and rate are known; 0
+/// without a velocity.
+fn gear_velocity(c: &EpochConfig, corrections: &Corrections) -> Result<Vec3> {
+    let centroid = c.tag_positions.iter().fold([0.0; 3], |s, r| add(&s, &r.map(|x| x / TAGS as f64)));
+    let v_gear = match (corrections.velocity, corrections.attitude, corrections.omega_body) {
+        (Some(v), Some(r), Some(w)) => add(&v, &mat_vec(&r, &cross(&w, &centroid))),
+        (Some(v), _, _) => v,
+        (None, _, _) => [0.0; 3],
+    };
+    if v_gear.iter().any(|x| !x.is_finite()) {
+        return Err(Error::NonFinite("velocity".into()));
+    }
+    Ok(v_gear)
+}
+
+/// Per pair (index `(j * M + m) * 2 + p`): the pair mean (eq. 2), the
+/// rotational shift of its first tag (eq. 7 / 2, CFO difference removed),
+/// and its chirp-timing term `(value Hz, variance Hz^2, both peaks clear)`.
+struct PairShifts {
+    pair_mean_hz: Vec<f64>,
+    rotational_hz: Vec<f64>,
+    timing_terms: Vec<(f64, f64, bool)>,
+}
+
+fn pair_shifts(c: &EpochConfig, grid: &PeakGrid, cfo: &[f64], translational: &[f64]) -> PairShifts {
+    let m_ant = grid.antennas;
+    let mut pair_mean_hz = vec![0.0; CHANNELS * m_ant * 2];
+    let mut rotational_hz = vec![0.0; CHANNELS * m_ant * 2];
+    let mut timing_terms: Vec<(f64, f64, bool)> = Vec::with_capacity(CHANNELS * m_ant * 2);
+    for j in 0..CHANNELS {
+        for m in 0..m_ant {
+            for (p, &(a, b)) in c.pairs.iter().enumerate() {
+                let (pa, pb) = (grid.peak(j, a, m), grid.peak(j, b, m));
+                let i = (j * m_ant + m) * 2 + p;
+                pair_mean_hz[i] = pair_mean(pa.frequency_hz, pb.frequency_hz);
+                rotational_hz[i] = pair_half_difference(pa.frequency_hz, pb.frequency_hz) - 0.5 * (cfo[a] - cfo[b]);
+                let t = pair_mean_hz[i]
+                    - 0.5 * (cfo[a] + cfo[b])
+                    - 0.5 * (translational[j * TAGS + a] + translational[j * TAGS + b]);
+                let variance = 0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
+                timing_terms.push((t, variance, grid.pair_clear(j, (a, b), m)));
+            }
+        }
+    }
+    PairShifts { pair_mean_hz, rotational_hz, timing_terms }
+}
+
+/// The chirp-timing term `-(BW/T) tau` (Hz) and the range `c0 tau / 2` of
+/// the tags' centroid (m), each with its 1-sigma.
+struct Timing {
+    hz: f64,
+    sigma_hz: f64,
+    range_m: f64,
+    range_sigma_m: f64,
+}
+
+fn chirp_timing(c: &EpochConfig, terms: &[(f64, f64, bool)]) -> Timing {
+    let (hz, sigma_hz) = timing_mean(terms);
+    let tau = delay_from_frequency_s(&c.chirp, hz);
+    Timing {
+        hz,
+        sigma_hz,
+        range_m: SPEED_OF_LIGHT * tau / 2.0,
+        range_sigma_m: SPEED_OF_LIGHT / 2.0 * sigma_hz / c.chirp.chirp_rate_hz_per_s(),
+    }
+}
+
+/// Per-tag Doppler for the phase ramp (index `j * 4 + k`, Hz): translation +
+/// the tag's rotational shift (sign + for a pair's first tag), averaged
+/// over the antennas where both of the pair's peaks are clear: one noise
+/// peak's half difference is up to 125 kHz, and its ramp scrambles the
+/// pair's phases on every antenna. No clear antenna: no rotational shift is
+/// removed. All 0 for the Doppler-blind baseline.
+fn ramp_doppler(c: &EpochConfig, grid: &PeakGrid, translational: &[f64], rotational_hz: &[f64]) -> [f64; CHANNELS * TAGS] {
+    let m_ant = grid.antennas;
+    let mut doppler = [0.0; CHANNELS * TAGS];
+    if c.ignore_doppler {
+        return doppler;
+    }
+    for j in 0..CHANNELS {
+        for (p, &(a, b)) in c.pairs.iter().enumerate() {
+            let clear_antennas: Vec<usize> = (0..m_ant).filter(|&m| grid.pair_clear(j, (a, b), m)).collect();
+            let rot = if clear_antennas.is_empty() {
+                0.0
+            } else {
+                clear_antennas.iter().map(|&m| rotational_hz[(j * m_ant + m) * 2 + p]).sum::<f64>()
+                    / clear_antennas.len() as f64
+            };
+            doppler[j * TAGS + a] = translational[j * TAGS + a] + rot;
+            doppler[j * TAGS + b] = translational[j * TAGS + b] - rot;
+        }
+    }
+    doppler
+}
+
+/// Step 4: every chirp's channel phase at the epoch's reference time (eq. 3),
+/// its CFO and Doppler ramps and calibration removed (rad, wrapped).
+fn channel_phases(c: &EpochConfig, grid: &PeakGrid, cfo: &[f64], doppler: &[f64], epoch_time_s: Option<f64>) -> Vec<f64> {
+    let t_ref = c.reference_time_s();
+    let mut phases_rad = vec![0.0; grid.peaks.len()];
+    for j in 0..CHANNELS {
+        for k in 0..TAGS {
+            let correction = PhaseCorrection { cfo_hz: cfo[k], doppler_hz: doppler[j * TAGS + k], epoch_time_s };
+            for m in 0..grid.antennas {
+                let raw = grid.peak(j, k, m).amplitude_centre.arg();
+                phases_rad[grid.index(j, k, m)] =
+                    channel_phase(raw, c.chirp_centre_s(j), t_ref, c.calibration(m, j, k), &correction);
+            }
+        }
+    }
+    phases_rad
+}
+
+/// One antenna's phase groups, each with its tag when it has one (groups
+/// per tag); `mask` says which peaks may enter. A group needs two peaks
+/// (one frequency carries no range).
+type AntennaGroups = Vec<(PhaseGroup, Option<usize>)>;
+
+fn phase_groups(c: &EpochConfig, grid: &PeakGrid, phases_rad: &[f64], m: usize, mask: &[bool]) -> Result<AntennaGroups> {
+    let weight = |p: &Peak| if c.magnitude_weights { p.amplitude_centre.norm() } else { 1.0 };
+    let allowed = |j: usize, k: usize| mask[grid.index(j, k, m)];
+    let phase = |j: usize, k: usize| phases_rad[grid.index(j, k, m)];
+    let mut groups = Vec::new();
+    let mut push = |sel: Vec<(usize, usize)>, tag: Option<usize>| -> Result<()> {
+        if sel.len() >= 2 {
+            groups.push((
+                PhaseGroup::new(
+                    sel.iter().map(|&(j, k)| c.carrier_hz(j, k)).collect(),
+                    sel.iter().map(|&(j, k)| phase(j, k)).collect(),
+                    sel.iter().map(|&(j, k)| weight(grid.peak(j, k, m))).collect(),
+                    sel.iter().map(|&(j, k)| grid.peak(j, k, m).phase_sigma_rad).collect(),
+                )?,
+                tag,
+            ));
+        }
+        Ok(())
+    };
+    match c.range_coherence {
+        RangeCoherence::AcrossTags => {
+            push(
+                (0..CHANNELS).flat_map(|j| (0..TAGS).map(move |k| (j, k))).filter(|&(j, k)| allowed(j, k)).collect(),
+                None,
+            )?;
+        }
+        RangeCoherence::PerTag => {
+            for k in 0..TAGS {
+                push((0..CHANNELS).map(|j| (j, k)).filter(|&(j, k)| allowed(j, k)).collect(), Some(k))?;
+            }
+        }
+        RangeCoherence::PairSums => {
+            let sel: Vec<(usize, (usize, usize))> = (0..CHANNELS)
+                .flat_map(|j| c.pairs.iter().map(move |&p| (j, p)))
+                .filter(|&(j, (a, b))| allowed(j, a) && allowed(j, b))
+                .collect();
+            if sel.len() >= 2 {
+                groups.push((
+                    PhaseGroup::new(
+                        sel.iter().map(|&(j, (a, b))| c.carrier_hz(j, a) + c.carrier_hz(j, b)).collect(),
+                        sel.iter().map(|&(j, (a, b))| super::wrap_angle(phase(j, a) + phase(j, b))).collect(),
+                        sel.iter().map(|&(j, (a, b))| weight(grid.peak(j, a, m)) * weight(grid.peak(j, b, m))).collect(),
+                        sel.iter()
+                            .map(|&(j, (a, b))| grid.peak(j, a, m).phase_sigma_rad.hypot(grid.peak(j, b, m).phase_sigma_rad))
+                            .collect(),
+                    )?,
+                    None,
+                ));
+            }
+        }
+    }
+    Ok(groups)
+}
+
+/// Where the phase range is searched: the configured interval, or around the
+/// chirp-timing range `timing_range_m` (m) with the fringe nearest to it
+/// ([`RangeWindow::AroundTiming`]).
+fn range_search(c: &EpochConfig, timing_range_m: f64) -> RangeConfig {
+    let mut range_config = c.range.clone();
+    if let RangeWindow::AroundTiming { half_width_m } = c.range_window {
+        let centre = timing_range_m.clamp(c.range.min_m, c.range.max_m);
+        range_config.min_m = (centre - half_width_m).max(c.range.min_m);
+        range_config.max_m = (centre + half_width_m).min(c.range.max_m);
+        if range_config.max_m <= range_config.min_m {
+            range_config.max_m = range_config.min_m + 2.0 * half_width_m;
+        }
+        range_config.select = RangeSelect::NearestTo(timing_range_m);
+    }
+    range_config
+}
+
+/// Step 5: the phase range of all antennas' groups, each antenna's own, and
+/// the groups with their (antenna, tag) for the range's spread.
+struct PhaseRange {
+    range: RangeEstimate,
+    antenna_ranges_m: Vec<f64>,
+    groups: Vec<PhaseGroup>,
+    group_of: Vec<(usize, Option<usize>)>,
+}
+
+fn phase_range(c: &EpochConfig, grid: &PeakGrid, phases_rad: &[f64], timing_range_m: f64) -> Result<PhaseRange> {
+    let m_ant = grid.antennas;
+    // The clear peaks' groups; where no group is left, every peak's.
+    let mut per_antenna: Vec<AntennaGroups> =
+        (0..m_ant).map(|m| phase_groups(c, grid, phases_rad, m, grid.clear)).collect::<Result<_>>()?;
+    if per_antenna.iter().all(|g| g.is_empty()) {
+        let all = vec![true; grid.peaks.len()];
+        per_antenna = (0..m_ant).map(|m| phase_groups(c, grid, phases_rad, m, &all)).collect::<Result<_>>()?;
+    }
+    let range_config = range_search(c, timing_range_m);
+    let mut groups = Vec::new();
+    let mut group_of = Vec::new();
+    let mut antenna_ranges_m = Vec::with_capacity(m_ant);
+    for (m, antenna) in per_antenna.into_iter().enumerate() {
+        let (antenna, tags): (Vec<PhaseGroup>, Vec<Option<usize>>) = antenna.into_iter().unzip();
+        antenna_ranges_m.push(estimate_range(&antenna, &range_config).map_or(f64::NAN, |e| e.range_m));
+        groups.extend(antenna);
+        group_of.extend(tags.into_iter().map(|k| (m, k)));
+    }
+    let range = estimate_range(&groups, &range_config)?;
+    Ok(PhaseRange { range, antenna_ranges_m, groups, group_of })
+}
+
+/// The combined angle's consistency (see [`EpochFeatures::angle_spread_rad`]).
+///
+/// A tag's direction differs from the centroid's by its lever arm
+/// `R (t_k - c)` (0.33 m: 3 degrees of direction at 6 m), which depends on
+/// the yaw — unobservable on a straight flight, and a yaw error left in the
+/// lever arm reads as scatter. An opposing pair's lever arms are opposite,
+/// so the pair's mean direction is the centroid's to first order whatever
+/// the attitude: the spread is taken over pair means.
+fn angle_spread(c: &EpochConfig, tag_angles: &[MusicEstimate], tag_used: &[bool; TAGS], direction: Vec3) -> Option<f64> {
+    let pair_directions: Vec<Vec3> = c
+        .pairs
+        .iter()
+        .filter(|&&(a, b)| tag_used[a] && tag_used[b])
+        .filter_map(|&(a, b)| normalize(&add(&tag_angles[a].direction, &tag_angles[b].direction)))
+        .collect();
+    let pair_mean = normalize(&pair_directions.iter().fold([0.0; 3], |s, d| add(&s, d))).unwrap_or(direction);
+    direction_spread(&pair_directions, &pair_mean)
+}
+
+/// The phase range's consistency (see [`EpochFeatures::range_spread_m`]):
+/// per antenna and opposing pair (the pair's two per-tag groups averaged:
+/// their lever arms cancel, as for the angle), or per group without tags,
+/// after the antenna's expected offset: half its offset along the line of
+/// sight (the receive leg alone changes).
+fn range_spread(c: &EpochConfig, phase: &PhaseRange, direction: Vec3) -> Option<f64> {
+    let group_deviation = group_deviations_m(&phase.groups, phase.range.range_m);
+    let antenna_offset = |m: usize| -0.5 * dot(&c.array.elements()[m], &direction);
+    let of_tag = |m: usize, k: usize| {
+        phase.group_of.iter().zip(&group_deviation).find(|(&(gm, gk), _)| gm == m && gk == Some(k)).and_then(|(_, &d)| d)
+    };
+    let mut deviations: Vec<f64> = phase
+        .group_of
+        .iter()
+        .zip(&group_deviation)
+        .filter(|(&(_, k), _)| k.is_none())
+        .filter_map(|(&(m, _), &d)| Some(d? - antenna_offset(m)))
+        .collect();
+    for m in 0..c.antennas() {
+        for &(a, b) in &c.pairs {
+            if let (Some(da), Some(db)) = (of_tag(m, a), of_tag(m, b)) {
+                deviations.push(0.5 * (da + db) - antenna_offset(m));
+            }
+        }
+    }
+    rms_spread(&deviations)
+}
+
+/// Step 6: the yaw from the pairs' frequency differences (eqs. 7-8) when the
+/// attitude and the gyroscope's rate are given; only pairs whose peaks are
+/// both clear (a noise peak's frequency is no rotational shift).
+fn heading(
+    c: &EpochConfig,
+    grid: &PeakGrid,
+    cfo: &[f64],
+    corrections: &Corrections,
+    u: Vec3,
+    v_gear: Vec3,
+    range_m: f64,
+) -> Option<HeadingEstimate> {
+    let (Some(r), Some(w)) = (corrections.attitude, corrections.omega_body) else {
+        return None;
+    };
+    let (_, roll_pitch) = split_yaw(&r);
+    let mut observations = Vec::with_capacity(CHANNELS * grid.antennas * 2);
+    for j in 0..CHANNELS {
+        for m in 0..grid.antennas {
+            for &(a, b) in &c.pairs {
+                if !grid.pair_clear(j, (a, b), m) {
+                    continue;
+                }
+                let (pa, pb) = (grid.peak(j, a, m), grid.peak(j, b, m));
+                observations.push(PairObservation {
+                    tag_a: c.tag_positions[a],
+                    tag_b: c.tag_positions[b],
+                    carrier_hz: 0.5 * (c.carrier_hz(j, a) + c.carrier_hz(j, b)),
+                    difference_hz: pa.frequency_hz - pb.frequency_hz - (cfo[a] - cfo[b]),
+                    sigma_hz: pa.frequency_sigma_hz.hypot(pb.frequency_sigma_hz),
+                });
+            }
+        }
+    }
+    let geometry = YawGeometry {
+        roll_pitch,
+        omega_body: w,
+        direction: u,
+        velocity: corrections.velocity.map(|_| v_gear),
+        range_m: Some(range_m),
+    };
+    solve_yaw(&observations, &geometry, &c.heading)
+}
+
+/// Mean and minimum per-sample SNR of the peaks, dB.
+fn snr_summary(peaks: &[Peak]) -> (f64, f64) {
+    let snrs: Vec<f64> = peaks.iter().map(|p| 10.0 * p.snr.max(1e-30).log10()).collect();
+    let snr_db = snrs.iter().sum::<f64>() / snrs.len() as f64;
+    let min_snr_db = snrs.iter().copied().fold(f64::INFINITY, f64::min);
+    (snr_db, min_snr_db)
 }
 
 /// Per-axis RMS deviation (rad) of unit directions from their combined
@@ -891,6 +1042,46 @@ mod tests {
         // None clear: the plain mean of all (as before the test existed).
         let (mean, sigma) = timing_mean(&[(1.0, 1.0, false), (3.0, 1.0, false)]);
         assert!((mean - 2.0).abs() < 1e-12 && (sigma - 2f64.sqrt() / 2.0).abs() < 1e-12);
+    }
+
+    fn peak_with_snr(snr: f64) -> Peak {
+        let zero = num_complex::Complex64::new(0.0, 0.0);
+        Peak {
+            frequency_hz: 0.0,
+            amplitude: zero,
+            amplitude_centre: zero,
+            snr,
+            noise_power: 1.0,
+            frequency_sigma_hz: 1.0,
+            phase_sigma_rad: 0.1,
+            bin: 0,
+            iterations: 0,
+        }
+    }
+
+    #[test]
+    fn clear_peaks_masks_the_faded_and_keeps_all_when_none_clears() {
+        // -20 dB threshold: 0.01 in linear per-sample SNR.
+        let peaks = [peak_with_snr(0.5), peak_with_snr(0.005), peak_with_snr(0.01)];
+        assert_eq!(clear_peaks(&peaks, -20.0), vec![true, false, true]);
+        // None clears 30 dB: every peak is used.
+        assert_eq!(clear_peaks(&peaks, 30.0), vec![true; 3]);
+    }
+
+    #[test]
+    fn range_search_is_around_the_timing_range_within_the_interval() {
+        let c = EpochConfig::marvel();
+        let RangeWindow::AroundTiming { half_width_m } = c.range_window else { panic!("default window") };
+        let around = range_search(&c, 20.0);
+        assert!((around.min_m - (20.0 - half_width_m)).abs() < 1e-12);
+        assert!((around.max_m - (20.0 + half_width_m)).abs() < 1e-12);
+        assert_eq!(around.select, RangeSelect::NearestTo(20.0));
+        // A timing range beyond the interval: the window keeps its width inside it.
+        let beyond = range_search(&c, -3.0);
+        assert_eq!(beyond.min_m, c.range.min_m);
+        assert!((beyond.max_m - (c.range.min_m + half_width_m)).abs() < 1e-12);
+        let full = range_search(&EpochConfig { range_window: RangeWindow::Full, ..c.clone() }, 20.0);
+        assert_eq!((full.min_m, full.max_m), (c.range.min_m, c.range.max_m));
     }
 
     #[test]
