@@ -1,13 +1,19 @@
 """``scattertrack live`` and ``scattertrack emulate-reader``: a real reader in.
 
     scattertrack live --scene S --llrp HOST[:PORT] --out track.csv|track.parquet --journal reads.csv
+                      [--publish-reads HOST[:PORT] --shards N]
                       [--method glac] [--duration SECONDS] [--antennas 1,2,3,4]
                       [--tx-power-dbm P] [--reader-mode M] [--session N] [--search-mode N]
                       [--mcap FILE] [--ros2-bag DIR] [--frame-id F] [--transform x,y,z,qw,qx,qy,qz]
                       [--foxglove [HOST:]PORT] [--mqtt-out HOST[:PORT]]
+    scattertrack live --scene S --mqtt-in HOST[:PORT] --shard K/N --out track.csv --journal reads.csv ...
     scattertrack emulate-reader --scenario NAME [--port P] [--speed X] [--drop-after S] [--seed N]
 
-``live`` runs :class:`scattertrack.readers.live.LiveSession` until
+``live`` runs :class:`scattertrack.readers.live.LiveSession` (reads from a
+reader; with ``--publish-reads`` also to their shards' MQTT topics, and
+with no ``--out`` only journaled and published) or, with ``--mqtt-in``,
+:class:`scattertrack.readers.mqtt_in.MqttReadsSession` (one shard's reads
+from the broker) until
 ``--duration`` (a hard wall-clock stop) or Ctrl-C, printing a progress line
 a second on stderr, then its summary on stdout; exit 0. ``emulate-reader``
 serves a simulated scenario as an Impinj reader on 127.0.0.1 (loopback
@@ -38,6 +44,18 @@ def antenna_list(text: str) -> tuple[int, ...]:
     return ports
 
 
+def shard_spec(text: str) -> tuple[int, int]:
+    """``K/N``: shard K (0-based) of N."""
+    k, slash, n = text.partition("/")
+    try:
+        shard, shards = ascii_int(k.strip()), ascii_int(n.strip())
+    except (argparse.ArgumentTypeError, ValueError):
+        shard = shards = -1
+    if not slash or not 1 <= shards <= 65536 or not 0 <= shard < shards:
+        raise argparse.ArgumentTypeError(f"expected K/N with 0 <= K < N (e.g. 0/2), got {text!r}")
+    return shard, shards
+
+
 def add_parsers(commands) -> None:
     """The two subcommands, on ``build_parser``'s subparsers."""
     live = commands.add_parser(
@@ -49,8 +67,17 @@ def add_parsers(commands) -> None:
         "Reconnects with backoff. Ends after --duration seconds of wall-clock time or on Ctrl-C, with a summary.",
     )
     live.add_argument("--scene", required=True, help="scene.toml (the antennas' ids are the reader's ports)")
-    live.add_argument("--llrp", required=True, type=host_and_port, metavar="HOST[:PORT]", help=f"the reader (port {LLRP_PORT} by default)")
-    live.add_argument("--out", required=True, help="track.csv to write (appended to if it exists); track.parquet: the CSV beside it as it goes, the Parquet twin at the end")
+    source = live.add_mutually_exclusive_group(required=True)
+    source.add_argument("--llrp", type=host_and_port, metavar="HOST[:PORT]", help=f"the reader (port {LLRP_PORT} by default)")
+    source.add_argument("--mqtt-in", type=outputs_command.mqtt_address, metavar="HOST[:PORT]",
+                        help="a worker: track the reads of one shard (--shard K/N) from this MQTT broker (scattertrack/reads/<K>)")
+    live.add_argument("--shard", type=shard_spec, metavar="K/N", help="with --mqtt-in: this worker's shard K of N (0-based)")
+    live.add_argument("--publish-reads", type=outputs_command.mqtt_address, metavar="HOST[:PORT]",
+                      help="with --llrp: publish every journaled read to this MQTT broker, on its tag's shard topic scattertrack/reads/<K> "
+                      "(K = CRC-32 of the upper-case EPC mod --shards), for --mqtt-in workers")
+    live.add_argument("--shards", type=ascii_int, default=1, help="with --publish-reads: the number of shards (workers), default 1")
+    live.add_argument("--out", help="track.csv to write (appended to if it exists); track.parquet: the CSV beside it as it goes, the Parquet twin at the end; "
+                      "required unless --publish-reads (then without --out the reads are only journaled and published)")
     live.add_argument("--journal", required=True, help="reads.csv to append every received read to")
     live.add_argument("--method", default="glac", help="tracking method for phase reads (default glac)")
     live.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
@@ -107,19 +134,39 @@ def _progress_line(session) -> None:
     print("  ".join(parts), file=sys.stderr, flush=True)
 
 
+def _check_sources(args) -> None:
+    """The option combinations of the reader, worker and publisher roles."""
+    if args.mqtt_in and args.shard is None:
+        raise ValueError("--mqtt-in needs --shard K/N (this worker's shard)")
+    if args.shard is not None and not args.mqtt_in:
+        raise ValueError("--shard goes with --mqtt-in (a worker); a reader process publishes with --publish-reads and --shards")
+    if args.mqtt_in and (args.publish_reads or args.antennas or args.tx_power_dbm is not None or args.reader_mode is not None or args.search_mode is not None):
+        raise ValueError("--mqtt-in takes reads from the broker: --publish-reads and the reader's settings do not apply")
+    if not 1 <= args.shards <= 65536:
+        raise ValueError(f"--shards must be from 1 to 65536, got {args.shards}")
+    if args.shards != 1 and not args.publish_reads:
+        raise ValueError("--shards goes with --publish-reads")
+    if not args.out and not args.publish_reads:
+        raise ValueError("--out is required (only a --publish-reads process may run without tracking)")
+
+
 def command_live(args) -> int:
     from scattertrack import io, track
     from scattertrack.io.csvutil import is_parquet
     from scattertrack.readers.live import LiveSession, ReaderSettings
     from scattertrack.readers.outputs import LiveOutputs
 
+    _check_sources(args)
     params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
-    tracker = track.make(args.method, scene, **params)  # a bad parameter or method fails before connecting
-    host, port = args.llrp
+    # A bad parameter or method fails before connecting; without --out nothing is tracked.
+    tracker = track.make(args.method, scene, **params) if args.out else None
+    host, port = args.llrp or args.mqtt_in
     # Parquet has no append: the rows go to the CSV beside it as they come, the twin is made at the end.
-    track_csv = Path(args.out).with_suffix(".csv") if is_parquet(args.out) else Path(args.out)
-    options = outputs_command.output_options(args, parquet=args.out if is_parquet(args.out) else None)
+    track_csv = None if not args.out else Path(args.out).with_suffix(".csv") if is_parquet(args.out) else Path(args.out)
+    options = outputs_command.output_options(args, parquet=args.out if args.out and is_parquet(args.out) else None)
+    if options.any and tracker is None:
+        raise ValueError("the track outputs (--mcap, --ros2-bag, --foxglove, --mqtt-out) need --out (a tracked run)")
     for path in (args.out, args.journal, args.mcap, args.ros2_bag):
         if path:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -128,17 +175,35 @@ def command_live(args) -> int:
     settings = ReaderSettings(args.antennas, args.tx_power_dbm, args.reader_mode, args.session, args.search_mode)
     progress = None if args.no_progress else _progress_line
     outputs = LiveOutputs(options, scene, track_csv) if options.any else None
+    publisher = None
     try:
-        session = LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress, outputs=outputs)
+        if args.mqtt_in:
+            from scattertrack.readers.mqtt_in import MqttReadsSession
+
+            shard, shards = args.shard
+            session = MqttReadsSession(scene, host, port, shard, shards, args.journal, track_csv, tracker, duration_s=args.duration, progress=progress, outputs=outputs)
+        else:
+            if args.publish_reads:
+                from scattertrack.io.mqtt import MqttPublisher
+
+                publisher = MqttPublisher(*args.publish_reads)
+            session = LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress,
+                                  outputs=outputs, read_publisher=publisher, shards=args.shards)
     except BaseException:
-        if outputs is not None:  # the session closes them, once it exists
-            outputs.close()
+        for opened in (outputs, publisher):
+            if opened is not None:  # the session closes them, once it exists
+                opened.close()
         raise
-    say(f"live: {host}:{port}, journal {args.journal}, track {track_csv}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
+    role = f"shard {args.shard[0]} of {args.shard[1]} from the MQTT broker" if args.mqtt_in else "reader"
+    say(f"live: {role} {host}:{port}, journal {args.journal}, track {track_csv or '(none: journal and publish only)'}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
+    if publisher is not None:
+        say(f"  publishing every read to the MQTT broker {args.publish_reads[0]}:{args.publish_reads[1]} on scattertrack/reads/<K>, {plural(args.shards, 'shard')}")
     if outputs is not None and outputs.foxglove is not None:
         say(f"  Foxglove WebSocket on ws://{options.foxglove[0]}:{outputs.foxglove.port}")
     summary = asyncio.run(_run_until_interrupted(session))
     print_live_summary(summary, args)
+    if publisher is not None:
+        say(f"  published {plural(publisher.published, 'read')} to {plural(args.shards, 'shard')}")
     if outputs is not None:
         outputs_command.say_outputs(outputs)
     if summary.hop_table_hz:
@@ -165,9 +230,10 @@ async def _run_until_interrupted(session):
 
 def print_live_summary(summary, args) -> None:
     ended = {"duration": f"--duration {args.duration:g} s reached", "stop": "interrupted"}.get(summary.stopped_by, "ended")
-    say(f"live run {ended} after {summary.wall_s:.1f} s: {plural(summary.reads, 'read')} of {plural(len(summary.tags), 'tag')} journaled to {args.journal} ({summary.reads_per_s:,.0f} reads/s), {plural(summary.estimates, 'estimate')} written to {args.out}")
+    written = f"{plural(summary.estimates, 'estimate')} written to {args.out}" if args.out else "nothing tracked"
+    say(f"live run {ended} after {summary.wall_s:.1f} s: {plural(summary.reads, 'read')} of {plural(len(summary.tags), 'tag')} journaled to {args.journal} ({summary.reads_per_s:,.0f} reads/s), {written}")
     if summary.reader:
-        say(f"  reader: {summary.reader}; hop table of {plural(len(summary.hop_table_hz), 'channel')}")
+        say(f"  reader: {summary.reader}" + (f"; hop table of {plural(len(summary.hop_table_hz), 'channel')}" if summary.hop_table_hz else ""))
     declined = sum(summary.declined.values())
     say(f"  declined {plural(declined, 'report')}" + (": " + "; ".join(f"{n} {reason}" for reason, n in summary.declined.most_common()) if declined else ""))
     reconnects = len(summary.outages_s)

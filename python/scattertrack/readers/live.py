@@ -20,7 +20,13 @@ needs (RF phase angle, peak RSSI, Doppler), and for every tag report:
    on the journal gives exactly the live track;
 5. appends any estimate to the track (``track.csv``), flushed, and hands
    the row to ``outputs`` (Parquet, MCAP, ROS 2 bag, Foxglove, MQTT:
-   :class:`scattertrack.readers.outputs.LiveOutputs`), closed at the end.
+   :class:`scattertrack.readers.outputs.LiveOutputs`), closed at the end;
+6. with a ``read_publisher`` (scale-out), publishes the read as journaled
+   to its tag's shard topic (``scattertrack/reads/<K>``,
+   :mod:`scattertrack.io.mqtt`), where ``live --mqtt-in … --shard K/N``
+   workers (:class:`scattertrack.readers.mqtt_in.MqttReadsSession`) track
+   it. Without a tracker (``tracker=None``) a session only journals and
+   publishes.
 
 When the connection drops it reconnects with exponential backoff and sets
 the reader up again (a reader deactivates its ROSpecs when its client goes:
@@ -125,6 +131,8 @@ class LiveSession:
         progress: Callable[["LiveSession"], None] | None = None,
         progress_interval_s: float = 1.0,
         outputs=None,
+        read_publisher=None,
+        shards: int = 1,
     ) -> None:
         self.scene = scene
         self.host, self.port = host, int(port)
@@ -137,9 +145,12 @@ class LiveSession:
         self.tracker = tracker
         self.antenna_ids = {a.id for a in scene.antennas}
         self.journal = ReadsAppender(journal_path)
-        self.track = TrackAppender(track_path)
+        self.track = TrackAppender(track_path) if tracker is not None else None
         self.outputs = outputs
         """Anything with ``add(epc, cells, covariance)`` and ``close()``, or None."""
+        self.read_publisher = read_publisher
+        """Anything with ``publish_read(read, shards)`` and ``close()`` (``io.mqtt.MqttPublisher``), or None."""
+        self.shards = shards
         self.summary = LiveSummary()
         self.last_estimate: dict = {}
         """EPC -> its latest :class:`~scattertrack.track.glac.Estimate`."""
@@ -166,33 +177,44 @@ class LiveSession:
         if isinstance(read, str):
             self.summary.declined[read] += 1
             return
-        if read.antenna not in self.antenna_ids:
-            self.summary.declined[NOT_IN_SCENE.format(read.antenna)] += 1
-            return
         key = (read.first_seen_us, read.epc, read.antenna, read.channel_index, round(read.phase_rad * 1e6))
+        self.accept(read.time_s, read.epc, read.antenna, read.frequency_hz, read.phase_rad, read.rssi_dbm, read.doppler_hz, read.channel_index, key)
+
+    def accept(self, time_s, epc, antenna, frequency_hz, phase_rad, rssi_dbm, doppler_hz, channel_index, key) -> None:
+        """Journal, publish, track and write one read (``key``: its identity, for de-duplication)."""
+        if antenna not in self.antenna_ids:
+            self.summary.declined[NOT_IN_SCENE.format(antenna)] += 1
+            return
         if key in self._recent_keys:
             self.summary.declined[DUPLICATE] += 1
             return
         self._remember(key)
-        time_s, phase_rad = self.journal.append(
-            read.time_s, read.epc, read.antenna, read.frequency_hz, read.phase_rad, read.rssi_dbm, read.doppler_hz, read.channel_index
-        )
+        time_s, phase_rad = self.journal.append(time_s, epc, antenna, frequency_hz, phase_rad, rssi_dbm, doppler_hz, channel_index)
         self.journal.flush()
+        if self.read_publisher is not None:
+            # The values as journaled, so a worker's journal is this one's rows of its tags.
+            self.read_publisher.publish_read(
+                {"time_s": time_s, "epc": epc, "antenna": antenna, "frequency_hz": frequency_hz, "phase_rad": phase_rad,
+                 "rssi_dbm": rssi_dbm, "doppler_hz": doppler_hz, "channel_index": channel_index},
+                self.shards,
+            )
         self.summary.reads += 1
         now = time.monotonic() - self._started
         if self.summary.reads == 1:
             self.summary.first_read_s = now
         self.summary.last_read_s = now
-        self.summary.tags[read.epc] = self.summary.tags.get(read.epc, 0) + 1
-        estimate = self.tracker.step(time_s, read.epc, read.antenna, read.frequency_hz, phase_rad)
+        self.summary.tags[epc] = self.summary.tags.get(epc, 0) + 1
+        if self.tracker is None:
+            return
+        estimate = self.tracker.step(time_s, epc, antenna, frequency_hz, phase_rad)
         if estimate is not None:
             sigma = [math.sqrt(max(estimate.covariance[k, k], 0.0)) for k in range(3)]
-            cells = self.track.append(estimate.time_s, read.epc, estimate.position, estimate.velocity, sigma)
+            cells = self.track.append(estimate.time_s, epc, estimate.position, estimate.velocity, sigma)
             self.track.flush()
             if self.outputs is not None:
-                self.outputs.add(read.epc, cells, estimate.covariance)
+                self.outputs.add(epc, cells, estimate.covariance)
             self.summary.estimates += 1
-            self.last_estimate[read.epc] = estimate
+            self.last_estimate[epc] = estimate
 
     def _remember(self, key) -> None:
         self._recent.append(key)
@@ -284,8 +306,11 @@ class LiveSession:
             with contextlib.suppress(asyncio.CancelledError, Exception):
                 await asyncio.wait_for(asyncio.gather(worker, ticker, stopper, return_exceptions=True), STOP_GRACE_S)
             self.journal.close()
-            self.track.close()
+            if self.track is not None:
+                self.track.close()
             if self.outputs is not None:
                 self.outputs.close()
+            if self.read_publisher is not None:
+                self.read_publisher.close()
             self.summary.wall_s = time.monotonic() - self._started
         return self.summary
