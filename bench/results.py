@@ -43,6 +43,7 @@ BENCHMARKS: list[tuple[str, list[str]]] = [
     ("marvel", [PY, "bench/marvel.py"]),
     ("live", [PY, "bench/live.py"]),
     ("calibration", [PY, "bench/calibration.py"]),
+    ("batch", [PY, "bench/batch.py"]),
 ]
 """(key, command): run from the repository root, in this order."""
 

@@ -38,7 +38,7 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack.arguments import ascii_float, ascii_int, parse_parameter, plural, say, tracker_parameters
-from scattertrack import calibrate_command, live_command, locate_command, outputs_command
+from scattertrack import batch_command, calibrate_command, live_command, locate_command, outputs_command
 from scattertrack.server import command as dashboard_command
 
 DEMO_SCENARIO = "glac-3d-arm"
@@ -944,6 +944,7 @@ def build_parser() -> argparse.ArgumentParser:
     live_command.add_parsers(commands)
     calibrate_command.add_parser(commands)
     locate_command.add_parser(commands)
+    batch_command.add_parser(commands)
     dashboard_command.add_parser(commands)
 
     demo = commands.add_parser(
