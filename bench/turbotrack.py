@@ -33,7 +33,7 @@ Blocks:
    fusion -> tracker): frames/s as fast as possible, and at the recorded
    speed the latency from each reply's arrival to its position (p50, p90,
    p99, max, where it went), plus the accuracy of those positions.
-8. lobes (issue 16): lock-in on a wrong lobe, from 40 start frames each
+8. lobes: lock-in on a wrong lobe, from 40 start frames each
    (``bench/turbotrack_lobes.py`` defines lock-in): every ``helper-*``
    outside recording (``../shared/outside``, measured, never tuned on) and
    our simulator's SNR x static/moving x layout sweep (reduced by default:

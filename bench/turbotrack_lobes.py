@@ -1,4 +1,4 @@
-"""Lobe lock-in of the wideband trackers, measured (issue 16, item 1).
+"""Lobe lock-in of the wideband trackers, measured.
 
 A helper whose receivers sit in line with the transmitter has neighbouring
 *lobes*: positions whose bistatic path sums differ from the truth's by one

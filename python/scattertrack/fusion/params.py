@@ -30,17 +30,13 @@ class MarvelParams:
 
     smoother_lag_s: float = parameter(4.0, "> 0", "s", "states older than this behind the newest epoch are marginalised (the revised track's lag)")
     """States older than this behind the newest epoch are marginalised, s.
-    The causal rows barely depend on it; the revised track does (docs/marvel.md
-    section 11: square through walls 0.470 m at 3 s, 0.411 m at 6 and 10 s,
-    dev seeds), and the time per epoch grows with it: the once-a-second
-    relinearisation (``relinearize_skip``) relinearises the whole window in
-    iSAM2's batch step, the slowest epoch of each second and so the p99
-    (since issue 16 it runs between epochs: fusion/between_epochs.py).
-    4 s (was 6 s until issue 16): dev seeds 1000-1001, thread CPU time per
-    epoch on the 2-core VM, 6 s -> 4 s: 20 m circle p99 33.3 -> 21.0 ms,
-    causal 0.386 -> 0.386 m, revised 0.272 -> 0.280 m; square through walls
-    p99 29.2 -> 18.4 ms, causal 0.674 -> 0.673 m, revised 0.426 -> 0.448 m.
-    The 30 ms p99 budget is not met at 6 s on that machine."""
+    The causal rows barely depend on it; the revised track does, and the
+    time per epoch grows with it: the once-a-second relinearisation
+    (``relinearize_skip``) relinearises the whole window in iSAM2's batch
+    step, the slowest epoch of each second and so the p99 (it runs between
+    epochs: fusion/between_epochs.py). 4 s keeps the p99 within the 30 ms
+    budget on a 2-core machine at nearly the same errors as a longer lag
+    (the measurements: docs/notes/marvel-experiments.md)."""
     marginalize_every_s: float = parameter(1.0, ">= 0", "s", "states leave the window in groups spanning this long (<= smoother_lag_s; 0: each alone)")
     """States leave the window in groups spanning this long, s: each state's
     time stamp in the smoother is the end of its bucket ``[n T, (n + 1) T)``,
@@ -51,8 +47,8 @@ class MarvelParams:
     clique), and when most variables are affected iSAM2 relinearises every
     factor (its batch step); done each epoch, that was most of the time per
     epoch. The revised rows of a group are read together just before it
-    leaves: the first marginal covariance walks the tree (about 10 ms at a 6 s
-    lag), the next ones reuse its cached separator marginals (about 0.1 ms).
+    leaves: the first marginal covariance walks the tree, the next ones reuse
+    its cached separator marginals (a small fraction of its cost).
     0: each state stamped with its own time, marginalised alone."""
     gravity_m_s2: float = parameter(GRAVITY_M_S2, "> 0", "m/s^2", "magnitude of gravity; the world's gravity is (0, 0, -g)")
     accel_noise_density: float = parameter(1.0e-3, "> 0", "m/s^2/sqrt(Hz)", "accelerometer white noise")
@@ -159,8 +155,8 @@ class MarvelParams:
     take-off detector missed), the ground factors of the epochs in the last
     this many seconds are removed from the graph, not obeyed (the window
     mean lags the rise). When the IMU ends the ground phase nothing is
-    removed: every sample before was within the rest thresholds. (Removing
-    0.3 s there too cost the 20 m circle 1 cm, seeds 0-2: 0.435 -> 0.444 m.)"""
+    removed: every sample before was within the rest thresholds, so those
+    factors are right (docs/notes/marvel-experiments.md)."""
     moving_velocity_sigma_m_s: float = parameter(2.0, "> 0", "m/s", "velocity prior of a log that does not start at rest, and of a restart after divergence")
     """1-sigma (m/s, per axis, zero mean) of the first state's velocity when
     the rest test has not passed (a log that starts in flight or while lifting
@@ -266,11 +262,8 @@ class MarvelParams:
     range and direction factor, so relinearising it (or any state deep in
     the window) re-eliminates the whole window; checked on every update
     with the 0.01 threshold, that happened on nearly every one (p50 32 ms
-    per epoch against 2-3 ms). Measured on dev seeds 1000-1004 (square
-    through walls) and 1000-1002 (circle), mean causal / revised error:
-    threshold 0.01, skip 10: 0.681 / 0.413 m and 0.386 / 0.283 m; 0.01, 5:
-    0.684 / 0.420 and 0.385 / 0.280; 0.05, 1: 0.680 / 0.415 and 0.385 /
-    0.279 m (p50 17-23 ms); 0.1, 5: 0.685 / 0.418 and 0.384 / 0.279 m."""
+    per epoch against 2-3 ms). Other thresholds and skips give the same
+    errors within a few millimetres (docs/notes/marvel-experiments.md)."""
     factorization: str = parameter("QR", "any", "", "iSAM2 factorization", choices=("QR", "CHOLESKY"))
     """iSAM2 factorization, "QR" or "CHOLESKY" (see the note in the constructor)."""
     extra_iterations: int = parameter(0, ">= 0", "", "additional iSAM2 updates per epoch (more Gauss-Newton steps)")

@@ -1,4 +1,4 @@
-//! Lobe-level evidence for the wideband particle filters (issue 16).
+//! Lobe-level evidence for the wideband particle filters.
 //!
 //! Every receiver's candidates form a comb one wavelength λ apart
 //! (eq. 5.1), so the likelihood has *lobes*: positions whose path lengths

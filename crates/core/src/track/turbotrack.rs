@@ -25,7 +25,7 @@
 //!   particles improbable, or the fix jumping) leave the particles as
 //!   they were and extrapolate; **MAP** output is the highest-weight
 //!   particle's mode, and its backtracked ancestry is the MAP trajectory.
-//! - **Lobe test** (issue 16, `lobes.rs`): every accepted frame the
+//! - **Lobe test** (`lobes.rs`): every accepted frame the
 //!   filter's lobe is compared with its neighbouring lobes (other comb
 //!   teeth) by their profile likelihood, accumulated over frames; the
 //!   particles move to a lobe whose evidence passes `lobe_switch_nats`, and
@@ -100,7 +100,7 @@ pub struct TurboTrackParams {
     pub resample_threshold: f64,
     /// Perimeter threshold T of the thesis's initial pruning, m (doubled up
     /// to 3 times when no tuple survives): the gaussian-pf baseline only;
-    /// turbotrack and uniform-pf test each tuple's χ² instead (issue 16).
+    /// turbotrack and uniform-pf test each tuple's χ² instead.
     pub perimeter_threshold_m: f64,
     /// Largest number of initial mixture components kept (by weight).
     pub max_initial_components: usize,
