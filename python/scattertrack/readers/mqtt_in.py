@@ -19,7 +19,6 @@ counted, never dropped silently.
 from __future__ import annotations
 
 import asyncio
-import math
 import queue
 
 from scattertrack.io.mqtt import MqttReadsSubscriber, parse_read, shard_of
@@ -66,10 +65,8 @@ class MqttReadsSession(LiveSession):
             self.receive(payload)
 
     async def run(self, stop: asyncio.Event | None = None):
+        # What arrives after the end is not lost: the broker keeps it for the next run (persistent session).
         try:
-            summary = await super().run(stop)
+            return await super().run(stop)
         finally:
             self.subscriber.close()
-        # What arrived after the end is not lost: the broker keeps it for the next run (persistent session).
-        summary.wall_s = summary.wall_s if math.isfinite(summary.wall_s) else 0.0
-        return summary

@@ -2,7 +2,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::hop_centre::invert;
+use super::hop_centre::{infinite, invert};
 use super::{hop_centre, search, PhaseReads};
 
 /// 4π/c, s/m: k = m s (4π/c) f.
@@ -122,10 +122,6 @@ fn independent_reads(reads: &PhaseReads, time_s: &[f64], correlation_s: f64) -> 
     keys.sort_unstable();
     keys.dedup();
     keys.len()
-}
-
-fn infinite(axes: usize) -> Matrix3<f64> {
-    Matrix3::from_fn(|r, c| if r < axes && c < axes { f64::INFINITY } else { 0.0 })
 }
 
 /// σ² (J̃ᵀJ̃)⁻¹, J̃ᵢ = kᵢ uᵢ centred over the reads (candidates' docs).

@@ -63,16 +63,13 @@ fn weighted_multilateration(anchors: &[Vector3<f64>], ranges: &[f64], weights: &
             break;
         }
     }
-    let covariance = invert(&normal, axes).unwrap_or_else(|| {
-        let mut infinite = Matrix3::zeros();
-        for axis in 0..axes {
-            for other in 0..axes {
-                infinite[(axis, other)] = f64::INFINITY;
-            }
-        }
-        infinite
-    });
+    let covariance = invert(&normal, axes).unwrap_or_else(|| infinite(axes));
     Some((p, covariance))
+}
+
+/// Infinite over the first `axes` (a singular fit), zero beyond.
+pub(super) fn infinite(axes: usize) -> Matrix3<f64> {
+    Matrix3::from_fn(|r, c| if r < axes && c < axes { f64::INFINITY } else { 0.0 })
 }
 
 /// (H restricted to the first `axes`)⁻¹, zero-padded; `None` if singular.
