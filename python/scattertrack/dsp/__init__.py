@@ -21,6 +21,12 @@ reverse. One module per concept:
     (docs/dsp.md). Windows declined are counted in ``Frames.skipped``,
     never dropped silently; a bad recording raises
     :class:`scattertrack.io.types.FormatError`.
+:mod:`scattertrack.dsp.lora_sensing`
+    ``sense_epochs(recording, fusion, options) -> Iterator[SensedEpoch]``:
+    Marvel's pose sensing of a LoRa recording (docs/marvel.md sections
+    5-8), epoch by epoch, with the fusion alongside reached through the
+    ``Fusion`` protocol the runner passes in (this layer imports neither
+    :mod:`scattertrack.fusion` nor :mod:`scattertrack.track`).
 """
 
 from scattertrack.dsp.ofdm import (

@@ -1,6 +1,7 @@
 """The run helper behind both Marvel entry points: feature files and LoRa recordings.
 
-:func:`run_marvel` (``features.csv`` + ``imu.csv``) and
+:func:`run_marvel` (``features.csv`` + ``imu.csv``; the same run as
+:class:`scattertrack.track.marvel.MarvelTracker`'s loop over ``step``) and
 :func:`scattertrack.track.marvel.run_sigmf` (a recording sensed epoch by
 epoch) differ only in where each epoch's feature row comes from. Everything
 around it is here, once: the estimator from its parameters
@@ -45,10 +46,15 @@ class ImuFeed:
     def until(self, estimator, time_s: float) -> None:
         """Every sample at or before ``time_s`` (s) not given yet (``side="right"``:
         a sample at the epoch's own time is part of "at or before")."""
-        end = int(np.searchsorted(self.time_s, time_s, side="right"))
-        for i in range(self.next, end):
+        for i in self.take_until(time_s):
             estimator.add_imu(self.time_s[i], self.accel[i], self.gyro[i], self.baro[i])
+
+    def take_until(self, time_s: float) -> range:
+        """The indices of the samples at or before ``time_s`` (s) not given yet, now counted as given."""
+        end = int(np.searchsorted(self.time_s, time_s, side="right"))
+        taken = range(self.next, end)
         self.next = max(self.next, end)
+        return taken
 
 
 def run_marvel(imu: Imu, features: Features, scene: Scene | None = None, *, progress: bool = False, **params) -> Track:

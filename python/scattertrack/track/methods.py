@@ -35,8 +35,14 @@ METHODS: tuple[str, ...] = tuple(REGISTRY)
 READ_METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY.values() if m.input == "reads")
 """Methods that track phase reads (GLAC and its variants)."""
 
-WIDEBAND_METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY.values() if m.input == "frames")
-"""Methods that track a helper's wideband frames (TurboTrack and its variants)."""
+HELPER_METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY.values() if m.input == "frames")
+"""Methods that track a localization helper's wideband frames (TurboTrack and its variants)."""
+
+WIDEBAND_METHODS: tuple[str, ...] = HELPER_METHODS
+"""The helper pipeline's methods under their old name."""
+
+DRONE_METHODS: tuple[str, ...] = tuple(m.name for m in REGISTRY.values() if m.pipeline == "drone")
+"""Methods that track the drone (Marvel and mu-locate: IMU plus features or a LoRa recording)."""
 
 
 def method(name: str) -> Method:

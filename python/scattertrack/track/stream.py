@@ -30,8 +30,8 @@ from scattertrack.dsp.ofdm import SigmfCalibration, calibrate_sigmf, helper_posi
 from scattertrack.io.sigmf import read_sigmf, Recording
 from scattertrack.io.sigmf_scene import check_calibration
 from scattertrack.io.types import Scene, SkipReport, Track
-from scattertrack.track import wideband
-from scattertrack.track.glac import track_from_columns
+from scattertrack.track import helper
+from scattertrack.track.columns import track_from_columns
 
 SKIP_DSP = "reply without a usable tag channel (DSP: {})"
 SKIP_UNREADABLE = "reply window that could not be read from the data file"
@@ -111,8 +111,8 @@ def stream_sigmf(
     Windows are cut to the shortest window's length (the helper records
     equal windows).
     """
-    if method not in wideband.WIDEBAND_METHODS:
-        raise ValueError(f"method '{method}' does not track helper recordings (one of {', '.join(wideband.WIDEBAND_METHODS)})")
+    if method not in helper.WIDEBAND_METHODS:
+        raise ValueError(f"method '{method}' does not track helper recordings (one of {', '.join(helper.WIDEBAND_METHODS)})")
     recording = recording if isinstance(recording, Recording) else read_sigmf(recording)
     _positions(scene, recording)
     options = dict(dsp_options or {})
@@ -133,7 +133,7 @@ def stream_sigmf(
     tx_phase = np.array([-1 if w.tx_sample_index is None else w.tx_sample_index % n for w in recording.windows], dtype=np.int64)
 
     index = {a.id: i for i, a in enumerate(scene.antennas)}
-    core = wideband.engine(method, scene, params)
+    core = helper.engine(method, scene, params)
     settings = dict(
         timing_reference=calibration.timing_reference,
         correction=np.ascontiguousarray(calibration.correction, dtype=np.complex128),
@@ -163,7 +163,7 @@ def stream_sigmf(
         skipped.add(SKIP_UNREADABLE, n=int(out["unreadable"]))
     columns = {k: [out[k]] for k in ("row", "time_s", "position", "velocity", "covariance")}
     stats = {str(name): dict(core.stats(i)) for i, name in enumerate(names)}
-    track = track_from_columns(columns, epcs, skipped, stats, wideband._DECLINED, keep_covariance=True)  # for the ROS 2 outputs
+    track = track_from_columns(columns, epcs, skipped, stats, helper._DECLINED, keep_covariance=True)  # for the ROS 2 outputs
     return StreamResult(
         track=track,
         latency_ns=np.asarray(out["latency_ns"], dtype=np.int64),

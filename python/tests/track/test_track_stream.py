@@ -152,12 +152,12 @@ def test_a_window_that_cannot_be_read_is_counted(session, tmp_path):
 
 def test_the_binding_wants_exactly_one_source(session):
     from scattertrack.dsp.ofdm import ofdm_dsp as _dsp
-    from scattertrack.track import wideband
+    from scattertrack.track import helper
 
     _, out = session
     scene = io.read_scene(out / "scene.toml")
     recording = read_sigmf(out / "recording.sigmf-meta")
-    core = wideband.engine("turbotrack", scene, {})
+    core = helper.engine("turbotrack", scene, {})
     empty = np.zeros(0, dtype=np.int64)
     with pytest.raises(ValueError, match="exactly one of windows and file"):
         core.run_stream(empty, np.zeros(0), empty, _dsp(recording, {}), 0, [1, 2, 3, 4])
