@@ -1,4 +1,4 @@
-"""Marvel pose sensing from a LoRa recording, fused with the IMU (track/marvel.py, docs/marvel.md sections 5-8).
+"""Marvel pose sensing from a LoRa recording, fused with the IMU (dsp/lora_sensing.py, track/marvel.py, docs/marvel.md sections 5-8).
 
 One short IQ flight is simulated once (``simulate --iq``: the rail of paper
 Fig. 9 at 3 m/s, 3 s at rest then two passes) and shared read-only; the
@@ -21,6 +21,7 @@ from scattertrack.sim import load_scenario, simulate
 from scattertrack.sim.drone import flight as flight_at
 from scattertrack.sim.marvel import simulate_marvel_iq
 from scattertrack.sim.rotation import wrap_angle
+from scattertrack.dsp import lora_sensing
 from scattertrack.track import marvel
 
 SEED = 1001
@@ -335,9 +336,9 @@ def test_rest_rows_leave_out_faded_peaks():
     frequency = np.arange(2 * 4 * 3, dtype=float).reshape(2, 4, 3)  # (channel, tag, antenna)
     snr = np.full((2, 4, 3), -8.0)
     snr[1, 3, 0] = -26.0  # channel 1, tag 3, antenna 0 in a fade
-    rows = marvel._rest_rows(frequency, snr, -20.0)
+    rows = lora_sensing._rest_rows(frequency, snr, -20.0)
     assert rows.shape == (5, 4)
-    assert np.array_equal(marvel._rest_rows(frequency), np.transpose(frequency, (0, 2, 1)).reshape(6, 4))
+    assert np.array_equal(lora_sensing._rest_rows(frequency), np.transpose(frequency, (0, 2, 1)).reshape(6, 4))
     assert not any(np.array_equal(row, frequency[1, :, 0]) for row in rows)
 
 
@@ -364,7 +365,7 @@ def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
     assert len(angle) > 0.8 * len(real) and len(distance) > 0.8 * len(real)
     assert np.median(angle) < 0.01 and np.median(distance) < 0.05
 
-    original = marvel._Sensor.processor
+    original = lora_sensing._Sensor.processor
 
     class Injected:
         def __init__(self, inner):
@@ -375,7 +376,7 @@ def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
             result = self.inner.process(samples, **kwargs)
             return result | {"angle_spread_rad": 0.2, "range_spread_m": 1.5}
 
-    monkeypatch.setattr(marvel._Sensor, "processor", lambda self, offsets: Injected(original(self, offsets)))
+    monkeypatch.setattr(lora_sensing._Sensor, "processor", lambda self, offsets: Injected(original(self, offsets)))
     for flag in (True, False):
         estimator = MarvelEstimator(MarvelParams.from_kwargs(multipath="inflation"))
         rows = [e for e in marvel.sense_epochs("marvel", meta, imu, estimator, consistency_sigmas=flag) if e.sensed]
@@ -386,6 +387,6 @@ def test_consistency_spreads_widen_the_row_sigmas(recorded, monkeypatch):
             assert np.all(angle >= 0.2) and np.all(distance >= 1.5)
         else:
             assert np.median(angle) < 0.05 and np.median(distance) < 0.5
-    assert marvel._spread(None) == 0.0 and marvel._spread(float("nan")) == 0.0 and marvel._spread(0.2) == 0.2
+    assert lora_sensing._spread(None) == 0.0 and lora_sensing._spread(float("nan")) == 0.0 and lora_sensing._spread(0.2) == 0.2
     with pytest.raises(ValueError, match="consistency_sigmas"):
         marvel._resolve_sensing({"consistency_sigmas": "maybe"})
