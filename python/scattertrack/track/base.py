@@ -32,7 +32,7 @@ Units: SI throughout (s, m, m/s, rad, Hz).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 

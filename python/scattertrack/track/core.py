@@ -63,11 +63,11 @@ class CoreTracker(base.Tracker):
         The old positional form ``step(time_s, epc, antenna, frequency_hz,
         phase_rad)`` (one read) still works.
         """
-        if args:
-            measurement = Read(measurement, *args)
-        if isinstance(measurement, Read):
+        if args or isinstance(measurement, Read):
             if self._input != "reads":
                 raise ValueError(f"method '{self.method}' takes wideband frames (Frame), not phase reads")
+            if args:  # the old positional form: no Read built on the hot path
+                return self.step_read(measurement, *args)
             return self.step_read(measurement.time_s, measurement.epc, measurement.antenna, measurement.frequency_hz, measurement.phase_rad)
         if isinstance(measurement, Frame):
             if self._input != "frames":

@@ -41,15 +41,7 @@ from collections.abc import Iterator
 import numpy as np
 
 from scattertrack.dsp import lora_sensing
-from scattertrack.dsp.lora_sensing import (  # noqa: F401  (their old home: kept importable from here)
-    SENSING_DECLINE_REASONS,
-    SensedEpoch,
-    _Recording,
-    _rest_rows,
-    _Sensor,
-    _spread,
-    features_of,
-)
+from scattertrack.dsp.lora_sensing import SENSING_DECLINE_REASONS, SensedEpoch, features_of  # also importable from here, their old home
 from scattertrack.io.types import Features, Imu, Scene, Track
 from scattertrack.track import base
 from scattertrack.track import methods as registry
