@@ -38,6 +38,7 @@ def add_parser(commands) -> None:
 
 
 def command_demo(args) -> int:
+    """``demo``: a scenario simulated, read back, tracked with glac, evaluated; a summary and the files."""
     from scattertrack import eval as evaluation
     from scattertrack import io
 
@@ -63,6 +64,24 @@ def command_demo(args) -> int:
     say()
     say(evaluation.format_report(report, title="accuracy of glac against the simulated truth"))
     say()
+    print_demo_summary(report, simulation, result, reads, wall_s)
+    say()
+    files = [out / "scene.toml", out / "reads.csv", out / "truth.csv", out / "track.csv"]
+    files += save_figures(report, simulation.truth, result, out)
+    write_json(out / "report.json", report, scenario=simulation.scenario["name"], seed=simulation.seed)
+    files.append(out / "report.json")
+    say("files")
+    for path in files:
+        say(f"  {path}")
+    return 0
+
+
+def print_demo_summary(report, simulation, result, reads, wall_s: float) -> None:
+    """The demo's summary: accuracy, convergence, when the true candidate won, reads, speed, latency, declined."""
+    from scattertrack import eval as evaluation
+
+    duration = float(simulation.scenario["duration_s"])
+    tags = reads.epcs()
     overall = report.overall
     speedup = duration / wall_s if wall_s > 0 else math.inf
     say("summary")
@@ -98,12 +117,3 @@ def command_demo(args) -> int:
         )
     declined = result.skipped.summary().removeprefix("skipped ") if result.skipped.total else "none"
     say(f"  declined   {declined}")
-    say()
-    files = [out / "scene.toml", out / "reads.csv", out / "truth.csv", out / "track.csv"]
-    files += save_figures(report, simulation.truth, result, out)
-    write_json(out / "report.json", report, scenario=simulation.scenario["name"], seed=simulation.seed)
-    files.append(out / "report.json")
-    say("files")
-    for path in files:
-        say(f"  {path}")
-    return 0

@@ -69,3 +69,10 @@ def write_json(path: Path, report, **inputs) -> None:
     record = {"version": __version__, **inputs, **evaluation.report_to_dict(report)}
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(record, indent=2, allow_nan=False) + "\n")
+
+
+def output_path(path) -> Path:
+    """A command's output file: ``path`` as a Path, its folder made if need be."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    return out

@@ -9,8 +9,6 @@ reply's arrival to its position, stage by stage.
 
 from __future__ import annotations
 
-from pathlib import Path
-
 from scattertrack import outputs_command
 from scattertrack.arguments import (
     UsageError,
@@ -24,7 +22,7 @@ from scattertrack.arguments import (
     tracker_parameters,
 )
 from scattertrack.reporting import format_duration, format_nanoseconds
-from scattertrack.track_command import warn_about_geometry
+from scattertrack.track_command import warn_about_geometry, write_track_file
 
 
 def add_parser(commands) -> None:
@@ -82,12 +80,17 @@ def command_stream(args) -> int:
         args.sigmf, scene, calibration, args.method, speed=speed,
         workers=args.workers, layout=args.layout, prewake_s=args.prewake_us * 1e-6, ema_alpha=args.ema_alpha, **params,
     )
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    io.write_track(out, result.track)
+    out = write_track_file(args.out, result.track)
     pacing = "as fast as possible" if speed is None else f"{speed:g} x the recording's timing"
     say(f"streamed {plural(result.replies, 'reply')} from {args.sigmf} ({pacing}), {args.method}: "
         f"wrote {plural(len(result.track), 'row')} to {out}")
+    print_stream_summary(result)
+    outputs_command.finish_outputs(outputs, result.track)
+    return 0
+
+
+def print_stream_summary(result) -> None:
+    """What ``stream`` reports after the run: skips, throughput, latency, and where the time went."""
     say(f"  {result.track.skipped.summary()}")
     q = result.latency_percentile_ns
     say(f"  throughput: {result.frames_per_s:,.0f} frames/s ({format_duration(result.wall_s)} wall clock)")
@@ -102,5 +105,3 @@ def command_stream(args) -> int:
             f"{name} {format_nanoseconds(lo)}/{format_nanoseconds(hi)}" for name, lo, hi in zip(result.stages, p50, p99)
         )
         say(f"  where it went, p50/p99: {parts}")
-    outputs_command.finish_outputs(outputs, result.track)
-    return 0

@@ -31,7 +31,7 @@ from scattertrack.arguments import (
     show_progress,
     tracker_parameters,
 )
-from scattertrack.reporting import format_duration, format_nanoseconds
+from scattertrack.reporting import format_duration, format_nanoseconds, output_path
 
 MAX_TAGS_LISTED = 10
 """Per-tag lines printed by ``track``; more tags are summarised in one line."""
@@ -94,8 +94,8 @@ def add_check_scene_parser(commands) -> None:
 
 
 def command_track(args) -> int:
+    """``track``: the method's input checked against the options, then tracked by its pipeline."""
     from scattertrack import io
-
     from scattertrack import track as tracking
     from scattertrack.track import marvel
 
@@ -117,6 +117,13 @@ def command_track(args) -> int:
         raise UsageError(f"method '{args.method}' tracks phase reads: give --reads")
     if wideband:
         return track_frames(args, scene, params)
+    return track_reads(args, scene, params)
+
+
+def track_reads(args, scene, params: dict) -> int:
+    """``track`` for a COTS reader: reads.csv (and the ROS 2 files, if asked for)."""
+    from scattertrack import io
+
     reads = io.read_reads(args.reads, scene)
     say(f"read {plural(len(reads), 'read')} of {plural(len(reads.epcs()), 'tag')} from {args.reads}")
     say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
@@ -124,10 +131,7 @@ def command_track(args) -> int:
     ros2_out = bool(args.mcap or args.ros2_bag)
     transform = outputs_command.ros2_transform(args)
     result, wall_s = run_tracker(args.method, scene, reads, params, show_progress(args), covariance=ros2_out)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    io.write_track(out, result)
-    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
+    say_tracked(args.method, result, write_track_file(args.out, result))
     outputs_command.write_ros2_files(args, result, scene, transform)
     if not len(result):
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
@@ -183,8 +187,7 @@ def command_check_scene(args) -> int:
 def track_marvel(args, scene, params: dict) -> int:
     """``track`` for the drone pipeline: IMU plus features.csv (or a LoRa recording)."""
     from scattertrack import io
-    from scattertrack.io import summary, timeline
-    from scattertrack.track import marvel, methods
+    from scattertrack.io import summary
 
     if args.reads or args.frames:
         raise UsageError(f"method '{args.method}' takes --imu with --features or --sigmf, not --reads or --frames")
@@ -196,40 +199,58 @@ def track_marvel(args, scene, params: dict) -> int:
     say(summary.imu_line(imu, args.imu))
     start = time.perf_counter()
     if args.sigmf:
-        from scattertrack.io.sigmf_lora import open_lora_sigmf
-
-        # Validated before the long run: a broken recording fails at once, naming its key.
-        epochs = open_lora_sigmf(args.sigmf).epoch_time_s
-        timeline.warn_outside_span(args.sigmf, epochs, None, args.imu, imu.time_s, "IMU sample",
-                                   column="captures.scattertrack:time_s", noun="epoch")
-        result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
-        epochs = int(result.stats.get("drone", {}).get("epochs", len(result)))
+        result, epochs = _drone_from_sigmf(args, scene, imu, params)
         source = args.sigmf
     else:
-        if methods.method(args.method).input == "sigmf+imu":
-            raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
-        features = io.read_features(args.features)
-        say(summary.features_line(features, args.features))
-        timeline.warn_outside_span(args.features, features.time_s, features.line, args.imu, imu.time_s, "IMU sample")
-        result = marvel.run_features(args.method, scene, imu, features, progress=show_progress(args), **params)
-        epochs = len(features)
+        result, epochs = _drone_from_features(args, scene, imu, params)
         source = args.features
     wall_s = time.perf_counter() - start
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    io.write_track(out, result)
+    out = write_track_file(args.out, result)
     say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} to {out} (from {source})")
     if not len(result):
         say(f"  no estimates from {plural(epochs, 'epoch')}: what was declined, and why, is below")
     if args.revised_out:
-        revised_out = Path(args.revised_out)
-        revised_out.parent.mkdir(parents=True, exist_ok=True)
-        io.write_track(revised_out, result.revised)
+        revised_out = write_track_file(args.revised_out, result.revised)
         fallbacks = int(result.stats.get("drone", {}).get("revised_fallbacks", 0))
         say(
             f"  revised (fixed-lag smoothed) track: {plural(len(result.revised), 'row')} to {revised_out}"
             + (f", {fallbacks} of them causal (the smoother restarted while they were in its window)" if fallbacks else "")
         )
+    print_drone_summary(result, epochs, wall_s)
+    return 0
+
+
+def _drone_from_sigmf(args, scene, imu, params: dict):
+    """The drone tracked from a LoRa recording (``--sigmf``); the track and its epochs."""
+    from scattertrack.io import timeline
+    from scattertrack.io.sigmf_lora import open_lora_sigmf
+    from scattertrack.track import marvel
+
+    # Validated before the long run: a broken recording fails at once, naming its key.
+    epochs = open_lora_sigmf(args.sigmf).epoch_time_s
+    timeline.warn_outside_span(args.sigmf, epochs, None, args.imu, imu.time_s, "IMU sample",
+                               column="captures.scattertrack:time_s", noun="epoch")
+    result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
+    return result, int(result.stats.get("drone", {}).get("epochs", len(result)))
+
+
+def _drone_from_features(args, scene, imu, params: dict):
+    """The drone tracked from features.csv (``--features``); the track and its epochs."""
+    from scattertrack import io
+    from scattertrack.io import summary, timeline
+    from scattertrack.track import marvel, methods
+
+    if methods.method(args.method).input == "sigmf+imu":
+        raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
+    features = io.read_features(args.features)
+    say(summary.features_line(features, args.features))
+    timeline.warn_outside_span(args.features, features.time_s, features.line, args.imu, imu.time_s, "IMU sample")
+    result = marvel.run_features(args.method, scene, imu, features, progress=show_progress(args), **params)
+    return result, len(features)
+
+
+def print_drone_summary(result, epochs: int, wall_s: float) -> None:
+    """What ``track`` reports after tracking a drone: declined rows, the controller, the start, divergences, speed."""
     say(f"  {result.skipped.summary() if result.skipped.total else 'nothing declined'}")
     stats = result.stats.get("drone", {})
     controller = stats.get("controller")
@@ -254,7 +275,6 @@ def track_marvel(args, scene, params: dict) -> int:
         f"  speed: {rate:,.0f} epochs/s wall clock ({format_duration(wall_s)} for {epochs} epochs); "
         f"per epoch {format_nanoseconds(q.get('p50', 0))} p50, {format_nanoseconds(q.get('p99', 0))} p99"
     )
-    return 0
 
 
 def track_frames(args, scene, params: dict) -> int:
@@ -278,10 +298,13 @@ def track_frames(args, scene, params: dict) -> int:
     start = time.perf_counter()
     result = tracking.run(args.method, scene, frames, progress=show_progress(args), **params)
     wall_s = time.perf_counter() - start
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    io.write_track(out, result)
-    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
+    say_tracked(args.method, result, write_track_file(args.out, result))
+    print_frames_summary(result, frames, wall_s)
+    return 0
+
+
+def print_frames_summary(result, frames, wall_s: float) -> None:
+    """What ``track`` reports after tracking frames: skips, per-tag counts, speed."""
     say(f"  {result.skipped.summary()}")
     for epc, tag in list(result.stats.items())[:MAX_TAGS_LISTED]:
         say(
@@ -298,7 +321,20 @@ def track_frames(args, scene, params: dict) -> int:
             f"{format_nanoseconds(q.get('p99', 0))} p99, {format_nanoseconds(max_ns)} max per frame"
         )
     say(line)
-    return 0
+
+
+def write_track_file(path, result) -> Path:
+    """``result`` written as a track.csv at ``path``, its folder made if need be; returns the path."""
+    from scattertrack import io
+
+    out = output_path(path)
+    io.write_track(out, result)
+    return out
+
+
+def say_tracked(method: str, result, out: Path) -> None:
+    """The line after tracking tags: rows and tags written, and where."""
+    say(f"tracked with {method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
 
 
 def run_tracker(method: str, scene, reads, params: dict, progress: bool, covariance: bool = False):
