@@ -62,6 +62,11 @@ def parse_parameter(text: str) -> tuple[str, str]:
     return name, value.strip()
 
 
+def add_parameter_option(parser, help: str = "tracker parameter, repeatable") -> None:
+    """``--param NAME=VALUE``, repeatable, on a command that tracks (:func:`tracker_parameters` reads it)."""
+    parser.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help=help)
+
+
 def tracker_parameters(method: str, pairs) -> dict:
     """``--param`` pairs read by ``method``'s table: typed values, or a ValueError naming the
     parameter and what it must be (an unknown name lists the close matches)."""

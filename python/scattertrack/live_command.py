@@ -34,7 +34,17 @@ import time
 from pathlib import Path
 
 from scattertrack import outputs_command
-from scattertrack.arguments import LLRP_PORT, ascii_float, ascii_int, host_and_port, parse_parameter, plural, say, tracker_parameters
+from scattertrack.arguments import (
+    LLRP_PORT,
+    add_parameter_option,
+    ascii_float,
+    ascii_int,
+    host_and_port,
+    plural,
+    say,
+    tracker_parameters,
+)
+
 
 def antenna_list(text: str) -> tuple[int, ...]:
     """``1,2,3,4``: antenna ports, 1-based."""
@@ -80,7 +90,7 @@ def add_parsers(commands) -> None:
                       "required unless --publish-reads (then without --out the reads are only journaled and published)")
     live.add_argument("--journal", required=True, help="reads.csv to append every received read to")
     live.add_argument("--method", default="glac", help="tracking method for phase reads (default glac)")
-    live.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
+    add_parameter_option(live)
     live.add_argument("--duration", type=ascii_float, help="stop after this many seconds of wall-clock time")
     live.add_argument("--antennas", type=antenna_list, default=(), help="antenna ports to read, e.g. 1,2,3,4 (default: all)")
     live.add_argument("--tx-power-dbm", type=ascii_float, help="transmit power, dBm (default: the reader's)")

@@ -12,11 +12,11 @@ from __future__ import annotations
 from scattertrack import outputs_command
 from scattertrack.arguments import (
     UsageError,
+    add_parameter_option,
     ascii_float,
     ascii_int,
     calibration_for,
     check_parameters,
-    parse_parameter,
     plural,
     say,
     tracker_parameters,
@@ -56,7 +56,7 @@ def add_parser(commands) -> None:
         "(default 1000; 0: they sleep until it arrives)",
     )
     stream.add_argument("--ema-alpha", type=ascii_float, help="EMA factor across each tag's channels (default: off)")
-    stream.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
+    add_parameter_option(stream)
     outputs_command.add_output_options(stream, files=False)
     stream.set_defaults(run=command_stream)
 

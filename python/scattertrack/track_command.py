@@ -23,9 +23,9 @@ import numpy as np
 from scattertrack import outputs_command
 from scattertrack.arguments import (
     UsageError,
+    add_parameter_option,
     calibration_for,
     check_parameters,
-    parse_parameter,
     plural,
     say,
     show_progress,
@@ -67,12 +67,8 @@ def add_parser(commands) -> None:
         help="marvel, ulocate: also write the fixed-lag smoothed track.csv (each epoch as last revised, "
         "about smoother_lag_s (6 s) later; docs/marvel.md section 8)",
     )
-    track.add_argument(
-        "--param",
-        action="append",
-        type=parse_parameter,
-        metavar="NAME=VALUE",
-        help="tracker parameter, repeatable (see 'scattertrack methods --params METHOD' or docs/parameters.md)",
+    add_parameter_option(
+        track, help="tracker parameter, repeatable (see 'scattertrack methods --params METHOD' or docs/parameters.md)"
     )
     outputs_command.add_output_options(track, files=True, live=False)
     track.add_argument("--no-progress", action="store_true", help="no progress bar")
