@@ -17,6 +17,12 @@ Subcommands::
     scattertrack locate --scene S --reads R --out positions.csv
     scattertrack dashboard [--host 127.0.0.1] [--port 8050] [--token T]
 
+Each command family is a module of its own (``simulate_command``,
+``track_command``, ...: ``add_parser(commands)`` and its command
+function; the shared option types and checks in :mod:`scattertrack.arguments`,
+the shared report lines in :mod:`scattertrack.reporting`); this module
+builds the parser from them and runs one command.
+
 Bad input never ends in a traceback: a malformed file, an unknown method or
 parameter, or a missing file prints ``scattertrack: error: <message>`` on
 stderr (the message names the file, line and column where it can) and
