@@ -30,7 +30,7 @@ runs is a lower bound.
 from __future__ import annotations
 
 import argparse
-import importlib.util
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -45,10 +45,10 @@ from scattertrack.sim import load_scenario, simulate
 
 def _bench_run():
     """bench/run.py (its ``score``) as a module under a name that cannot clash."""
-    spec = importlib.util.spec_from_file_location("scattertrack_bench_run", Path(__file__).resolve().parent / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    import bench_modules
+
+    return bench_modules.load("run")
 
 
 @dataclass

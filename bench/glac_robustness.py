@@ -36,7 +36,6 @@ from __future__ import annotations
 import argparse
 import copy
 import datetime
-import importlib.util
 import json
 import math
 import subprocess
@@ -115,15 +114,10 @@ CONDITIONS = {
 }
 
 
-def _bench_run():
-    """bench/run.py (its ``score`` and ``aggregate``) under a name that cannot clash."""
-    spec = importlib.util.spec_from_file_location("scattertrack_bench_run", BENCH / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+sys.path.insert(0, str(BENCH))
+import bench_modules  # noqa: E402
 
-
-bench_run = _bench_run()
+bench_run = bench_modules.load("run")  # its ``score`` and ``aggregate``
 
 
 def first_rest_after(trajectory: dict, after_s: float, step_s: float = 0.005) -> float:

@@ -54,14 +54,9 @@ CRITERION_LINE = re.compile(r"^\S.*time:\s+\[")
 
 def machine() -> str:
     """CPU model, cores, memory and OS, as this machine reports them."""
-    model = platform.processor() or platform.machine()
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                model = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    from bench_machine import cpu_model
+
+    model = cpu_model(platform.processor() or platform.machine())
     memory = ""
     try:
         kib = int(next(line for line in Path("/proc/meminfo").read_text().splitlines() if line.startswith("MemTotal")).split()[1])

@@ -619,14 +619,9 @@ def _json_ready(value):
 def environment() -> dict:
     import filterpy
 
-    cpu = platform.processor() or ""
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                cpu = line.split(":", 1)[1].strip()
-                break
-    except OSError:
-        pass
+    from bench_machine import cpu_model
+
+    cpu = cpu_model(platform.processor() or "")
     return {
         "scattertrack": scattertrack.__version__,
         "python": platform.python_version(),

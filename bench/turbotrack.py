@@ -50,7 +50,6 @@ Usage: ``.venv/bin/python bench/turbotrack.py [--seeds N] [--skip BLOCKS] [--out
 from __future__ import annotations
 
 import argparse
-import importlib.util
 import json
 import math
 import os
@@ -71,18 +70,10 @@ from scattertrack.eval import compare  # noqa: E402
 from scattertrack.sim import list_scenarios, load_scenario, simulate_iq_scenario, wideband, write_iq_simulation  # noqa: E402
 
 sys.path.insert(0, str(BENCH))
+import bench_modules  # noqa: E402
 import turbotrack_lobes as lobes  # noqa: E402
 
-
-def _glac_bench():
-    """bench/run.py as a module, for its table formatting and JSON helpers."""
-    spec = importlib.util.spec_from_file_location("scattertrack_bench_run", BENCH / "run.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
-_run = _glac_bench()
+_run = bench_modules.load("run")  # for its table formatting and JSON helpers
 simulate_run, table, text_table, markdown_table, json_ready = (
     _run.simulate_run,
     _run.table,

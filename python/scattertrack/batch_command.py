@@ -33,7 +33,7 @@ import os
 import time
 from pathlib import Path
 
-from scattertrack.arguments import ascii_int, parse_parameter, plural, say, tracker_parameters
+from scattertrack.arguments import add_parameter_option, ascii_int, plural, say, tracker_parameters
 
 SUMMARY_HEADER = ["recording", "status", "reads", "tags", "rows", "declined", "wall_s", "error"]
 
@@ -49,7 +49,7 @@ def add_parser(commands) -> None:
     batch.add_argument("recordings", nargs="+", help="recording folders (each with scene.toml and reads.csv)")
     batch.add_argument("--out-dir", required=True, help="where each recording's track.csv goes (OUT_DIR/<name>/track.csv)")
     batch.add_argument("--method", default="glac", help="tracking method for phase reads (default glac)")
-    batch.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
+    add_parameter_option(batch)
     where = batch.add_mutually_exclusive_group()
     where.add_argument("--workers", type=ascii_int, help="LocalCluster worker processes (default: one per core)")
     where.add_argument("--scheduler", metavar="ADDRESS", help="an existing Dask scheduler (tcp://HOST:8786) instead of a LocalCluster")

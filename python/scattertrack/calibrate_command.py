@@ -14,11 +14,11 @@ from __future__ import annotations
 
 import argparse
 import warnings
-from pathlib import Path
 
 import numpy as np
 
 from scattertrack.arguments import ascii_float, plural, say
+from scattertrack.reporting import output_path
 
 
 def reference(text: str) -> tuple[str, np.ndarray]:
@@ -74,8 +74,7 @@ def command_calibrate(args) -> int:
     report(result)
     for message in result.warnings:
         warnings.warn(io.InputWarning(args.reads, None, None, message), stacklevel=1)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = output_path(args.out)
     result.scene().save(out)
     say(f"wrote the calibrated scene to {out}")
     return 0

@@ -34,7 +34,17 @@ import time
 from pathlib import Path
 
 from scattertrack import outputs_command
-from scattertrack.arguments import LLRP_PORT, ascii_float, ascii_int, host_and_port, parse_parameter, plural, say, tracker_parameters
+from scattertrack.arguments import (
+    LLRP_PORT,
+    add_parameter_option,
+    ascii_float,
+    ascii_int,
+    host_and_port,
+    plural,
+    say,
+    tracker_parameters,
+)
+
 
 def antenna_list(text: str) -> tuple[int, ...]:
     """``1,2,3,4``: antenna ports, 1-based."""
@@ -80,7 +90,7 @@ def add_parsers(commands) -> None:
                       "required unless --publish-reads (then without --out the reads are only journaled and published)")
     live.add_argument("--journal", required=True, help="reads.csv to append every received read to")
     live.add_argument("--method", default="glac", help="tracking method for phase reads (default glac)")
-    live.add_argument("--param", action="append", type=parse_parameter, metavar="NAME=VALUE", help="tracker parameter, repeatable")
+    add_parameter_option(live)
     live.add_argument("--duration", type=ascii_float, help="stop after this many seconds of wall-clock time")
     live.add_argument("--antennas", type=antenna_list, default=(), help="antenna ports to read, e.g. 1,2,3,4 (default: all)")
     live.add_argument("--tx-power-dbm", type=ascii_float, help="transmit power, dBm (default: the reader's)")
@@ -153,7 +163,7 @@ def _check_sources(args) -> None:
 def command_live(args) -> int:
     from scattertrack import io, track
     from scattertrack.io.csvutil import is_parquet
-    from scattertrack.readers.live import LiveSession, ReaderSettings
+    from scattertrack.readers.live import ReaderSettings
     from scattertrack.readers.outputs import LiveOutputs
 
     _check_sources(args)
@@ -161,7 +171,6 @@ def command_live(args) -> int:
     scene = io.read_scene(args.scene)
     # A bad parameter or method fails before connecting; without --out nothing is tracked.
     tracker = track.make(args.method, scene, **params) if args.out else None
-    host, port = args.llrp or args.mqtt_in
     # Parquet has no append: the rows go to the CSV beside it as they come, the twin is made at the end.
     track_csv = None if not args.out else Path(args.out).with_suffix(".csv") if is_parquet(args.out) else Path(args.out)
     options = outputs_command.output_options(args, parquet=args.out if args.out and is_parquet(args.out) else None)
@@ -173,33 +182,20 @@ def command_live(args) -> int:
     # llrpkit logs every lost connection; the summary reports them instead.
     logging.getLogger("llrpkit").setLevel(logging.CRITICAL)
     settings = ReaderSettings(args.antennas, args.tx_power_dbm, args.reader_mode, args.session, args.search_mode)
-    progress = None if args.no_progress else _progress_line
     outputs = LiveOutputs(options, scene, track_csv) if options.any else None
     publisher = None
     try:
-        if args.mqtt_in:
-            from scattertrack.readers.mqtt_in import MqttReadsSession
+        if args.publish_reads and not args.mqtt_in:
+            from scattertrack.io.mqtt import MqttPublisher
 
-            shard, shards = args.shard
-            session = MqttReadsSession(scene, host, port, shard, shards, args.journal, track_csv, tracker, duration_s=args.duration, progress=progress, outputs=outputs)
-        else:
-            if args.publish_reads:
-                from scattertrack.io.mqtt import MqttPublisher
-
-                publisher = MqttPublisher(*args.publish_reads)
-            session = LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress,
-                                  outputs=outputs, read_publisher=publisher, shards=args.shards)
+            publisher = MqttPublisher(*args.publish_reads)
+        session = _open_session(args, scene, settings, track_csv, tracker, outputs, publisher)
     except BaseException:
         for opened in (outputs, publisher):
             if opened is not None:  # the session closes them, once it exists
                 opened.close()
         raise
-    role = f"shard {args.shard[0]} of {args.shard[1]} from the MQTT broker" if args.mqtt_in else "reader"
-    say(f"live: {role} {host}:{port}, journal {args.journal}, track {track_csv or '(none: journal and publish only)'}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
-    if publisher is not None:
-        say(f"  publishing every read to the MQTT broker {args.publish_reads[0]}:{args.publish_reads[1]} on scattertrack/reads/<K>, {plural(args.shards, 'shard')}")
-    if outputs is not None and outputs.foxglove is not None:
-        say(f"  Foxglove WebSocket on ws://{options.foxglove[0]}:{outputs.foxglove.port}")
+    say_live_start(args, track_csv, publisher, outputs, options)
     summary = asyncio.run(_run_until_interrupted(session))
     print_live_summary(summary, args)
     if publisher is not None:
@@ -212,6 +208,33 @@ def command_live(args) -> int:
         dataclasses.replace(scene, hop_table=dict(summary.hop_table_hz)).save(scene_out)
         say(f"  wrote the scene with the reader's hop table ({plural(len(summary.hop_table_hz), 'channel')}) to {scene_out}")
     return 0
+
+
+def say_live_start(args, track_csv, publisher, outputs, options) -> None:
+    """What ``live`` says before it reads: the source, the journal, the track, and where reads and rows go."""
+    host, port = args.llrp or args.mqtt_in
+    role = f"shard {args.shard[0]} of {args.shard[1]} from the MQTT broker" if args.mqtt_in else "reader"
+    say(f"live: {role} {host}:{port}, journal {args.journal}, track {track_csv or '(none: journal and publish only)'}" + (f", {args.duration:g} s" if args.duration else ", until Ctrl-C"))
+    if publisher is not None:
+        say(f"  publishing every read to the MQTT broker {args.publish_reads[0]}:{args.publish_reads[1]} on scattertrack/reads/<K>, {plural(args.shards, 'shard')}")
+    if outputs is not None and outputs.foxglove is not None:
+        say(f"  Foxglove WebSocket on ws://{options.foxglove[0]}:{outputs.foxglove.port}")
+
+
+def _open_session(args, scene, settings, track_csv, tracker, outputs, publisher):
+    """The session reading from the reader (``--llrp``, its reads published by ``publisher``
+    unless None) or from an MQTT shard (``--mqtt-in``)."""
+    host, port = args.llrp or args.mqtt_in
+    progress = None if args.no_progress else _progress_line
+    if args.mqtt_in:
+        from scattertrack.readers.mqtt_in import MqttReadsSession
+
+        shard, shards = args.shard
+        return MqttReadsSession(scene, host, port, shard, shards, args.journal, track_csv, tracker, duration_s=args.duration, progress=progress, outputs=outputs)
+    from scattertrack.readers.live import LiveSession
+
+    return LiveSession(scene, host, port, args.journal, track_csv, tracker, settings=settings, duration_s=args.duration, progress=progress,
+                       outputs=outputs, read_publisher=publisher, shards=args.shards)
 
 
 def _stop_event() -> asyncio.Event:

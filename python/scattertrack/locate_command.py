@@ -6,11 +6,11 @@
 from __future__ import annotations
 
 import time
-from pathlib import Path
 
 import numpy as np
 
 from scattertrack.arguments import plural, say
+from scattertrack.reporting import output_path
 
 
 def add_parser(commands) -> None:
@@ -47,8 +47,7 @@ def command_locate(args) -> int:
         for number, candidate in enumerate(location.candidates, start=1):
             sigma = np.sqrt(np.clip(np.diag(candidate.covariance), 0, None))
             rows.append((location.epc, candidate.position, sigma, number, candidate.weight, candidate.cue))
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
+    out = output_path(args.out)
     write_positions(out, rows)
     say(f"located {plural(len(locations), 'tag')} from {plural(len(reads), 'read')} in {wall_s:.2f} s: wrote {plural(len(rows), 'row')} to {out}")
     ambiguous = [loc for loc in locations if len(loc.candidates) > 1]

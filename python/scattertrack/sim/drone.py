@@ -248,6 +248,16 @@ class ParameterError(ValueError):
         super().__init__(f"{key}: {message}" if key else message)
 
 
+def with_defaults(given: dict | None, defaults: dict) -> dict:
+    """A model's table: ``defaults`` updated by ``given``; a key of ``given``
+    that ``defaults`` lacks is a :class:`ParameterError` naming it."""
+    given = dict(given or {})
+    for key in given:
+        if key not in defaults:
+            raise ParameterError(key, f"unknown key (expected one of: {', '.join(sorted(defaults))})")
+    return {**defaults, **given}
+
+
 class FlightError(ParameterError):
     """A malformed flight table."""
 

@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from scattertrack.io.types import Imu
-from scattertrack.sim.drone import GRAVITY, FlightTruth, ParameterError
+from scattertrack.sim.drone import GRAVITY, FlightTruth, ParameterError, with_defaults
 from scattertrack.sim.rotation import quat_conjugate, rotate
 
 IMU_MODEL_DEFAULTS = {
@@ -57,11 +57,7 @@ NOISE_KEYS = (
 
 def resolve_imu_model(given: dict | None = None) -> dict:
     """The model with defaults filled in; raises :class:`ParameterError` (naming the key) for a bad one."""
-    given = dict(given or {})
-    for key in given:
-        if key not in IMU_MODEL_DEFAULTS:
-            raise ParameterError(key, f"unknown key (expected one of: {', '.join(sorted(IMU_MODEL_DEFAULTS))})")
-    model = {**IMU_MODEL_DEFAULTS, **given}
+    model = with_defaults(given, IMU_MODEL_DEFAULTS)
     rate = model["rate_hz"]
     if isinstance(rate, bool) or not isinstance(rate, (int, float)) or not rate > 0 or not np.isfinite(rate):
         raise ParameterError("rate_hz", f"must be a positive number, got {rate!r}")

@@ -73,7 +73,6 @@ Units: metres, seconds, hertz, radians, dB.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -548,8 +547,8 @@ def _truth(epcs, trajectories, query_end, duration_s) -> Truth:
 
 def write_iq_simulation(sim: IqSimulation, out_dir) -> Path:
     """Write ``recording.sigmf-*``, ``calibration.sigmf-*``, ``scene.toml``, ``truth.csv`` and ``simulation.json``."""
-    from scattertrack import __version__
     from scattertrack.io import write_scene, write_truth
+    from scattertrack.sim.simulation import write_record
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -557,14 +556,7 @@ def write_iq_simulation(sim: IqSimulation, out_dir) -> Path:
     write_sigmf(out / "calibration", sim.calibration)
     write_scene(out / "scene.toml", sim.scene)
     write_truth(out / "truth.csv", sim.truth)
-    record = {
-        "generator": "scattertrack.sim.iq",
-        "version": __version__,
-        "seed": sim.seed,
-        "model": sim.model,
-        "details": sim.details,
-    }
-    (out / "simulation.json").write_text(json.dumps(record, indent=2) + "\n")
+    write_record(out, "scattertrack.sim.iq", sim.seed, model=sim.model, details=sim.details)
     return out
 
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 
-from scattertrack.sim.drone import ParameterError
+from scattertrack.sim.drone import ParameterError, with_defaults
 
 CHANNEL_BASE_HZ = 902.1e6
 """LoRa channel 0, hertz (docs/marvel.md section 5)."""
@@ -85,11 +85,7 @@ _ANY = ("tx_power_dbm", "tx_gain_dbi", "rx_gain_dbi", "tag_gain_dbi", "snr_ceili
 
 def resolve_feature_model(given: dict | None = None) -> dict:
     """The feature model with defaults filled in; raises :class:`ParameterError` naming the key."""
-    given = dict(given or {})
-    for key in given:
-        if key not in FEATURE_MODEL_DEFAULTS:
-            raise ParameterError(key, f"unknown key (expected one of: {', '.join(sorted(FEATURE_MODEL_DEFAULTS))})")
-    model = {**FEATURE_MODEL_DEFAULTS, **given}
+    model = with_defaults(given, FEATURE_MODEL_DEFAULTS)
     for key in _POSITIVE + _NON_NEGATIVE + _ANY:
         value = model[key]
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):

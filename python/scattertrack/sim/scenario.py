@@ -182,12 +182,7 @@ def simulate(scenario: dict, seed: int | None = None) -> Simulation:
         ],
         dtype=float,
     )
-    for tag in tags:
-        trajectory_seed = int(rngs["trajectories"].integers(2**31))
-        if tag["trajectory"]["kind"] == "random":
-            tag["trajectory"].setdefault("seed", trajectory_seed)
-    epcs = [tag["epc"] for tag in tags]
-    trajectories = [tag["trajectory"] for tag in tags]
+    epcs, trajectories = _tag_trajectories(tags, rngs["trajectories"])
 
     reads, counts = cots.generate_reads(
         duration_s=data["duration_s"],
@@ -261,15 +256,21 @@ def _simulate_helper(data: dict) -> Simulation:
         extra={"helper": {key: model[key] for key in wideband.OFDM_KEYS}},
     )
     tags = data["tags"]
-    for tag in tags:
-        trajectory_seed = int(rngs["trajectories"].integers(2**31))
-        if tag["trajectory"]["kind"] == "random":
-            tag["trajectory"].setdefault("seed", trajectory_seed)
-    epcs = [tag["epc"] for tag in tags]
-    trajectories = [tag["trajectory"] for tag in tags]
+    epcs, trajectories = _tag_trajectories(tags, rngs["trajectories"])
     frames, details = wideband.frames_from_trajectories(scene, epcs, trajectories, data["duration_s"], model, rngs)
     truth = _truth(epcs, trajectories, data["duration_s"], data["truth_rate_hz"])
     return Simulation(scene=scene, reads=None, truth=truth, scenario=data, seed=seed, details=details, frames=frames)
+
+
+def _tag_trajectories(tags: list[dict], rng) -> tuple[list[str], list[dict]]:
+    """The tags' epcs and trajectories; a random trajectory without its own
+    seed gets one from ``rng``. One draw per tag, random or not, so that a
+    tag's seed does not depend on the kinds of the tags before it."""
+    for tag in tags:
+        trajectory_seed = int(rng.integers(2**31))
+        if tag["trajectory"]["kind"] == "random":
+            tag["trajectory"].setdefault("seed", trajectory_seed)
+    return [tag["epc"] for tag in tags], [tag["trajectory"] for tag in tags]
 
 
 def _truth(epcs: list[str], trajectories: list[dict], duration_s: float, rate_hz: float) -> Truth:
@@ -279,5 +280,3 @@ def _truth(epcs: list[str], trajectories: list[dict], duration_s: float, rate_hz
 
 # --------------------------------------------------------------------------
 # output
-
-

@@ -61,8 +61,6 @@ def write_simulation(sim: Simulation, out_dir) -> Path:
     version and the hidden truth (true offsets, hop table, counts), so a run
     can be reproduced and audited. Returns the folder.
     """
-    from scattertrack import __version__
-
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     write_scene(out / "scene.toml", sim.scene)
@@ -77,15 +75,16 @@ def write_simulation(sim: Simulation, out_dir) -> Path:
     else:
         write_reads(out / "reads.csv", sim.reads)
     write_truth(out / "truth.csv", sim.truth)
-    record = {
-        "generator": "scattertrack.sim",
-        "version": __version__,
-        "seed": sim.seed,
-        "scenario": sim.scenario,
-        "details": _json_ready(sim.details),
-    }
-    (out / "simulation.json").write_text(json.dumps(record, indent=2) + "\n")
+    write_record(out, "scattertrack.sim", sim.seed, scenario=sim.scenario, details=_json_ready(sim.details))
     return out
+
+
+def write_record(out: Path, generator: str, seed: int, **fields) -> None:
+    """``simulation.json`` in ``out``: the generator, the package version, the seed, then ``fields``."""
+    from scattertrack import __version__
+
+    record = {"generator": generator, "version": __version__, "seed": seed, **fields}
+    (out / "simulation.json").write_text(json.dumps(record, indent=2) + "\n")
 
 
 def _json_ready(value):

@@ -16,6 +16,8 @@ import pytest
 from scattertrack.cli import DEMO_SCENARIO, main
 from scattertrack.io import read_track
 
+from cli_runs import run, with_cell
+
 SHORT_SCENARIO = "glac-2d-10cms"
 SHORT_DURATION = "3"
 
@@ -27,13 +29,6 @@ def session(tmp_path_factory) -> Path:
     code = main(["simulate", "--scenario", SHORT_SCENARIO, "--out", str(folder), "--duration", SHORT_DURATION])
     assert code == 0
     return folder
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    """main(argv) with its exit code, stdout and stderr."""
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def track_with_reads(capsys, session: Path, tmp_path: Path, lines: list[str], *extra):
@@ -192,20 +187,14 @@ def test_track_missing_column(capsys, session, tmp_path):
 
 def test_track_nan_value(capsys, session, tmp_path):
     lines = reads_lines(session)
-    header = lines[0].split(",")
-    cells = lines[4].split(",")
-    cells[header.index("phase_rad")] = "nan"
-    lines[4] = ",".join(cells)
+    lines = with_cell(lines, 4, lines[0].split(",").index("phase_rad"), "nan")
     code, out, err = track_with_reads(capsys, session, tmp_path, lines)
     assert_input_error(code, out, err, "reads.csv:5:", "column 'phase_rad'", "not a finite number")
 
 
 def test_track_unknown_antenna(capsys, session, tmp_path):
     lines = reads_lines(session)
-    header = lines[0].split(",")
-    cells = lines[6].split(",")
-    cells[header.index("antenna")] = "9"
-    lines[6] = ",".join(cells)
+    lines = with_cell(lines, 6, lines[0].split(",").index("antenna"), "9")
     code, out, err = track_with_reads(capsys, session, tmp_path, lines)
     assert_input_error(code, out, err, "reads.csv:7:", "column 'antenna'", "not in the scene")
 

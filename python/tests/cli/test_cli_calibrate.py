@@ -8,17 +8,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scattertrack.cli import main
 from scattertrack.io import read_scene
 from scattertrack.sim import load_scenario, simulate, write_simulation
 
+from cli_runs import run
+
 REFERENCES = {"E2000C00": "0.3,0.3,0.4", "E2000C01": "3.0,3.0,1.2", "E2000C02": "0.5,3.5,0.3", "E2000C03": "3.5,0.5,1.0"}
-
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 @pytest.fixture(scope="module")

@@ -7,7 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from scattertrack.cli import main
+from cli_runs import run
+
 
 FUZZ = Path(__file__).resolve().parents[1] / "io" / "test_io_fuzz_pipelines.py"
 CASES = 12
@@ -24,12 +25,6 @@ def fuzz():
 
 
 F = fuzz()
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def assert_clean(code: int, out: str, err: str, path: Path) -> None:

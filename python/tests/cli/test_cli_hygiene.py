@@ -5,7 +5,8 @@ from pathlib import Path
 
 import pytest
 
-from scattertrack.cli import main
+from cli_runs import assert_rejected, run, warning_lines, with_cell
+
 
 OUTSIDE = Path(__file__).resolve().parents[3].parent / "shared" / "outside"
 
@@ -32,12 +33,6 @@ position = [0.3, 0.0, 0.0]
 HEADER = "time_s,epc,antenna,frequency_hz,phase_rad"
 
 
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
 def reads_rows(n: int = 30, start_s: float = 0.0) -> list[str]:
     return [f"{start_s + 0.01 * i:.6f},E200,{i % 3 + 1},915250000.0,{(0.37 * i) % 6.28:.6f}" for i in range(n)]
 
@@ -48,16 +43,6 @@ def track(capsys, tmp_path, rows: list[str], first_id: str = "1", header: str = 
     reads = tmp_path / "reads.csv"
     reads.write_text("\n".join([header, *rows]) + "\n")
     return run(capsys, "track", "--scene", scene, "--reads", reads, "--out", tmp_path / "track.csv", "--no-progress")
-
-
-def assert_rejected(code: int, out: str, err: str, *fragments: str) -> None:
-    """Exit 2, no traceback, and the last stderr line is the error with every fragment."""
-    assert code == 2
-    assert "Traceback" not in out + err
-    last = err.rstrip("\n").split("\n")[-1]
-    assert last.startswith("scattertrack: error: "), err
-    for fragment in fragments:
-        assert fragment in last, (fragment, last)
 
 
 COLUMN_INDEX = {name: k for k, name in enumerate(HEADER.split(","))}
@@ -75,11 +60,7 @@ COLUMN_INDEX = {name: k for k, name in enumerate(HEADER.split(","))}
     ],
 )
 def test_malformed_reads_exit_2_naming_line_and_column(capsys, tmp_path, row, column, value, fragment):
-    rows = reads_rows()
-    cells = rows[row].split(",")
-    cells[COLUMN_INDEX[column]] = value
-    rows[row] = ",".join(cells)
-    code, out, err = track(capsys, tmp_path, rows)
+    code, out, err = track(capsys, tmp_path, with_cell(reads_rows(), row, COLUMN_INDEX[column], value))
     # rows[0] is on line 2, after the header.
     assert_rejected(code, out, err, f"{tmp_path / 'reads.csv'}:{row + 2}:", f"column '{column}'", fragment)
 
@@ -93,7 +74,7 @@ def test_clock_jump_is_a_warning_line_and_tracking_goes_on(capsys, tmp_path):
     rows = reads_rows(20, start_s=30.0) + reads_rows(20, start_s=10.0)  # line 22 jumps back 20 s
     code, out, err = track(capsys, tmp_path, rows)
     assert code == 0, err
-    warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
+    warnings = warning_lines(err)
     assert len(warnings) == 1 and f"{tmp_path / 'reads.csv'}:22: line 22, column 'time_s': clock jumps back" in warnings[0]
     assert "read 40 reads" in out
 

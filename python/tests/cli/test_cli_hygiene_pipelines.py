@@ -4,8 +4,7 @@ every row used or declined with a reason and counted in what the command prints.
 
 import pytest
 
-from scattertrack.cli import main
-
+from cli_runs import assert_rejected, run, warning_lines, with_cell
 from scene_texts import helper_scene
 
 HELPER_SCENE = helper_scene(4, """\
@@ -25,26 +24,6 @@ kind = "lora-backscatter"
 FRAMES = "time_s,epc,tx,rx,frequency_hz,h_re,h_im"
 IMU = "time_s,ax,ay,az,gx,gy,gz"
 FEATURES = "time_s,range_m,azimuth_rad,elevation_rad,yaw_rad,range_sigma_m,angle_sigma_rad,yaw_sigma_rad"
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
-
-
-def assert_rejected(code: int, out: str, err: str, *fragments: str) -> None:
-    """Exit 2, no traceback, and the last stderr line is the error with every fragment."""
-    assert code == 2, (out, err)
-    assert "Traceback" not in out + err
-    last = err.rstrip("\n").split("\n")[-1]
-    assert last.startswith("scattertrack: error: "), err
-    for fragment in fragments:
-        assert fragment in last, (fragment, last)
-
-
-def warning_lines(text: str) -> list[str]:
-    return [line for line in text.splitlines() if line.startswith("warning: ")]
 
 
 def frames_rows(n_frames: int = 3) -> list[str]:
@@ -98,11 +77,7 @@ FRAMES_COLUMN = {name: k for k, name in enumerate(FRAMES.split(","))}
     ],
 )
 def test_malformed_frames_exit_2_naming_line_and_column(capsys, tmp_path, row, column, value, fragment):
-    rows = frames_rows()
-    cells = rows[row].split(",")
-    cells[FRAMES_COLUMN[column]] = value
-    rows[row] = ",".join(cells)
-    code, out, err = track_frames(capsys, tmp_path, rows)
+    code, out, err = track_frames(capsys, tmp_path, with_cell(frames_rows(), row, FRAMES_COLUMN[column], value))
     assert_rejected(code, out, err, f"{tmp_path / 'frames.csv'}:{row + 2}: line {row + 2}", f"column '{column}'", fragment)
 
 
@@ -166,10 +141,7 @@ IMU_COLUMN = {name: k for k, name in enumerate(IMU.split(","))}
     ],
 )
 def test_malformed_features_exit_2_naming_line_and_column(capsys, tmp_path, row, column, value, fragment):
-    rows = features_rows()
-    cells = rows[row].split(",")
-    cells[FEATURES_COLUMN[column]] = value
-    rows[row] = ",".join(cells)
+    rows = with_cell(features_rows(), row, FEATURES_COLUMN[column], value)
     code, out, err = track_drone(capsys, tmp_path, imu_rows(), rows)
     assert_rejected(code, out, err, f"{tmp_path / 'features.csv'}:{row + 2}: line {row + 2}", f"column '{column}'",
                     fragment)
@@ -180,10 +152,7 @@ def test_malformed_features_exit_2_naming_line_and_column(capsys, tmp_path, row,
     [(10, "az", "9.81\u00a0", "U+00A0"), (11, "gx", "nan", "not a finite number"), (12, "time_s", "", "empty value")],
 )
 def test_malformed_imu_exit_2_naming_line_and_column(capsys, tmp_path, row, column, value, fragment):
-    rows = imu_rows()
-    cells = rows[row].split(",")
-    cells[IMU_COLUMN[column]] = value
-    rows[row] = ",".join(cells)
+    rows = with_cell(imu_rows(), row, IMU_COLUMN[column], value)
     code, out, err = track_drone(capsys, tmp_path, rows, features_rows())
     assert_rejected(code, out, err, f"{tmp_path / 'imu.csv'}:{row + 2}: line {row + 2}", f"column '{column}'", fragment)
 

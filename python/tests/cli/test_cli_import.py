@@ -4,17 +4,12 @@ from pathlib import Path
 
 import pytest
 
-from scattertrack.cli import main
 from scattertrack.io import read_reads, read_scene
+
+from cli_runs import run
 
 DATA = Path(__file__).resolve().parents[1] / "io" / "data"
 SCENE = DATA / "import_scene.toml"
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 @pytest.mark.parametrize(

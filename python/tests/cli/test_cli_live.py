@@ -15,11 +15,7 @@ from robots import free_port
 from scattertrack.cli import main
 from scattertrack.io import read_reads, read_scene, read_track
 
-
-def run(capsys, *argv):
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
+from cli_runs import run
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,8 @@ import pytest
 from scattertrack.cli import main
 from scattertrack.io import read_track
 
+from cli_runs import run
+
 
 @pytest.fixture(scope="module")
 def flight(tmp_path_factory) -> Path:
@@ -15,12 +17,6 @@ def flight(tmp_path_factory) -> Path:
     folder = tmp_path_factory.mktemp("flight")
     assert main(["simulate", "--scenario", "marvel-hover", "--out", str(folder), "--duration", "6"]) == 0
     return folder
-
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_marvel_tracks_features_and_imu(capsys, flight, tmp_path):

@@ -8,11 +8,7 @@ from scattertrack import cli
 from scattertrack.cli import main
 from scattertrack.track import REGISTRY
 
-
-def run(capsys, *argv) -> tuple[int, str, str]:
-    code = main([str(a) for a in argv])
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
+from cli_runs import run
 
 
 def assert_one_line_error(code: int, out: str, err: str, *fragments: str) -> None:

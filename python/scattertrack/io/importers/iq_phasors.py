@@ -48,16 +48,9 @@ def import_iq_phasors(paths, scene: Scene) -> tuple[Reads, ImportReport]:
         json_source = is_json_lines(path)
         # json_lines counts its events itself (a line may hold several).
         layout, source = _json_rows(path, report) if json_source else csv_rows(path, REQUIRED, EXTRA)
-        for line, get in source:
-            if not json_source:
-                report.rows += 1
-            values, reason = layout.shared(get, line)
-            if reason is None:
-                reason = _add_phasor(values, get("i"), get("q"), layout.has("rssi"))
-            if reason is not None:
-                report.decline(path, line, reason)
-                continue
-            rows.add(path, line, **values)
+        has_rssi = layout.has("rssi")
+        rows.add_source(path, layout, source, report, lambda values, get: _add_phasor(values, get("i"), get("q"), has_rssi),
+                        count_rows=not json_source)
         has_channel |= layout.has("channel")
         described = [text for text in layout.describe() if not text.startswith(("i <-", "q <-"))]
         described.append(f"phase_rad <- atan2({layout.column['q']!r}, {layout.column['i']!r}) (radians)")

@@ -56,6 +56,22 @@ class Rows:
         self.files.append(str(path))
         self.lines.append(int(line))
 
+    def add_source(self, path, layout, source, report, read_own, count_rows: bool = True) -> None:
+        """Every row of ``source`` (``(line, get)`` pairs of ``path`` laid out by ``layout``): its
+        shared fields, then ``read_own(values, get)`` puts the format's own into ``values`` and
+        returns a decline reason or None. A declined row goes to ``report`` with its reason.
+        ``count_rows``: count each row in ``report.rows`` (a JSON-lines source counts its events itself)."""
+        for line, get in source:
+            if count_rows:
+                report.rows += 1
+            values, reason = layout.shared(get, line)
+            if reason is None:
+                reason = read_own(values, get)
+            if reason is not None:
+                report.decline(path, line, reason)
+                continue
+            self.add(path, line, **values)
+
     def __len__(self) -> int:
         return len(self.lines)
 

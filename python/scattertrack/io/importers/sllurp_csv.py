@@ -62,15 +62,12 @@ def import_sllurp_csv(paths, scene: Scene) -> tuple[Reads, ImportReport]:
     for path in paths:
         layout, source = csv_rows(path, ("time", "epc", "antenna", "phase"), {"phase": PHASE})
         has_channel |= layout.has("channel")
-        for line, get in source:
-            report.rows += 1
-            values, reason = layout.shared(get, line)
-            if reason is None:
-                values["phase_rad"], reason = phase_rad(get("phase"), layout.unit["phase"])
-            if reason is not None:
-                report.decline(path, line, reason)
-                continue
-            rows.add(path, line, **values)
+
+        def read_phase(values, get, unit=layout.unit["phase"]):
+            values["phase_rad"], reason = phase_rad(get("phase"), unit)
+            return reason
+
+        rows.add_source(path, layout, source, report, read_phase)
         for text in layout.describe():
             if text not in report.columns:
                 report.columns.append(text)

@@ -1,0 +1,413 @@
+"""``scattertrack track`` and ``scattertrack check-scene``: a recording tracked offline, a layout checked.
+
+    scattertrack track --scene S --reads R|--frames F|--features F|--sigmf R [--imu I] [--calibration C]
+                       [--method glac] --out T [--param name=value ...]
+    scattertrack check-scene SCENE [--reads R]
+
+``track`` dispatches on the method's input: phase reads (glac...),
+wideband frames of the localization helper (turbotrack..., from
+frames.csv or a SigMF recording) or the drone's IMU and LoRa features
+(marvel, ulocate). Before tracking it prints the geometry check's
+warnings; after, the tracker's summary (declined reads, per-tag counts,
+unresolved tags, speed).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from pathlib import Path
+
+import numpy as np
+
+from scattertrack import outputs_command
+from scattertrack.arguments import (
+    UsageError,
+    add_parameter_option,
+    calibration_for,
+    check_parameters,
+    plural,
+    say,
+    show_progress,
+    tracker_parameters,
+)
+from scattertrack.reporting import format_duration, format_nanoseconds, output_path
+
+MAX_TAGS_LISTED = 10
+"""Per-tag lines printed by ``track``; more tags are summarised in one line."""
+
+
+def add_parser(commands) -> None:
+    track = commands.add_parser(
+        "track",
+        help="track tags from a scene and reads, write track.csv",
+        description="Track every tag in a reads.csv, causally (each estimate uses only reads at or "
+        "before its time), and write track.csv. Rows out of time order are sorted; duplicates and "
+        "reads the tracker declines are counted and reported.",
+    )
+    track.add_argument("--scene", required=True, help="scene.toml")
+    source = track.add_mutually_exclusive_group(required=True)
+    source.add_argument("--reads", help="reads.csv (COTS reader methods: glac...)")
+    source.add_argument("--frames", help="frames.csv (localization-helper methods: turbotrack...)")
+    source.add_argument("--features", help="features.csv (LoRa-backscatter pose features: marvel)")
+    source.add_argument(
+        "--sigmf",
+        help="a SigMF IQ recording (.sigmf-meta): of the helper (turned into frames first), or of a LoRa "
+        "controller (marvel, ulocate: turned into features first)",
+    )
+    track.add_argument("--imu", help="imu.csv (marvel, ulocate: the drone's inertial samples)")
+    track.add_argument(
+        "--calibration",
+        help="with --sigmf: the calibration recording (default: calibration.sigmf-meta beside the recording)",
+    )
+    track.add_argument("--method", default="glac", help="tracking method (see 'scattertrack methods'; default glac)")
+    track.add_argument("--out", required=True, help="track.csv to write")
+    track.add_argument(
+        "--revised-out",
+        help="marvel, ulocate: also write the fixed-lag smoothed track.csv (each epoch as last revised, "
+        "about smoother_lag_s (6 s) later; docs/marvel.md section 8)",
+    )
+    add_parameter_option(
+        track, help="tracker parameter, repeatable (see 'scattertrack methods --params METHOD' or docs/parameters.md)"
+    )
+    outputs_command.add_output_options(track, files=True, live=False)
+    track.add_argument("--no-progress", action="store_true", help="no progress bar")
+    track.set_defaults(run=command_track)
+
+
+def add_check_scene_parser(commands) -> None:
+    check_scene = commands.add_parser(
+        "check-scene",
+        help="check that a COTS or helper scene's antenna layout fixes a tag's position",
+        description="Search the region for twin positions that fit every phase a monostatic reader reports "
+        "(three antennas on one line, all antennas in one plane, ...) and print one 'warning:' line per "
+        "ambiguity (antennas, size in cm, remedy) and 'note:' lines for weaker findings; for a localization "
+        "helper, warn about receive antennas in line with the transmitter; exit 0 either way.",
+    )
+    check_scene.add_argument("scene", help="scene.toml")
+    check_scene.add_argument("--reads", help="reads.csv: analyse the channels it reads (calibrated hopping removes integer shifts)")
+    check_scene.set_defaults(run=command_check_scene)
+
+
+def command_track(args) -> int:
+    """``track``: the method's input checked against the options, then tracked by its pipeline."""
+    from scattertrack import io
+    from scattertrack import track as tracking
+    from scattertrack.track import marvel
+
+    # Before reading anything: an unknown method or a bad value fails at once.
+    params = tracker_parameters(args.method, args.param)
+    scene = io.read_scene(args.scene)
+    if args.method in marvel.MARVEL_METHODS:
+        return track_marvel(args, scene, params)
+    if args.features or args.imu:
+        raise UsageError(f"--features and --imu are inputs of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
+    if args.revised_out:
+        raise UsageError(f"--revised-out is an output of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
+    # Before reading the input: a typo should not wait for a large file to load.
+    check_parameters(args.method, scene, params, args.scene)
+    wideband = args.method in tracking.WIDEBAND_METHODS
+    if wideband and args.reads:
+        raise UsageError(f"method '{args.method}' tracks wideband frames: give --frames or --sigmf, not --reads")
+    if not wideband and not args.reads:
+        raise UsageError(f"method '{args.method}' tracks phase reads: give --reads")
+    if wideband:
+        return track_frames(args, scene, params)
+    return track_reads(args, scene, params)
+
+
+def track_reads(args, scene, params: dict) -> int:
+    """``track`` for a COTS reader: reads.csv (and the ROS 2 files, if asked for)."""
+    from scattertrack import io
+
+    reads = io.read_reads(args.reads, scene)
+    say(f"read {plural(len(reads), 'read')} of {plural(len(reads.epcs()), 'tag')} from {args.reads}")
+    say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
+    warn_about_geometry(scene, reads)
+    ros2_out = bool(args.mcap or args.ros2_bag)
+    transform = outputs_command.ros2_transform(args)
+    result, wall_s = run_tracker(args.method, scene, reads, params, show_progress(args), covariance=ros2_out)
+    say_tracked(args.method, result, write_track_file(args.out, result))
+    outputs_command.write_ros2_files(args, result, scene, transform)
+    if not len(result):
+        say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
+    print_tracker_summary(result, reads, wall_s)
+    return 0
+
+
+def warn_about_geometry(scene, reads) -> None:
+    """Before tracking a COTS scene: the geometry check's ``warning:`` lines
+    (twin positions the layout cannot tell apart on the channels read);
+    for a helper scene those of the helper check (receivers in line with the
+    transmitter); nothing on a layout that fixes the position. Never stops the tracking."""
+    from scattertrack import check
+
+    if scene.reader.kind == "sdr-helper":
+        for finding in check.check_helper_scene(scene).warnings:
+            say(finding.line())
+        return
+    if scene.reader.kind != "cots":
+        return
+    try:
+        result = check.check_scene(scene, reads)
+    except ValueError as error:
+        say(f"  geometry check skipped: {error}")
+        return
+    for finding in result.warnings:
+        say(finding.line())
+
+
+def command_check_scene(args) -> int:
+    """``check-scene``: every finding of the geometry check, then whether the layout fixes the position."""
+    from scattertrack import check, io
+
+    scene = io.read_scene(args.scene)
+    if scene.reader.kind == "sdr-helper" and not args.reads:
+        for line in check.check_helper_scene(scene).lines():
+            say(line)
+        return 0
+    if scene.reader.kind != "cots":
+        raise UsageError(f"check-scene checks reader scenes ([reader] kind = \"cots\", or \"sdr-helper\" without "
+                         f"--reads), not {scene.reader.kind!r}" + (" with --reads" if args.reads else ""))
+    reads = io.read_reads(args.reads, scene) if args.reads else None
+    from scattertrack.check.calibration import calibration_lines
+
+    # What is not calibrated first; the geometry's verdict stays the last line.
+    for line in calibration_lines(scene, reads):
+        say(line)
+    for line in check.check_scene(scene, reads).lines():
+        say(line)
+    return 0
+
+
+def track_marvel(args, scene, params: dict) -> int:
+    """``track`` for the drone pipeline: IMU plus features.csv (or a LoRa recording)."""
+    from scattertrack import io
+    from scattertrack.io import summary
+
+    if args.reads or args.frames:
+        raise UsageError(f"method '{args.method}' takes --imu with --features or --sigmf, not --reads or --frames")
+    if not args.imu:
+        raise UsageError(f"method '{args.method}' needs the drone's inertial samples: give --imu")
+    if scene.reader.kind != "lora-backscatter":
+        raise UsageError(f"method '{args.method}' needs a scene with [reader] kind = \"lora-backscatter\", not {scene.reader.kind!r}")
+    imu = io.read_imu(args.imu)
+    say(summary.imu_line(imu, args.imu))
+    start = time.perf_counter()
+    if args.sigmf:
+        result, epochs = _drone_from_sigmf(args, scene, imu, params)
+        source = args.sigmf
+    else:
+        result, epochs = _drone_from_features(args, scene, imu, params)
+        source = args.features
+    wall_s = time.perf_counter() - start
+    out = write_track_file(args.out, result)
+    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} to {out} (from {source})")
+    if not len(result):
+        say(f"  no estimates from {plural(epochs, 'epoch')}: what was declined, and why, is below")
+    if args.revised_out:
+        revised_out = write_track_file(args.revised_out, result.revised)
+        fallbacks = int(result.stats.get("drone", {}).get("revised_fallbacks", 0))
+        say(
+            f"  revised (fixed-lag smoothed) track: {plural(len(result.revised), 'row')} to {revised_out}"
+            + (f", {fallbacks} of them causal (the smoother restarted while they were in its window)" if fallbacks else "")
+        )
+    print_drone_summary(result, epochs, wall_s)
+    return 0
+
+
+def _drone_from_sigmf(args, scene, imu, params: dict):
+    """The drone tracked from a LoRa recording (``--sigmf``); the track and its epochs."""
+    from scattertrack.io import timeline
+    from scattertrack.io.sigmf_lora import open_lora_sigmf
+    from scattertrack.track import marvel
+
+    # Validated before the long run: a broken recording fails at once, naming its key.
+    epochs = open_lora_sigmf(args.sigmf).epoch_time_s
+    timeline.warn_outside_span(args.sigmf, epochs, None, args.imu, imu.time_s, "IMU sample",
+                               column="captures.scattertrack:time_s", noun="epoch")
+    result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
+    return result, int(result.stats.get("drone", {}).get("epochs", len(result)))
+
+
+def _drone_from_features(args, scene, imu, params: dict):
+    """The drone tracked from features.csv (``--features``); the track and its epochs."""
+    from scattertrack import io
+    from scattertrack.io import summary, timeline
+    from scattertrack.track import marvel, methods
+
+    if methods.method(args.method).input == "sigmf+imu":
+        raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
+    features = io.read_features(args.features)
+    say(summary.features_line(features, args.features))
+    timeline.warn_outside_span(args.features, features.time_s, features.line, args.imu, imu.time_s, "IMU sample")
+    result = marvel.run_features(args.method, scene, imu, features, progress=show_progress(args), **params)
+    return result, len(features)
+
+
+def print_drone_summary(result, epochs: int, wall_s: float) -> None:
+    """What ``track`` reports after tracking a drone: declined rows, the controller, the start, divergences, speed."""
+    say(f"  {result.skipped.summary() if result.skipped.total else 'nothing declined'}")
+    stats = result.stats.get("drone", {})
+    controller = stats.get("controller")
+    if controller is not None:
+        say("  controller estimated at (" + ", ".join(f"{v:.2f}" for v in controller) + ") m")
+    elif stats.get("controller_refused"):
+        say(f"  controller estimate refused: {stats['controller_refused']}")
+    rest = stats.get("rest")
+    if rest:
+        start = "at rest (ground factors)" if rest["state"] == "rest" else f"not at rest (failed check: {rest['failed_check']}; wide velocity prior)"
+        dropped = f", {plural(rest['ground_factors_dropped'], 'ground factor')} dropped" if rest.get("ground_factors_dropped") else ""
+        say(f"  start: {start}{dropped}")
+    if "divergences" in stats:
+        unrecovered = stats["divergences"] - stats.get("divergences_recovered", 0)
+        say(
+            f"  divergences: {stats['divergences']} (restarted from the features), "
+            f"{stats.get('divergences_recovered', 0)} recovered, {unrecovered} not recovered"
+        )
+    q = result.latency_quantiles_ns
+    rate = epochs / wall_s if wall_s > 0 else math.inf
+    say(
+        f"  speed: {rate:,.0f} epochs/s wall clock ({format_duration(wall_s)} for {epochs} epochs); "
+        f"per epoch {format_nanoseconds(q.get('p50', 0))} p50, {format_nanoseconds(q.get('p99', 0))} p99"
+    )
+
+
+def track_frames(args, scene, params: dict) -> int:
+    """``track`` for the localization helper: frames.csv or a SigMF recording."""
+    from scattertrack import io
+    from scattertrack import track as tracking
+    from scattertrack.io import summary
+
+    if args.sigmf:
+        from scattertrack.dsp import read_sigmf_frames
+
+        calibration = calibration_for(args)
+        frames = read_sigmf_frames(args.sigmf, scene, calibration)
+        source = args.sigmf
+    else:
+        frames = io.read_frames(args.frames, scene)
+        source = args.frames
+    for line in summary.frames_lines(frames, source):
+        say(line)
+    warn_about_geometry(scene, None)
+    start = time.perf_counter()
+    result = tracking.run(args.method, scene, frames, progress=show_progress(args), **params)
+    wall_s = time.perf_counter() - start
+    say_tracked(args.method, result, write_track_file(args.out, result))
+    print_frames_summary(result, frames, wall_s)
+    return 0
+
+
+def print_frames_summary(result, frames, wall_s: float) -> None:
+    """What ``track`` reports after tracking frames: skips, per-tag counts, speed."""
+    say(f"  {result.skipped.summary()}")
+    for epc, tag in list(result.stats.items())[:MAX_TAGS_LISTED]:
+        say(
+            f"  tag {epc}: {tag.get('measurements', 0)} frames, {tag.get('outliers', 0)} outliers, "
+            f"{tag.get('reinitialisations', 0)} reinitialisations"
+        )
+    rate = frames.n_frames / wall_s if wall_s > 0 else math.inf
+    line = f"  speed: {rate:,.0f} frames/s wall clock ({format_duration(wall_s)} for {frames.n_frames} frames)"
+    if result.latency and result.latency[0]:
+        _, mean_ns, max_ns = result.latency
+        q = result.latency_quantiles_ns
+        line += (
+            f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(q.get('p50', 0))} p50, "
+            f"{format_nanoseconds(q.get('p99', 0))} p99, {format_nanoseconds(max_ns)} max per frame"
+        )
+    say(line)
+
+
+def write_track_file(path, result) -> Path:
+    """``result`` written as a track.csv at ``path``, its folder made if need be; returns the path."""
+    from scattertrack import io
+
+    out = output_path(path)
+    io.write_track(out, result)
+    return out
+
+
+def say_tracked(method: str, result, out: Path) -> None:
+    """The line after tracking tags: rows and tags written, and where."""
+    say(f"tracked with {method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
+
+
+def run_tracker(method: str, scene, reads, params: dict, progress: bool, covariance: bool = False):
+    """Track every tag; returns the Track and the wall-clock seconds the tracking took."""
+    from scattertrack import track
+
+    start = time.perf_counter()
+    extra = {"covariance": True} if covariance else {}
+    result = track.run(method, scene, reads, progress=progress, **extra, **params)
+    return result, time.perf_counter() - start
+
+
+def print_tracker_summary(result, reads, wall_s: float) -> None:
+    """What ``track`` reports after tracking: skips, per-tag stats, speed."""
+    say(f"  {result.skipped.summary()}")
+    stats = result.stats
+    for epc in list(stats)[:MAX_TAGS_LISTED]:
+        tag = stats[epc]
+        say(
+            f"  tag {epc}: {tag.get('measurements', 0)} reads, "
+            f"{tag.get('initialising', 0)} initialising, "
+            f"{tag.get('reinitialisations', 0)} reinitialisations, "
+            f"at most {tag.get('max_hypotheses', 0)} hypotheses"
+        )
+    for line in unresolved_warnings(result):
+        say(line)
+    if reads is not None and hasattr(reads, "phase_rad"):
+        from scattertrack.track.plausibility import implausible_speed_warnings
+
+        for line in implausible_speed_warnings(result, reads):
+            say(line)
+    if len(stats) > MAX_TAGS_LISTED:
+        rest = list(stats.values())[MAX_TAGS_LISTED:]
+        say(
+            f"  ... and {len(rest)} more tags: "
+            f"{sum(t.get('reinitialisations', 0) for t in rest)} reinitialisations in all"
+        )
+    throughput = len(reads) / wall_s if wall_s > 0 else math.inf
+    line = f"  speed: {throughput:,.0f} reads/s wall clock ({format_duration(wall_s)} for {len(reads)} reads)"
+    latency = result.latency
+    if latency and latency[0]:
+        _, mean_ns, max_ns = latency
+        line += f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(max_ns)} max per read"
+    say(line)
+
+
+# A row is unresolved while its largest sigma exceeds this (m): a quarter
+# of the λ/2 ≈ 16 cm candidate spacing, the scale at which competing
+# candidate trajectories (or geometric twins) still carry weight.
+UNRESOLVED_SIGMA_M = 0.04
+
+
+def unresolved_warnings(result) -> list[str]:
+    """One ``warning:`` line per tag whose track ends unresolved (its last
+    row's largest sigma above :data:`UNRESOLVED_SIGMA_M`), saying how much
+    of the track was; a tag that resolved says nothing."""
+    if result.sigma is None or len(result) == 0:
+        return []
+    largest = np.nanmax(result.sigma, axis=1)
+    unresolved = largest > UNRESOLVED_SIGMA_M
+    # Per tag in one pass over the rows (a recording may hold thousands of
+    # tags): its last row, its share of unresolved rows and its widest sigma.
+    epcs, tag = np.unique(result.epc.astype(str), return_inverse=True)
+    rows = np.arange(len(result))
+    first, last = np.full(len(epcs), len(result)), np.zeros(len(epcs), dtype=int)
+    np.minimum.at(first, tag, rows)
+    np.maximum.at(last, tag, rows)
+    widest = np.full(len(epcs), -np.inf)
+    np.maximum.at(widest, tag, largest)
+    share = np.bincount(tag, weights=unresolved, minlength=len(epcs)) / np.bincount(tag, minlength=len(epcs))
+    lines = []
+    for k in np.argsort(first, kind="stable"):  # in order of first appearance
+        if unresolved[last[k]]:
+            lines.append(
+                f"warning: tag {epcs[k]}: the reads did not resolve its position: "
+                f"{share[k] * 100:.0f} % of its rows, the last included, have a sigma above "
+                f"{UNRESOLVED_SIGMA_M * 100:.0f} cm (up to {widest[k] * 100:.0f} cm); "
+                "the sigmas cover the competing candidates, the position is the likeliest of them"
+            )
+    return lines
