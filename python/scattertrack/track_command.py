@@ -90,15 +90,19 @@ def add_check_scene_parser(commands) -> None:
 
 
 def command_track(args) -> int:
-    """``track``: the method's input checked against the options, then tracked by its pipeline."""
+    """``track``: the method's input checked against the options, then tracked by its pipeline.
+
+    One dispatch, on the registry's input kind (``scattertrack.track.methods``):
+    each pipeline reads its files into the batch input ``st.track.run`` takes.
+    """
     from scattertrack import io
-    from scattertrack import track as tracking
-    from scattertrack.track import marvel
+    from scattertrack.track import marvel, methods
 
     # Before reading anything: an unknown method or a bad value fails at once.
     params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
-    if args.method in marvel.MARVEL_METHODS:
+    kind = methods.method(args.method).input
+    if kind in ("features+imu", "sigmf+imu"):
         return track_marvel(args, scene, params)
     if args.features or args.imu:
         raise UsageError(f"--features and --imu are inputs of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
@@ -106,14 +110,11 @@ def command_track(args) -> int:
         raise UsageError(f"--revised-out is an output of {', '.join(marvel.MARVEL_METHODS)}, not of '{args.method}'")
     # Before reading the input: a typo should not wait for a large file to load.
     check_parameters(args.method, scene, params, args.scene)
-    wideband = args.method in tracking.WIDEBAND_METHODS
-    if wideband and args.reads:
+    if kind == "frames" and args.reads:
         raise UsageError(f"method '{args.method}' tracks wideband frames: give --frames or --sigmf, not --reads")
-    if not wideband and not args.reads:
+    if kind == "reads" and not args.reads:
         raise UsageError(f"method '{args.method}' tracks phase reads: give --reads")
-    if wideband:
-        return track_frames(args, scene, params)
-    return track_reads(args, scene, params)
+    return track_frames(args, scene, params) if kind == "frames" else track_reads(args, scene, params)
 
 
 def track_reads(args, scene, params: dict) -> int:
@@ -220,13 +221,13 @@ def _drone_from_sigmf(args, scene, imu, params: dict):
     """The drone tracked from a LoRa recording (``--sigmf``); the track and its epochs."""
     from scattertrack.io import timeline
     from scattertrack.io.sigmf_lora import open_lora_sigmf
-    from scattertrack.track import marvel
+    from scattertrack import track as tracking
 
     # Validated before the long run: a broken recording fails at once, naming its key.
     epochs = open_lora_sigmf(args.sigmf).epoch_time_s
     timeline.warn_outside_span(args.sigmf, epochs, None, args.imu, imu.time_s, "IMU sample",
                                column="captures.scattertrack:time_s", noun="epoch")
-    result = marvel.run_sigmf(args.method, scene, args.sigmf, imu, progress=show_progress(args), **params)
+    result = tracking.run(args.method, scene, tracking.DroneData(imu, recording=args.sigmf), progress=show_progress(args), **params)
     return result, int(result.stats.get("drone", {}).get("epochs", len(result)))
 
 
@@ -234,14 +235,15 @@ def _drone_from_features(args, scene, imu, params: dict):
     """The drone tracked from features.csv (``--features``); the track and its epochs."""
     from scattertrack import io
     from scattertrack.io import summary, timeline
-    from scattertrack.track import marvel, methods
+    from scattertrack import track as tracking
+    from scattertrack.track import methods
 
     if methods.method(args.method).input == "sigmf+imu":
         raise UsageError(f"method '{args.method}' differs from marvel in the pose sensing: give --sigmf, not --features")
     features = io.read_features(args.features)
     say(summary.features_line(features, args.features))
     timeline.warn_outside_span(args.features, features.time_s, features.line, args.imu, imu.time_s, "IMU sample")
-    result = marvel.run_features(args.method, scene, imu, features, progress=show_progress(args), **params)
+    result = tracking.run(args.method, scene, tracking.DroneData(imu, features), progress=show_progress(args), **params)
     return result, len(features)
 
 

@@ -118,15 +118,17 @@ def test_non_monotonic_imu_is_counted_and_reported(capsys, flight, tmp_path):
 
 
 def test_marvel_parameters_reach_the_fusion_typed(capsys, flight, tmp_path, monkeypatch):
-    from scattertrack.track import marvel
+    from scattertrack import track
 
     seen = {}
 
-    def capture(method, scene, imu, features, progress=False, **params):
+    def capture(method, scene, data, progress=False, **params):
+        assert isinstance(data, track.DroneData) and data.features is not None
         seen.update(params)
         raise ValueError("stop here")
 
-    monkeypatch.setattr(marvel, "run_features", capture)
+    # The CLI's one dispatch point for every pipeline.
+    monkeypatch.setattr(track, "run", capture)
     code, _, err = run(
         capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml", "--features", flight / "features.csv",
         "--imu", flight / "imu.csv", "--out", tmp_path / "t.csv", "--param", "use_baro=false", "--param", "smoother_lag_s=3",
