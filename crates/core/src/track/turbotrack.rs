@@ -54,7 +54,13 @@ use super::bistatic::{
 };
 use super::key_hash::KeyMap;
 use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeLevels};
-use super::{Estimate, Measurement, Tracker, TrackerStats, WidebandFrame};
+use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
+
+/// The registry's constructor of `turbotrack`: Algorithm 1 with the
+/// parameters as given (the §7.2 baselines: [`super::variants`]).
+pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
+    Ok(Box::new(TurboTrack::new(scene.clone(), params.turbotrack.clone())?))
+}
 
 /// The observation model used to weight particles.
 #[derive(Debug, Clone, Copy, PartialEq)]
