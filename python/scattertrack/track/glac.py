@@ -15,7 +15,6 @@ from scattertrack import _core
 from scattertrack.io.types import Reads, Scene, SkipReport, Track
 from scattertrack.track import methods as registry
 from scattertrack.track import parameters
-from scattertrack.track.scene_arguments import scene_arguments
 
 METHODS: list[str] = list(registry.METHODS)
 """Every registered method (the registry in the Rust core)."""
@@ -56,11 +55,7 @@ def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
         raise ValueError(f"method '{method}' needs a monostatic reader scene (kind = 'cots'), got '{scene.reader.kind}'")
     # Parameters cross as one dict; the core's table checks every one
     # (ValueError naming the parameter).
-    return _core.Engine(
-        *scene_arguments(scene),
-        method,
-        dict(params),
-    )
+    return _core.Engine(_core.Scene(scene), method, dict(params))
 
 
 class Tracker:
