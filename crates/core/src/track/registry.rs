@@ -25,6 +25,8 @@ use crate::error::{Error, Result};
 use crate::params::{Schemas, Value};
 use crate::scene::Scene;
 
+#[path = "trilateration_ekf.rs"] mod trilateration_ekf;
+
 /// The hardware a method's input comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Pipeline {
@@ -146,6 +148,7 @@ pub const METHODS: &[Method] = &[
         variants::glac_naive,
         "GLAC without nearest-neighbour pruning or quick stop: every hypothesis branches on every candidate distance, capped by max_hypotheses (sec. 5.2.3)",
     ),
+    cots("trilateration-ekf", trilateration_ekf::build, "baseline: one EKF on [p, v] fed ranges unwrapped from each antenna and channel's phase, from a multilateration fix whose twins the first reads rule out"),
     helper("turbotrack", turbotrack::build, "TurboTrack: particle filter over a mixture of each receiver's candidate path lengths, near-optimal proposal (thesis ch. 5)"),
     helper("gaussian-pf", variants::gaussian_pf, "TurboTrack baseline: one broad Gaussian around the strongest candidate, bootstrap proposal (thesis sec. 7.2(a))"),
     helper("uniform-pf", variants::uniform_pf, "TurboTrack baseline: particles spread uniformly over the [region], bootstrap proposal (thesis sec. 7.2(b))"),
