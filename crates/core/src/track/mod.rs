@@ -10,7 +10,8 @@
 //! Registering a method: add its file (the tracker, its `build`
 //! constructor, its tests) and its entry in [`registry::METHODS`] (name,
 //! pipeline, input, parameter table, constructor, description); [`make`]
-//! finds it there. Variants of a tracker are named constructors in
+//! finds it there, and the file may be declared next to that entry (see
+//! [`registry`]). Variants of a tracker are named constructors in
 //! [`variants`]. Parameters: [`glac_params`], [`turbotrack_params`].
 
 pub mod bistatic;

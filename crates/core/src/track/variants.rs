@@ -4,13 +4,10 @@
 //! ([`super::registry::METHODS`]) names these constructors; the base
 //! methods' own are `build` in their files.
 
-use super::{Glac, Inference, Params, Proposal, Tracker, TurboTrack, WidebandLikelihood};
+use super::{Glac, GlacParams, Inference, InitialSampling, Params, Proposal, Tracker, TurboTrack, WidebandLikelihood};
 use crate::error::Result;
 use crate::model::wideband::CandidateWeighting;
 use crate::scene::Scene;
-
-use super::turbotrack::InitialSampling;
-use super::GlacParams;
 
 /// 1-sigma of the Gaussian-PF baseline's single-Gaussian likelihood, m:
 /// "a large standard deviation" (§7.2(a)) — a quarter of the 100 MHz
