@@ -7,26 +7,33 @@ import numpy.typing as npt
 
 EstimateTuple = tuple[float, list[float], list[float], list[float], int, float]
 
+DEFAULT_PHASE_NOISE_RAD: float
+"""The filter's prior phase noise when the scene states none (docs/formats.md section 1), radians."""
+
+class Scene:
+    """A ``scattertrack.io.Scene`` read once into the core's scene (``python/src/scene.rs``).
+
+    Reads dimensions, plane_z (None: 0), the reader's phase_sign, period_rad,
+    phase_noise_rad (None or 0: ``DEFAULT_PHASE_NOISE_RAD``) and kind, each
+    antenna's id, position and phase_offset_rad, and the region; a monostatic
+    scene also its channel_offsets, an ``sdr-helper`` scene each antenna's
+    role. ValueError for a scene the core rejects."""
+
+    def __init__(self, scene: Any) -> None: ...
+    @property
+    def dimensions(self) -> int: ...
+    @property
+    def antennas(self) -> int:
+        """Number of antennas (trackers index them 0..n in the scene's order)."""
+    @property
+    def phase_noise_rad(self) -> float:
+        """The prior phase noise the trackers use, radians."""
+
 class Engine:
     """Per-tag trackers of one method over one scene (core ``engine::Engine``)."""
 
-    def __init__(
-        self,
-        dimensions: int,
-        plane_z: float,
-        phase_sign: float,
-        phase_period: float,
-        phase_noise_rad: float,
-        antenna_positions: npt.NDArray[np.float64],
-        antenna_offsets: npt.NDArray[np.float64],
-        region: tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]] | None,
-        channel_frequencies: npt.NDArray[np.float64],
-        channel_offsets: npt.NDArray[np.float64],
-        method: str,
-        params: dict[str, Any] | None = None,
-        roles: list[str] | None = None,
-    ) -> None:
-        """``roles``: one of "txrx", "tx", "rx" per antenna (default all "txrx")."""
+    def __init__(self, scene: Scene, method: str, params: dict[str, Any] | None = None) -> None:
+        """Trackers of ``method`` over ``scene``; ``params`` checked by the method's table (ValueError)."""
     def step(
         self, tag: int, time_s: float, antenna: int, frequency_hz: float, phase_rad: float
     ) -> EstimateTuple | None:
@@ -347,16 +354,7 @@ def lora_clock_error(
 # --- scene geometry check (python/src/geometry.rs) ---------------------------
 
 def analyse_scene(
-    dimensions: int,
-    plane_z: float,
-    phase_sign: float,
-    phase_period: float,
-    phase_noise_rad: float,
-    antenna_positions: np.ndarray,
-    antenna_offsets: np.ndarray,
-    region: tuple[np.ndarray, np.ndarray] | None,
-    channel_frequencies: np.ndarray,
-    channel_offsets: np.ndarray,
+    scene: Scene,
     read_frequencies: list[float],
     evidence_reads: float | None = None,
     remedies: bool = True,
@@ -364,16 +362,7 @@ def analyse_scene(
     """Layout findings and twin families (dict of lists of dicts; antenna indices, metres)."""
 
 def twin_positions(
-    dimensions: int,
-    plane_z: float,
-    phase_sign: float,
-    phase_period: float,
-    phase_noise_rad: float,
-    antenna_positions: np.ndarray,
-    antenna_offsets: np.ndarray,
-    region: tuple[np.ndarray, np.ndarray] | None,
-    channel_frequencies: np.ndarray,
-    channel_offsets: np.ndarray,
+    scene: Scene,
     position: list[float],
     frequencies: list[float],
     evidence_reads: float | None = None,

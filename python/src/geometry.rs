@@ -3,13 +3,13 @@
 //! Plain dicts and lists cross the boundary; the Python side words them.
 
 use nalgebra::Vector3;
-use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
 use scattertrack_core::geometry::ambiguity::{self, AmbiguityOptions, FamilyKind, LayoutKind};
 
-use crate::{make_scene, value_error};
+use crate::scene::Scene;
+use crate::value_error;
 
 fn triple(v: &Vector3<f64>) -> [f64; 3] {
     [v.x, v.y, v.z]
@@ -26,28 +26,18 @@ fn options(evidence_reads: Option<f64>, remedies: bool) -> AmbiguityOptions {
 /// The scene's layout findings and twin families on the channels of
 /// `read_frequencies` (Hz, most-read first; see `joint_frequencies`).
 #[pyfunction]
-#[pyo3(signature = (dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions, antenna_offsets, region, channel_frequencies, channel_offsets, read_frequencies, evidence_reads=None, remedies=true))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, read_frequencies, evidence_reads=None, remedies=true))]
 fn analyse_scene<'py>(
     py: Python<'py>,
-    dimensions: usize,
-    plane_z: f64,
-    phase_sign: f64,
-    phase_period: f64,
-    phase_noise_rad: f64,
-    antenna_positions: PyReadonlyArray2<f64>,
-    antenna_offsets: PyReadonlyArray1<f64>,
-    region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
-    channel_frequencies: PyReadonlyArray1<f64>,
-    channel_offsets: PyReadonlyArray1<f64>,
+    scene: PyRef<'_, Scene>,
     read_frequencies: Vec<f64>,
     evidence_reads: Option<f64>,
     remedies: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let scene = make_scene(dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions, antenna_offsets, region, channel_frequencies, channel_offsets, None)?;
+    let scene = &scene.inner;
     let opts = options(evidence_reads, remedies);
-    let frequencies = ambiguity::joint_frequencies(&scene, &read_frequencies);
-    let report = py.detach(|| ambiguity::analyse_scene(&scene, &frequencies, &opts)).map_err(value_error)?;
+    let frequencies = ambiguity::joint_frequencies(scene, &read_frequencies);
+    let report = py.detach(|| ambiguity::analyse_scene(scene, &frequencies, &opts)).map_err(value_error)?;
     let out = PyDict::new(py);
     let layout = PyList::empty(py);
     for f in &report.layout {
@@ -107,28 +97,18 @@ fn analyse_scene<'py>(
 /// Twins of `position` (m) on `frequencies` (Hz, analysed jointly):
 /// `[(position, shift, chi_square)]`, nearest first (full shift set).
 #[pyfunction]
-#[pyo3(signature = (dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions, antenna_offsets, region, channel_frequencies, channel_offsets, position, frequencies, evidence_reads=None))]
-#[allow(clippy::too_many_arguments)]
+#[pyo3(signature = (scene, position, frequencies, evidence_reads=None))]
 fn twin_positions(
     py: Python<'_>,
-    dimensions: usize,
-    plane_z: f64,
-    phase_sign: f64,
-    phase_period: f64,
-    phase_noise_rad: f64,
-    antenna_positions: PyReadonlyArray2<f64>,
-    antenna_offsets: PyReadonlyArray1<f64>,
-    region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
-    channel_frequencies: PyReadonlyArray1<f64>,
-    channel_offsets: PyReadonlyArray1<f64>,
+    scene: PyRef<'_, Scene>,
     position: [f64; 3],
     frequencies: Vec<f64>,
     evidence_reads: Option<f64>,
 ) -> PyResult<Vec<([f64; 3], Vec<i32>, f64)>> {
-    let scene = make_scene(dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions, antenna_offsets, region, channel_frequencies, channel_offsets, None)?;
+    let scene = &scene.inner;
     let opts = options(evidence_reads, false);
     let p = Vector3::from(position);
-    let twins = py.detach(|| ambiguity::twin_positions(&scene, &p, &frequencies, &opts)).map_err(value_error)?;
+    let twins = py.detach(|| ambiguity::twin_positions(scene, &p, &frequencies, &opts)).map_err(value_error)?;
     Ok(twins.into_iter().map(|t| (triple(&t.position), t.shift, t.chi_square)).collect())
 }
 

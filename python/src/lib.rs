@@ -6,75 +6,19 @@ mod geometry;
 mod locate;
 mod lora;
 mod params;
+mod scene;
 
-use nalgebra::Vector3;
 use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 use scattertrack_core::engine::Engine as CoreEngine;
-use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Role, Scene};
 use scattertrack_core::track::{Estimate, Measurement, PhaseRead, TrackerStats, WidebandFrame};
 use nalgebra::Complex;
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
-}
-
-/// Builds a core scene from plain arrays (the Python `Scene` is converted
-/// in `scattertrack.track`).
-#[allow(clippy::too_many_arguments)]
-fn make_scene(
-    dimensions: usize,
-    plane_z: f64,
-    phase_sign: f64,
-    phase_period: f64,
-    phase_noise_rad: f64,
-    antenna_positions: PyReadonlyArray2<f64>,
-    antenna_offsets: PyReadonlyArray1<f64>,
-    region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
-    channel_frequencies: PyReadonlyArray1<f64>,
-    channel_offsets: PyReadonlyArray1<f64>,
-    roles: Option<Vec<String>>,
-) -> PyResult<Scene> {
-    let pos = antenna_positions.as_array();
-    let off = antenna_offsets.as_array();
-    if pos.ncols() != 3 || pos.nrows() != off.len() {
-        return Err(value_error("antenna_positions must be (n, 3) and antenna_offsets (n,)"));
-    }
-    let roles: Vec<Role> = match roles {
-        None => vec![Role::TxRx; pos.nrows()],
-        Some(r) if r.len() == pos.nrows() => r
-            .iter()
-            .map(|x| match x.as_str() {
-                "txrx" => Ok(Role::TxRx),
-                "tx" => Ok(Role::Tx),
-                "rx" => Ok(Role::Rx),
-                other => Err(value_error(format!("antenna role must be txrx, tx or rx, got {other}"))),
-            })
-            .collect::<PyResult<_>>()?,
-        Some(_) => return Err(value_error("roles must have one entry per antenna")),
-    };
-    let antennas = (0..pos.nrows())
-        .map(|i| Antenna { id: i as i64, position: Vector3::new(pos[(i, 0)], pos[(i, 1)], pos[(i, 2)]), phase_offset_rad: off[i], role: roles[i] })
-        .collect();
-    let region = match region {
-        Some((lo, hi)) => {
-            let (lo, hi) = (lo.as_array(), hi.as_array());
-            if lo.len() != 3 || hi.len() != 3 {
-                return Err(value_error("region bounds must have 3 entries"));
-            }
-            Some(Region { min: Vector3::new(lo[0], lo[1], lo[2]), max: Vector3::new(hi[0], hi[1], hi[2]) })
-        }
-        None => None,
-    };
-    let (cf, co) = (channel_frequencies.as_array(), channel_offsets.as_array());
-    if cf.len() != co.len() {
-        return Err(value_error("channel_frequencies and channel_offsets differ in length"));
-    }
-    let channels = cf.iter().zip(co.iter()).map(|(&f, &o)| ChannelOffset { frequency_hz: f, phase_offset_rad: o }).collect();
-    Scene::new(dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antennas, region, channels).map_err(value_error)
 }
 
 fn stats_dict<'py>(py: Python<'py>, s: &TrackerStats) -> PyResult<Bound<'py, PyDict>> {
@@ -167,38 +111,12 @@ struct Engine {
 
 #[pymethods]
 impl Engine {
+    /// Trackers of `method` over `scene` (a `_core.Scene`), with `params`
+    /// (name → value) checked by the method's table.
     #[new]
-    #[pyo3(signature = (dimensions, plane_z, phase_sign, phase_period, phase_noise_rad, antenna_positions,
-        antenna_offsets, region, channel_frequencies, channel_offsets, method, params=None, roles=None))]
-    #[allow(clippy::too_many_arguments)]
-    fn new(
-        dimensions: usize,
-        plane_z: f64,
-        phase_sign: f64,
-        phase_period: f64,
-        phase_noise_rad: f64,
-        antenna_positions: PyReadonlyArray2<f64>,
-        antenna_offsets: PyReadonlyArray1<f64>,
-        region: Option<(PyReadonlyArray1<f64>, PyReadonlyArray1<f64>)>,
-        channel_frequencies: PyReadonlyArray1<f64>,
-        channel_offsets: PyReadonlyArray1<f64>,
-        method: &str,
-        params: Option<&Bound<'_, PyDict>>,
-        roles: Option<Vec<String>>,
-    ) -> PyResult<Self> {
-        let scene = make_scene(
-            dimensions,
-            plane_z,
-            phase_sign,
-            phase_period,
-            phase_noise_rad,
-            antenna_positions,
-            antenna_offsets,
-            region,
-            channel_frequencies,
-            channel_offsets,
-            roles,
-        )?;
+    #[pyo3(signature = (scene, method, params=None))]
+    fn new(scene: PyRef<'_, scene::Scene>, method: &str, params: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
+        let scene = scene.inner.clone();
         let antennas = scene.antennas.len();
         let inner = CoreEngine::new(scene, method, params::make_params(method, params)?).map_err(value_error)?;
         Ok(Self { inner, antennas })
@@ -569,6 +487,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     lora::register(m)?;
     geometry::register(m)?;
     locate::register(m)?;
+    scene::register(m)?;
     Ok(())
 }
 

@@ -662,3 +662,172 @@ impl ReplyProcessor {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::backscatter::reply_chips;
+    use std::f64::consts::TAU;
+
+    /// A synthetic reply without noise: every rx antenna hears the
+    /// transmitter's periodic OFDM symbol through a leakage channel and,
+    /// while the tag reflects (FM0 chips of 12.5 µs from 25 µs on), through
+    /// the tag channel `tag(a, k)` (FFT bin `k`, FFT timing at the
+    /// transmitter's symbol boundary). The window's first sample is
+    /// `tx_phase` into the transmitter's stream.
+    struct Synthetic {
+        config: OfdmConfig,
+        symbol: KnownSymbol,
+        tx_phase: usize,
+        antennas: usize,
+    }
+
+    impl Synthetic {
+        fn new() -> Self {
+            let config = OfdmConfig::new(100e6, 20, 915e6, 40e3).unwrap();
+            Self { config, symbol: KnownSymbol::generate(20, 17).unwrap(), tx_phase: 7, antennas: 3 }
+        }
+
+        fn tag(&self, a: usize, k: usize) -> Complex64 {
+            Complex64::from_polar(0.02 * (1.0 + 0.3 * a as f64), 0.9 * a as f64 + 0.35 * k as f64)
+        }
+
+        fn leak(&self, a: usize, k: usize) -> Complex64 {
+            Complex64::from_polar(1.0 + 0.1 * a as f64, -0.2 * k as f64 + a as f64)
+        }
+
+        /// One period of the received symbol through `spectrum` (unitary inverse DFT).
+        fn periodic(&self, spectrum: impl Fn(usize) -> Complex64) -> Vec<Complex64> {
+            let n = self.config.subcarriers;
+            (0..n)
+                .map(|t| {
+                    (0..n).map(|k| self.symbol.frequency[k] * spectrum(k) * Complex64::from_polar(1.0, TAU * (k * t) as f64 / n as f64)).sum::<Complex64>()
+                        / (n as f64).sqrt()
+                })
+                .collect()
+        }
+
+        fn windows(&self) -> Vec<Vec<Complex32>> {
+            let chips = reply_chips(Encoding::Fm0, false, &[1, 0, 1, 1, 0, 0, 1, 0, 1, 1, 1, 0, 0, 1, 0, 1]).unwrap();
+            let (n, samples, chip, start) = (self.config.subcarriers, 30_000, 1250.0, 2500.0);
+            let level = |i: usize| {
+                let c = ((i as f64 - start) / chip).floor();
+                if c < 0.0 || c >= chips.len() as f64 { 0.0 } else { chips[c as usize] as f64 }
+            };
+            (0..self.antennas)
+                .map(|a| {
+                    let leak = self.periodic(|k| self.leak(a, k));
+                    let tag = self.periodic(|k| self.tag(a, k));
+                    (0..samples)
+                        .map(|i| {
+                            let p = (i + self.tx_phase) % n;
+                            let v = leak[p] + tag[p] * level(i);
+                            Complex32::new(v.re as f32, v.im as f32)
+                        })
+                        .collect()
+                })
+                .collect()
+        }
+
+        /// The estimate with the timing's linear phase `exp(j2π k' D / N)`,
+        /// `D = first_sample + tx_phase`, removed: comparable with `tag`.
+        fn untimed(&self, e: &ReplyEstimate) -> Vec<Complex64> {
+            let n = self.config.subcarriers as f64;
+            let bins = self.config.signed_bins();
+            let f = e.subcarriers;
+            e.tag_channel
+                .iter()
+                .enumerate()
+                .map(|(i, h)| {
+                    let d = (e.first_samples[i / f] + self.tx_phase) as f64;
+                    h * Complex64::from_polar(1.0, -TAU * bins[i % f] as f64 * d / n)
+                })
+                .collect()
+        }
+
+        fn truth(&self) -> Vec<Complex64> {
+            let bins = self.config.active_bins();
+            (0..self.antennas).flat_map(|a| bins.iter().map(move |&k| self.tag(a, k))).collect()
+        }
+    }
+
+    fn refs(windows: &[Vec<Complex32>]) -> Vec<&[Complex32]> {
+        windows.iter().map(|w| w.as_slice()).collect()
+    }
+
+    #[test]
+    fn a_noiseless_reply_gives_its_tag_channel() {
+        let s = Synthetic::new();
+        let windows = s.windows();
+        let mut p = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), ReplyOptions::default()).unwrap();
+        let e = p.process(&refs(&windows), None).unwrap();
+        assert_eq!((e.antennas, e.subcarriers), (3, s.config.active_count()));
+        assert!(e.antenna_errors.iter().all(Option::is_none), "{:?}", e.antenna_errors);
+        assert!((e.start_sample - 2500.0).abs() < 20.0, "start {}", e.start_sample);
+        assert!((e.blf_hz / 40e3 - 1.0).abs() < 0.01, "BLF {}", e.blf_hz);
+        let worst = s.untimed(&e).iter().zip(s.truth()).map(|(g, t)| (g - t).norm() / t.norm()).fold(0.0, f64::max);
+        // f32 samples with the leakage 34 dB above the tag.
+        assert!(worst < 1e-3, "worst relative error {worst}");
+        for (a, c) in e.counts.iter().enumerate() {
+            assert_eq!(c.high + c.low + c.edge + c.outside + c.invalid, e.symbols, "antenna {a}");
+            assert!(c.high > 0 && c.low > 0 && c.edge > 0, "antenna {a}: {c:?}");
+        }
+    }
+
+    /// The runtime's split, per-antenna fronts and one joint finish, is
+    /// the same computation as `process`.
+    #[test]
+    fn fronts_then_finish_equal_process() {
+        let s = Synthetic::new();
+        let windows = s.windows();
+        let options = ReplyOptions::default();
+        let mut whole = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), options.clone()).unwrap();
+        let expected = whole.process(&refs(&windows), Some(s.tx_phase)).unwrap();
+        let mut joint = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), options.clone()).unwrap();
+        let mut front = AntennaFront::new(&s.config, &s.symbol, &options).unwrap();
+        let mut antennas: Vec<AntennaSymbols> = (0..windows.len()).map(|_| AntennaSymbols::default()).collect();
+        for (a, (w, out)) in windows.iter().zip(antennas.iter_mut()).enumerate() {
+            front.process(w, joint.first_sample(a, Some(s.tx_phase)), out);
+        }
+        let got = joint.finish(&mut antennas, Some(s.tx_phase)).unwrap();
+        assert_eq!(got, expected);
+        assert_eq!(joint.timing_reference(), whole.timing_reference());
+    }
+
+    /// With the transmitter phase given, the first reply teaches the timing
+    /// reference D_r = (first_sample + tx_phase) mod N, and the next reply
+    /// is cut on it without the correlation timing.
+    #[test]
+    fn the_timing_reference_is_learnt_then_used() {
+        let s = Synthetic::new();
+        let windows = s.windows();
+        let n = s.config.subcarriers;
+        let mut p = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), ReplyOptions::default()).unwrap();
+        assert!(p.timing_reference().is_none());
+        let first = p.process(&refs(&windows), Some(s.tx_phase)).unwrap();
+        let reference: Vec<usize> = first.first_samples.iter().map(|&m| (m + s.tx_phase) % n).collect();
+        assert_eq!(p.timing_reference(), Some(reference.as_slice()));
+        assert!(first.timings.iter().all(Option::is_some));
+        let second = p.process(&refs(&windows), Some(s.tx_phase)).unwrap();
+        assert!(second.timings.iter().all(Option::is_none), "the reference replaces the correlation");
+        assert_eq!(second.first_samples, first.first_samples);
+        assert_eq!(second.tag_channel, first.tag_channel);
+        assert!(p.set_timing_reference(Some(vec![n; 3])).is_err());
+        assert!(matches!(p.process(&refs(&windows[..2]), Some(s.tx_phase)), Err(Error::Shape(_))));
+    }
+
+    #[test]
+    fn options_outside_their_domains_are_rejected() {
+        let bad = [
+            ReplyOptions { guard_symbols: -1.0, ..Default::default() },
+            ReplyOptions { decision_margin: 1.0, ..Default::default() },
+            ReplyOptions { detection: DetectionOptions { threshold: 0.0, ..Default::default() }, ..Default::default() },
+        ];
+        for options in bad {
+            assert!(matches!(options.validate(), Err(Error::BadConfig(_))), "{options:?}");
+        }
+        let s = Synthetic::new();
+        assert!(ReplyProcessor::new(s.config, s.symbol, ReplyOptions { guard_symbols: f64::NAN, ..Default::default() }).is_err());
+        assert!(matches!(ReplyProcessor::new(Synthetic::new().config, Synthetic::new().symbol, ReplyOptions::default()).unwrap().process(&[], None), Err(Error::Shape(_))));
+    }
+}

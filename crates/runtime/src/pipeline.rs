@@ -757,3 +757,150 @@ impl<'a, U> Release<'a, U> {
         self.report
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::Vector3;
+    use scattertrack_core::scene::{Antenna, Region, Role, Scene, SPEED_OF_LIGHT};
+    use scattertrack_core::track::Params;
+    use std::sync::atomic::AtomicUsize;
+
+    /// A helper: tx in the middle, four rx 40 cm around it.
+    fn scene() -> Scene {
+        let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
+        let antennas = layout
+            .iter()
+            .enumerate()
+            .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
+            .collect();
+        let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
+        Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+    }
+
+    fn frequencies() -> Vec<f64> {
+        (0..20).map(|k| 867.5e6 + 5e6 * k as f64).collect()
+    }
+
+    /// `n` replies 1 ms apart of a static tag; each window is the
+    /// noiseless channel itself (the stand-in worker passes it on).
+    fn replies(n: usize) -> Vec<Reply> {
+        let s = scene();
+        let p = Vector3::new(0.5, 1.2, 0.7);
+        let d = |a: usize| (p - s.antennas[0].position).norm() + (p - s.antennas[a].position).norm();
+        let windows: Vec<Vec<Complex32>> = (1..5)
+            .map(|a| {
+                frequencies()
+                    .iter()
+                    .map(|f| {
+                        let (sn, cs) = (std::f64::consts::TAU * f * d(a) / SPEED_OF_LIGHT).sin_cos();
+                        Complex32::new(cs as f32, -sn as f32)
+                    })
+                    .collect()
+            })
+            .collect();
+        (0..n).map(|k| Reply { tag: k % 2, time_s: k as f64 * 1e-3, tx_phase: None, windows: windows.clone() }).collect()
+    }
+
+    /// Tags its output with the slot and reply it processed.
+    struct Slotted;
+
+    impl AntennaWorker for Slotted {
+        type Output = (usize, f64, Vec<Complex64>);
+        fn process(&mut self, slot: usize, reply: &Reply) -> Self::Output {
+            let channel = reply.windows[slot].iter().map(|v| Complex64::new(v.re as f64, v.im as f64)).collect();
+            (slot, reply.time_s, channel)
+        }
+    }
+
+    /// Checks that each reply's outputs arrive complete, in slot order,
+    /// and replies in capture order; declines every 7th reply.
+    struct Checking {
+        seen: Vec<u64>,
+    }
+
+    impl ReplyFusion<(usize, f64, Vec<Complex64>)> for Checking {
+        fn fuse(&mut self, reply: &ReplyHeader, antennas: Vec<(usize, f64, Vec<Complex64>)>) -> std::result::Result<Vec<Option<Vec<Complex64>>>, String> {
+            assert_eq!(antennas.len(), 4);
+            for (i, (slot, time_s, _)) in antennas.iter().enumerate() {
+                assert_eq!((*slot, *time_s), (i, reply.time_s), "reply {}", reply.index);
+            }
+            self.seen.push(reply.index);
+            if reply.index % 7 == 3 {
+                return Err("test decline".into());
+            }
+            Ok(antennas.into_iter().map(|(_, _, h)| Some(h)).collect())
+        }
+    }
+
+    fn config(workers: Workers) -> RuntimeConfig {
+        RuntimeConfig { workers, queue_depth: 4, tx: 0, rx: vec![1, 2, 3, 4], frequencies_hz: frequencies(), ..Default::default() }
+    }
+
+    #[test]
+    fn every_layout_processes_n_replies_in_order_with_n_latencies() {
+        let n = 60;
+        for workers in [Workers::PerAntenna(1), Workers::PerAntenna(2), Workers::Shared(2), Workers::Team(2), Workers::Team(1)] {
+            let mut engine = Engine::new(scene(), "ellipse-intersection", Params::default()).unwrap();
+            let mut fusion = Checking { seen: Vec::new() };
+            let made = AtomicUsize::new(0);
+            let report = run(
+                replies(n),
+                |_| {
+                    made.fetch_add(1, Ordering::Relaxed);
+                    Slotted
+                },
+                &mut fusion,
+                &mut engine,
+                &config(workers),
+            );
+            assert_eq!(fusion.seen, (0..n as u64).collect::<Vec<_>>(), "{workers:?}: fusion order");
+            assert_eq!(report.outputs.len(), n, "{workers:?}");
+            assert!(report.outputs.iter().enumerate().all(|(i, o)| o.index == i as u64 && o.tag == i % 2), "{workers:?}: output order");
+            assert!(report.outputs.iter().all(|o| o.latency_ns > 0), "{workers:?}");
+            assert_eq!(report.stage_ns.len(), n, "{workers:?}");
+            let declined = (0..n).filter(|i| i % 7 == 3).count() as u64;
+            assert_eq!(report.declined.get("test decline"), Some(&declined), "{workers:?}");
+            assert_eq!(report.no_channel, declined, "{workers:?}");
+            for o in &report.outputs {
+                if o.index % 7 == 3 {
+                    assert!(o.estimate.is_none() && o.receivers == 0, "{workers:?}: declined reply {} tracked", o.index);
+                } else {
+                    assert_eq!(o.receivers, 4, "{workers:?}");
+                    let e = o.estimate.as_ref().expect("ellipse intersection answers every frame");
+                    let error = (Vector3::from(e.position) - Vector3::new(0.5, 1.2, 0.7)).norm();
+                    assert!(error < 0.01, "{workers:?}: reply {} off by {error} m", o.index);
+                }
+            }
+            let expected_workers = match workers {
+                Workers::PerAntenna(k) => 4 * k,
+                Workers::Shared(k) | Workers::Team(k) => k,
+            };
+            assert_eq!(made.load(Ordering::Relaxed), expected_workers, "{workers:?}");
+            assert!(report.latency_percentile_ns(0.5) <= report.latency_percentile_ns(1.0));
+        }
+    }
+
+    /// At recorded pacing capture waits for each reply's time: 30 replies
+    /// 1 ms apart take at least 29 ms of wall clock at speed 1, half at 2.
+    #[test]
+    fn recorded_pacing_follows_the_replies_timing() {
+        for (speed, at_least_s) in [(1.0, 0.029), (2.0, 0.0145)] {
+            let mut engine = Engine::new(scene(), "ellipse-intersection", Params::default()).unwrap();
+            let config = RuntimeConfig { pacing: Pacing::Recorded { speed }, ..config(Workers::PerAntenna(1)) };
+            let report = run(replies(30), |_| Slotted, &mut Checking { seen: Vec::new() }, &mut engine, &config);
+            assert_eq!(report.outputs.len(), 30);
+            assert!(report.wall_s >= at_least_s, "speed {speed}: {} s", report.wall_s);
+        }
+    }
+
+    #[test]
+    fn percentiles_are_nearest_rank() {
+        assert_eq!(percentile(vec![], 0.5), 0.0);
+        assert_eq!(percentile(vec![5, 1, 3, 2, 4], 0.5), 3.0);
+        assert_eq!(percentile(vec![5, 1, 3, 2, 4], 0.0), 1.0);
+        assert_eq!(percentile(vec![5, 1, 3, 2, 4], 1.0), 5.0);
+        let report = RunReport { wall_s: 0.5, outputs: Vec::new(), ..Default::default() };
+        assert_eq!(report.frames_per_s(), 0.0);
+    }
+}

@@ -24,7 +24,6 @@ import numpy as np
 
 from scattertrack import _core
 from scattertrack.io.types import Reads, Scene
-from scattertrack.track.scene_arguments import scene_arguments
 
 AXES = "xyz"
 
@@ -244,7 +243,7 @@ def check_scene(scene: Scene, reads: Reads | None = None, *, remedies: bool = Tr
     if scene.reader.kind != "cots":
         raise ValueError(f"the geometry check is for monostatic reader scenes (kind = 'cots'), not {scene.reader.kind!r}")
     frequencies, evidence = _read_channels(scene, reads)
-    report = _core.analyse_scene(*scene_arguments(scene), frequencies, evidence, remedies)
+    report = _core.analyse_scene(_core.Scene(scene), frequencies, evidence, remedies)
     families = report["families"]
     findings = []
     for family in families:
@@ -279,7 +278,7 @@ def twin_positions(scene: Scene, position, frequencies=None, evidence_reads: flo
     """Twins of one tag ``position`` (m): ``[(position, shift per antenna, chi_square)]``,
     nearest first, on ``frequencies`` (Hz, analysed jointly; default one channel)."""
     twins = _core.twin_positions(
-        *scene_arguments(scene),
+        _core.Scene(scene),
         [float(v) for v in np.asarray(position, dtype=float).reshape(3)],
         [float(f) for f in (frequencies or [])],
         evidence_reads,

@@ -19,7 +19,6 @@ from scattertrack.io.types import Scene
 from scattertrack.track import base
 from scattertrack.track import methods as registry
 from scattertrack.track.base import Estimate, Frame, Read
-from scattertrack.track.scene_arguments import scene_arguments
 
 
 def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
@@ -34,11 +33,7 @@ def _engine(method: str, scene: Scene, params: dict) -> _core.Engine:
         raise ValueError(f"method '{method}' needs a monostatic reader scene (kind = 'cots'), got '{scene.reader.kind}'")
     # Parameters cross as one dict; the core's table checks every one
     # (ValueError naming the parameter).
-    return _core.Engine(
-        *scene_arguments(scene),
-        method,
-        dict(params),
-    )
+    return _core.Engine(_core.Scene(scene), method, dict(params))
 
 
 class CoreTracker(base.Tracker):

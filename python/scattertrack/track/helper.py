@@ -38,27 +38,8 @@ def engine(method: str, scene: Scene, params: dict) -> _core.Engine:
     """A core engine for a helper scene (one ``tx``, several ``rx`` antennas)."""
     if scene.reader.kind != "sdr-helper":
         raise ValueError(f"method '{method}' needs a localization-helper scene (kind = 'sdr-helper'), got '{scene.reader.kind}'")
-    positions = np.array([a.position for a in scene.antennas], dtype=float).reshape(-1, 3)
-    offsets = np.array([a.phase_offset_rad for a in scene.antennas], dtype=float)
-    region = None
-    if scene.region is not None:
-        region = (np.asarray(scene.region.min, dtype=float), np.asarray(scene.region.max, dtype=float))
-    plane_z = scene.plane_z if scene.plane_z is not None else 0.0
-    return _core.Engine(
-        scene.dimensions,
-        float(plane_z),
-        float(scene.reader.phase_sign),
-        float(scene.reader.period_rad),
-        float(scene.reader.phase_noise_rad or 0.1),
-        positions,
-        offsets,
-        region,
-        np.zeros(0),
-        np.zeros(0),
-        method,
-        dict(params),
-        [a.role for a in scene.antennas],
-    )
+    # The binding reads the helper scene's antenna roles (one tx, the rx).
+    return _core.Engine(_core.Scene(scene), method, dict(params))
 
 
 def run_frames(method: str, scene: Scene, frames: Frames, *, progress: bool = False, chunk: int = 2_000, **params) -> Track:

@@ -16,7 +16,17 @@ use crate::error::{Error, Result};
 use crate::scene::Scene;
 
 use super::bistatic::{frame_receivers, tuple_gaussian, usable_subsets, HelperGeometry};
-use super::{Estimate, Measurement, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
+use crate::model::wideband::CandidateWeighting;
+
+use super::{Estimate, Measurement, Params, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
+
+/// The registry's constructor of `ellipse-intersection`.
+pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
+    let mut w = params.turbotrack.clone();
+    // §7.2(a): "weights obtained from the amplitude of the interpolated FFT".
+    w.candidates.weighting = CandidateWeighting::Amplitude;
+    Ok(Box::new(EllipseIntersection::new(scene.clone(), w)?))
+}
 
 /// The per-frame ellipse-intersection localiser.
 pub struct EllipseIntersection {

@@ -455,6 +455,12 @@ pub struct Glac {
     stats: TrackerStats,
 }
 
+/// The registry's constructor of `glac`: the paper's tracker with the
+/// parameters as given (variants: [`super::variants`]).
+pub fn build(scene: &Scene, params: &super::Params) -> Result<Box<dyn Tracker>> {
+    Ok(Box::new(Glac::new(scene.clone(), params.glac.clone())?))
+}
+
 impl Glac {
     pub fn new(scene: Scene, params: GlacParams) -> Result<Self> {
         params.validate()?;

@@ -7,9 +7,12 @@
 //! tracker declines (out of order, gated outliers, unknown antenna) are
 //! counted in [`TrackerStats`], never dropped silently.
 //!
-//! Registering a method: add its file, its entry in [`registry::METHODS`]
-//! (name, pipeline, input, parameter table, description), one arm in
-//! [`make`], and its tests. Parameters: [`glac_params`], [`turbotrack_params`].
+//! Registering a method: add its file (the tracker, its `build`
+//! constructor, its tests) and its entry in [`registry::METHODS`] (name,
+//! pipeline, input, parameter table, constructor, description); [`make`]
+//! finds it there, and the file may be declared next to that entry (see
+//! [`registry`]). Variants of a tracker are named constructors in
+//! [`variants`]. Parameters: [`glac_params`], [`turbotrack_params`].
 
 pub mod bistatic;
 mod bias;
@@ -25,6 +28,7 @@ pub mod registry;
 mod rfind;
 mod turbotrack;
 pub mod turbotrack_params;
+mod variants;
 
 pub use candidates::nearest_candidate;
 pub use glac::{Glac, GlacParams, Inference, Likelihood};
@@ -32,11 +36,11 @@ pub use initial::{initial_hypotheses, InitialHypothesis, InitialState};
 pub use ellipse_intersection::EllipseIntersection;
 pub use rfind::RFind;
 pub use turbotrack::{InitialSampling, Proposal, TurboTrack, TurboTrackParams, WidebandLikelihood};
+pub use variants::GAUSSIAN_PF_SIGMA_M;
 
 use crate::error::{Error, Result};
 use nalgebra::Complex;
 
-use crate::model::wideband::CandidateWeighting;
 use crate::model::StateMatrix;
 use crate::scene::Scene;
 
@@ -241,58 +245,14 @@ impl From<TurboTrackParams> for Params {
     }
 }
 
-/// Builds a tracker by name with the given parameters; the variant names
-/// set the parameters that define them on top of `params` (GLAC sec.
+/// Builds a tracker by name with the given parameters: the registry's
+/// constructor of that method ([`registry::Method::build`]), which sets
+/// the parameters that define a variant on top of `params` (GLAC sec.
 /// 5.2.2–5.2.3; TurboTrack thesis §7.2).
 pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
-    if !registry::method(name)?.in_core() {
-        return Err(Error::NotInCore(name.to_string()));
-    }
-    let mut p = params.glac.clone();
-    let mut w = params.turbotrack.clone();
-    match name {
-        "glac" => {}
-        "glac-no-velocity" => p.motion_model_no_velocity(),
-        "glac-sync" => p.inference = Inference::Synchronous,
-        "glac-sync-no-velocity" => {
-            p.inference = Inference::Synchronous;
-            p.motion_model_no_velocity();
-        }
-        "glac-naive" => p.inference = Inference::Naive,
-        "turbotrack" => return Ok(Box::new(TurboTrack::new(scene.clone(), w)?)),
-        "gaussian-pf" => {
-            // §7.2(a): one broad Gaussian around the strongest candidate,
-            // a bootstrap (prior) proposal.
-            w.likelihood = WidebandLikelihood::SingleGaussian { sigma_m: GAUSSIAN_PF_SIGMA_M };
-            w.proposal = Proposal::Prior;
-            // §7.2(a): the strongest candidate by FFT amplitude.
-            w.candidates.weighting = CandidateWeighting::Amplitude;
-            return Ok(Box::new(TurboTrack::new(scene.clone(), w)?));
-        }
-        "uniform-pf" => {
-            // §7.2(b): particles spread uniformly over the region, the
-            // prior as proposal, the same mixture likelihood.
-            w.initial_sampling = InitialSampling::Uniform;
-            w.proposal = Proposal::Prior;
-            return Ok(Box::new(TurboTrack::new(scene.clone(), w)?));
-        }
-        "ellipse-intersection" => {
-            // §7.2(a): "weights obtained from the amplitude of the interpolated FFT".
-            w.candidates.weighting = CandidateWeighting::Amplitude;
-            return Ok(Box::new(EllipseIntersection::new(scene.clone(), w)?));
-        }
-        "rfind" => return Ok(Box::new(RFind::new(scene.clone(), w)?)),
-        // Registered in core but without an arm: a programming error, reported not panicked.
-        _ => return Err(Error::UnknownMethod(name.to_string(), registry::names().join(", "))),
-    }
-    Ok(Box::new(Glac::new(scene.clone(), p)?))
+    let build = registry::method(name)?.build.ok_or_else(|| Error::NotInCore(name.to_string()))?;
+    build(scene, params)
 }
-
-/// 1-sigma of the Gaussian-PF baseline's single-Gaussian likelihood, m:
-/// "a large standard deviation" (§7.2(a)) — a quarter of the 100 MHz
-/// range resolution (c / B = 3 m), wide enough to cover the envelope's
-/// wavelength-scale ambiguity.
-pub const GAUSSIAN_PF_SIGMA_M: f64 = 0.3;
 
 /// Runs a tracker over measurements (time-ordered) and collects estimates.
 pub fn run(tracker: &mut dyn Tracker, measurements: &[Measurement]) -> Vec<Estimate> {

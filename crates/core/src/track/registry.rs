@@ -1,10 +1,15 @@
-//! The one list of tracking methods: name, pipeline, input, where its
-//! estimator runs, which parameter table it reads, and a one-line
-//! description. The bindings, `scattertrack.track`, the CLI's `methods`
-//! command and `docs/parameters.md` all read [`METHODS`].
+//! The one list of tracking methods: name, pipeline, input, which
+//! parameter table it reads, the constructor that builds its tracker, and
+//! a one-line description. [`super::make`] looks a method up here and
+//! calls its constructor; the bindings, `scattertrack.track`, the CLI's
+//! `methods` command and `docs/parameters.md` all read [`METHODS`].
 //!
-//! Registering a method: one entry here; a core method also needs its
-//! arm in [`super::make`] (which builds it), a Python one its runner in
+//! Registering a method: one entry here. A core method's entry names its
+//! constructor ([`Build`]: a `build` function in the method's own file, or
+//! a named variant in [`super::variants`]) and reuses a parameter table
+//! where it needs no new parameter; a new tracker file may be declared
+//! right here (`#[path = "….rs"] mod …;`) so that `mod.rs` needs no edit.
+//! A Python method (no constructor) needs its runner in
 //! `python/scattertrack/track/`.
 //!
 //! Marvel's estimator (a GTSAM factor graph) and its parameter table are
@@ -15,9 +20,12 @@
 
 use super::glac_params::glac_table;
 use super::turbotrack_params::turbotrack_table;
-use super::Params;
+use super::{ellipse_intersection, glac, rfind, turbotrack, variants, Params, Tracker};
 use crate::error::{Error, Result};
 use crate::params::{Schemas, Value};
+use crate::scene::Scene;
+
+#[path = "trilateration_ekf.rs"] mod trilateration_ekf;
 
 /// The hardware a method's input comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -86,13 +94,21 @@ pub enum Parameters {
     Python,
 }
 
+/// A core method's constructor: its tracker over `scene` from the
+/// parameter block its table fills (the variants set what defines them on
+/// top). Fails on a scene or parameters the tracker rejects.
+pub type Build = fn(&Scene, &Params) -> Result<Box<dyn Tracker>>;
+
 /// One registered method.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy)]
 pub struct Method {
     pub name: &'static str,
     pub pipeline: Pipeline,
     pub input: Input,
     pub parameters: Parameters,
+    /// Builds the tracker ([`super::make`]); `None` for a method whose
+    /// estimator is in Python.
+    pub build: Option<Build>,
     /// One line: what the method does and where it comes from.
     pub description: &'static str,
 }
@@ -100,38 +116,50 @@ pub struct Method {
 impl Method {
     /// Whether the Rust core runs the estimator ([`super::make`] builds it).
     pub fn in_core(&self) -> bool {
-        self.parameters != Parameters::Python
+        self.build.is_some()
     }
 }
 
-const fn cots(name: &'static str, description: &'static str) -> Method {
-    Method { name, pipeline: Pipeline::Cots, input: Input::Reads, parameters: Parameters::Glac, description }
+/// A COTS-reader method over phase reads with the GLAC table.
+const fn cots(name: &'static str, build: Build, description: &'static str) -> Method {
+    Method { name, pipeline: Pipeline::Cots, input: Input::Reads, parameters: Parameters::Glac, build: Some(build), description }
 }
 
-const fn helper(name: &'static str, description: &'static str) -> Method {
-    Method { name, pipeline: Pipeline::Helper, input: Input::Frames, parameters: Parameters::TurboTrack, description }
+/// A localization-helper method over wideband frames with the TurboTrack table.
+const fn helper(name: &'static str, build: Build, description: &'static str) -> Method {
+    Method {
+        name,
+        pipeline: Pipeline::Helper,
+        input: Input::Frames,
+        parameters: Parameters::TurboTrack,
+        build: Some(build),
+        description,
+    }
 }
 
 /// Every method, in the order listings show them.
 pub const METHODS: &[Method] = &[
-    cots("glac", "GLAC: HMM over candidate trajectories, one EKF each, nearest-neighbour pruning and initial state pruning (the paper's tracker)"),
-    cots("glac-no-velocity", "GLAC with a position random walk instead of the constant-velocity model (paper sec. 5.2.2, scheme 2)"),
-    cots("glac-sync", "GLAC treating each group of reads covering every antenna as one trilaterated measurement (sec. 5.2.2, scheme 3)"),
-    cots("glac-sync-no-velocity", "glac-sync with a position random walk (sec. 5.2.2)"),
+    cots("glac", glac::build, "GLAC: HMM over candidate trajectories, one EKF each, nearest-neighbour pruning and initial state pruning (the paper's tracker)"),
+    cots("glac-no-velocity", variants::glac_no_velocity, "GLAC with a position random walk instead of the constant-velocity model (paper sec. 5.2.2, scheme 2)"),
+    cots("glac-sync", variants::glac_sync, "GLAC treating each group of reads covering every antenna as one trilaterated measurement (sec. 5.2.2, scheme 3)"),
+    cots("glac-sync-no-velocity", variants::glac_sync_no_velocity, "glac-sync with a position random walk (sec. 5.2.2)"),
     cots(
         "glac-naive",
+        variants::glac_naive,
         "GLAC without nearest-neighbour pruning or quick stop: every hypothesis branches on every candidate distance, capped by max_hypotheses (sec. 5.2.3)",
     ),
-    helper("turbotrack", "TurboTrack: particle filter over a mixture of each receiver's candidate path lengths, near-optimal proposal (thesis ch. 5)"),
-    helper("gaussian-pf", "TurboTrack baseline: one broad Gaussian around the strongest candidate, bootstrap proposal (thesis sec. 7.2(a))"),
-    helper("uniform-pf", "TurboTrack baseline: particles spread uniformly over the [region], bootstrap proposal (thesis sec. 7.2(b))"),
-    helper("ellipse-intersection", "per frame, the intersection of the strongest candidates' ellipsoids, no filtering (thesis sec. 7.2(a))"),
-    helper("rfind", "RFind-style: a static tag localised from frames pooled over rfind_window_s (thesis Table 7.1)"),
+    cots("trilateration-ekf", trilateration_ekf::build, "baseline: one EKF on [p, v] fed ranges unwrapped from each antenna and channel's phase, from a multilateration fix whose twins the first reads rule out"),
+    helper("turbotrack", turbotrack::build, "TurboTrack: particle filter over a mixture of each receiver's candidate path lengths, near-optimal proposal (thesis ch. 5)"),
+    helper("gaussian-pf", variants::gaussian_pf, "TurboTrack baseline: one broad Gaussian around the strongest candidate, bootstrap proposal (thesis sec. 7.2(a))"),
+    helper("uniform-pf", variants::uniform_pf, "TurboTrack baseline: particles spread uniformly over the [region], bootstrap proposal (thesis sec. 7.2(b))"),
+    helper("ellipse-intersection", ellipse_intersection::build, "per frame, the intersection of the strongest candidates' ellipsoids, no filtering (thesis sec. 7.2(a))"),
+    helper("rfind", rfind::build, "RFind-style: a static tag localised from frames pooled over rfind_window_s (thesis Table 7.1)"),
     Method {
         name: "marvel",
         pipeline: Pipeline::Drone,
         input: Input::FeaturesImu,
         parameters: Parameters::Python,
+        build: None,
         description: "Marvel: LoRa-backscatter range/angle/heading fused with the IMU in a sliding-window factor graph (GTSAM), controller position estimated (paper sec. IV)",
     },
     Method {
@@ -139,6 +167,7 @@ pub const METHODS: &[Method] = &[
         pipeline: Pipeline::Drone,
         input: Input::RecordingImu,
         parameters: Parameters::Python,
+        build: None,
         description: "mu-locate-style Doppler-blind pose sensing of a LoRa recording, fused like marvel: the paper's Fig. 9 baseline",
     },
 ];
@@ -177,6 +206,8 @@ pub fn params(name: &str, values: &[(String, Value)]) -> Result<Params> {
 mod tests {
     use super::*;
     use crate::params::{Kind, Schema};
+    use crate::scene::{Antenna, Region, Role};
+    use nalgebra::Vector3;
     use crate::track::{GlacParams, TurboTrackParams};
 
     fn core_tables() -> Vec<Schemas> {
@@ -205,6 +236,36 @@ mod tests {
             assert_eq!(params(m.name, &[]).unwrap(), Params::default(), "{}", m.name);
             assert_eq!(schemas(m.name).unwrap().label, m.name);
         }
+    }
+
+    /// A 3D scene of four antennas; a helper's when `roles` is given.
+    fn scene(roles: Option<[Role; 4]>) -> Scene {
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.2], [0.0, 1.0, 0.4], [1.0, 1.0, 1.0]];
+        let antennas = (0..4)
+            .map(|i| Antenna {
+                id: i as i64 + 1,
+                position: Vector3::from(positions[i]),
+                phase_offset_rad: 0.0,
+                role: roles.map_or(Role::TxRx, |r| r[i]),
+            })
+            .collect();
+        let region = Region { min: Vector3::new(0.1, 0.1, 0.1), max: Vector3::new(0.9, 0.9, 0.9) };
+        Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), Vec::new()).unwrap()
+    }
+
+    #[test]
+    fn every_core_method_is_built_by_its_registry_constructor() {
+        let cots = scene(None);
+        let helper = scene(Some([Role::Tx, Role::Rx, Role::Rx, Role::Rx]));
+        for m in METHODS.iter().filter(|m| m.in_core()) {
+            let s = if m.pipeline == Pipeline::Helper { &helper } else { &cots };
+            let params = params(m.name, &[]).unwrap();
+            let mut tracker = super::super::make(m.name, s, &params).unwrap_or_else(|e| panic!("{}: {e}", m.name));
+            assert_eq!(tracker.stats().measurements, 0, "{}", m.name);
+            tracker.reset();
+        }
+        assert_eq!(super::super::make("marvel", &cots, &Params::default()).err(), Some(Error::NotInCore("marvel".into())));
+        assert!(matches!(super::super::make("nope", &cots, &Params::default()), Err(Error::UnknownMethod(..))));
     }
 
     #[test]

@@ -19,7 +19,12 @@ use crate::model::wideband::distance_candidates;
 use crate::scene::{Role, Scene};
 
 use super::bistatic::{tuple_gaussian, usable_subsets, HelperGeometry, Receiver};
-use super::{Estimate, Measurement, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
+use super::{Estimate, Measurement, Params, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
+
+/// The registry's constructor of `rfind`.
+pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
+    Ok(Box::new(RFind::new(scene.clone(), params.turbotrack.clone())?))
+}
 
 /// Iterations of the least-squares fit (it stops earlier once converged).
 const MAX_ITERATIONS: usize = 50;

@@ -54,7 +54,13 @@ use super::bistatic::{
 };
 use super::key_hash::KeyMap;
 use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeLevels};
-use super::{Estimate, Measurement, Tracker, TrackerStats, WidebandFrame};
+use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
+
+/// The registry's constructor of `turbotrack`: Algorithm 1 with the
+/// parameters as given (the §7.2 baselines: [`super::variants`]).
+pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
+    Ok(Box::new(TurboTrack::new(scene.clone(), params.turbotrack.clone())?))
+}
 
 /// The observation model used to weight particles.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -895,5 +901,124 @@ impl Tracker for TurboTrack {
 
     fn trajectory(&self) -> Vec<(f64, [f64; 3])> {
         self.map_trajectory()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Antenna, Region, Role, SPEED_OF_LIGHT};
+    use nalgebra::Complex;
+    use rand_distr::Distribution;
+
+    /// A helper on the floor: tx in the middle, four rx 40 cm around it.
+    fn scene() -> Scene {
+        let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
+        let antennas = layout
+            .iter()
+            .enumerate()
+            .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
+            .collect();
+        let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
+        Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+    }
+
+    /// Frames at 300 /s of a tag on `path` (docs/formats.md §5 convention:
+    /// `exp(−j 2π f d / c)`), 20 subcarriers over 100 MHz, complex noise of
+    /// rms 0.1 relative to the channel.
+    fn frames(scene: &Scene, path: impl Fn(f64) -> Vector3<f64>, duration_s: f64, seed: u64) -> Vec<(WidebandFrame, Vector3<f64>)> {
+        let mut rng = StdRng::seed_from_u64(seed);
+        let frequencies: Vec<f64> = (0..20).map(|k| 867.5e6 + 5e6 * k as f64).collect();
+        let tx = scene.antennas[0].position;
+        let rx: Vec<usize> = (1..5).collect();
+        let n = (duration_s * 300.0) as usize;
+        (0..n)
+            .map(|i| {
+                let t = i as f64 / 300.0;
+                let p = path(t);
+                let mut h = Vec::new();
+                for &r in &rx {
+                    let d = (p - tx).norm() + (p - scene.antennas[r].position).norm();
+                    for &f in &frequencies {
+                        let noise: (f64, f64) = (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
+                        let clean = Complex::from_polar(1.0, -std::f64::consts::TAU * f * d / SPEED_OF_LIGHT);
+                        h.push(clean + Complex::new(noise.0, noise.1) * (0.1 / 2f64.sqrt()));
+                    }
+                }
+                (WidebandFrame { time_s: t, tx: 0, rx: rx.clone(), frequencies_hz: frequencies.clone(), h }, p)
+            })
+            .collect()
+    }
+
+    fn tracker() -> TurboTrack {
+        TurboTrack::new(scene(), TurboTrackParams { particles: 2_000, ..TurboTrackParams::default() }).unwrap()
+    }
+
+    #[test]
+    fn a_static_tag_converges_within_millimetres() {
+        let truth = Vector3::new(0.5, 1.2, 0.8);
+        let mut tracker = tracker();
+        let mut errors = Vec::new();
+        for (frame, p) in frames(&scene(), |_| truth, 2.0, 1) {
+            let t = frame.time_s;
+            if let Some(e) = tracker.step(&Measurement::Wideband(frame)) {
+                if t >= 1.0 {
+                    errors.push((Vector3::from(e.position) - p).norm());
+                    assert!(e.position_sigma().iter().all(|s| s.is_finite() && *s > 0.0), "{e:?}");
+                }
+            }
+        }
+        assert!(errors.len() > 250, "{} estimates after 1 s", errors.len());
+        errors.sort_by(f64::total_cmp);
+        let median = errors[errors.len() / 2];
+        assert!(median < 3e-3, "median error {median} m");
+        assert!(errors[errors.len() * 9 / 10] < 6e-3, "p90 {} m", errors[errors.len() * 9 / 10]);
+    }
+
+    /// The smoothed (MAP) trajectory is causal bookkeeping of the frames
+    /// seen: ascending times, ending near the moving tag.
+    #[test]
+    fn a_moving_tag_is_followed_and_its_map_trajectory_kept() {
+        let path = |t: f64| Vector3::new(0.4 + 0.1 * t, 1.1 + 0.05 * t, 0.8);
+        let mut tracker = tracker();
+        let mut last = None;
+        for (frame, p) in frames(&scene(), path, 2.0, 2) {
+            if let Some(e) = tracker.step(&Measurement::Wideband(frame)) {
+                last = Some((Vector3::from(e.position) - p).norm());
+            }
+        }
+        assert!(last.unwrap() < 0.01, "final error {last:?} m");
+        let trajectory = tracker.trajectory();
+        assert!(trajectory.len() > 100);
+        assert!(trajectory.windows(2).all(|w| w[0].0 < w[1].0));
+        let mut smoothed: Vec<f64> =
+            trajectory.iter().filter(|(t, _)| *t >= 1.0).map(|(t, p)| (Vector3::from(*p) - path(*t)).norm()).collect();
+        smoothed.sort_by(f64::total_cmp);
+        assert!(!smoothed.is_empty() && smoothed[smoothed.len() / 2] < 0.01, "smoothed median error {:?} m", smoothed.get(smoothed.len() / 2));
+    }
+
+    #[test]
+    fn declines_what_it_cannot_use_and_resets() {
+        let mut tracker = tracker();
+        let frames = frames(&scene(), |_| Vector3::new(0.5, 1.2, 0.8), 0.5, 3);
+        for (f, _) in &frames[..60] {
+            tracker.step(&Measurement::Wideband(f.clone()));
+        }
+        let late = WidebandFrame { time_s: 0.0, ..frames[60].0.clone() };
+        assert!(tracker.step(&Measurement::Wideband(late)).is_none());
+        let read = super::super::PhaseRead { time_s: 1.0, antenna: 1, frequency_hz: 915e6, phase_rad: 0.1 };
+        assert!(tracker.step(&Measurement::Phase(read)).is_none());
+        let s = tracker.stats();
+        assert_eq!((s.measurements, s.out_of_order, s.invalid), (62, 1, 1));
+        tracker.reset();
+        assert_eq!(tracker.stats().measurements, 62, "reset keeps the counters");
+        assert!(tracker.trajectory().is_empty(), "reset forgets the trajectory");
+    }
+
+    #[test]
+    fn a_scene_without_a_transmitter_is_rejected() {
+        let mut s = scene();
+        s.antennas.iter_mut().for_each(|a| a.role = Role::TxRx);
+        assert!(matches!(TurboTrack::new(s, TurboTrackParams::default()), Err(Error::Scene(_))));
     }
 }
