@@ -153,7 +153,7 @@ class LiveSession:
         self.shards = shards
         self.summary = LiveSummary()
         self.last_estimate: dict = {}
-        """EPC -> its latest :class:`~scattertrack.track.glac.Estimate`."""
+        """EPC -> its latest :class:`~scattertrack.track.base.Estimate`."""
         self._recent: deque = deque()
         self._recent_keys: set = set()
         self._started = math.nan
