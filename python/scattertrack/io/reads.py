@@ -100,11 +100,9 @@ def parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Text
     frequency = chunk.floats("frequency_hz")
     chunk.flag_values("frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
     phase = chunk.floats("phase_rad")
-    outside = (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
+    outside = phase_outside(phase, period)
     chunk.flag_values("phase_rad", phase, outside, lambda text, value: units.phase_message(text, value, phase, period))
-    # Within the tolerance: fold rounding noise back into [0, P).
-    phase = np.where(phase >= period, phase - period, phase)
-    phase = np.where(phase < 0.0, 0.0, phase)
+    phase = fold_phase(phase, period)
     optional = {}
     for name in OPTIONAL:
         if chunk.has(name):
@@ -125,6 +123,17 @@ def parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Text
         "phase_rad": phase,
         **optional,
     }
+
+
+def phase_outside(phase: np.ndarray, period: float) -> np.ndarray:
+    """Mask of phases (radians) outside [0, P) by more than :data:`PHASE_TOLERANCE_RAD`."""
+    return (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
+
+
+def fold_phase(phase: np.ndarray, period: float) -> np.ndarray:
+    """Phases within the tolerance of [0, P) folded into it: rounding noise, not a reading."""
+    phase = np.where(phase >= period, phase - period, phase)
+    return np.where(phase < 0.0, 0.0, phase)
 
 
 def epc_problem(epc: str) -> str | None:

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scattertrack.io.reads_chunks import NeedsWholeFile, ReadsStream
+from scattertrack.io.reads_chunks import NeedsCheckedReader, NeedsWholeFile, ReadsStream
 from scattertrack.io.track_chunks import TrackWriter
 from scattertrack.io.types import SPEED_OF_LIGHT, Scene, SkipReport
 from scattertrack.track import make
@@ -318,10 +318,21 @@ def track_file(method: str, scene: Scene, reads_path, out_path, params: dict, *,
     :data:`MAX_SHARDS`).
     """
     start = time.perf_counter()
+    try:
+        result = _track_stream(method, scene, reads_path, out_path, params, unresolved_sigma_m, shards, fast=True)
+    except NeedsCheckedReader:
+        # A cell pyarrow's fast path leaves to the checked reader: start over with it.
+        result = _track_stream(method, scene, reads_path, out_path, params, unresolved_sigma_m, shards, fast=False)
+    result.wall_s = time.perf_counter() - start
+    return result
+
+
+def _track_stream(method: str, scene: Scene, reads_path, out_path, params: dict, unresolved_sigma_m: float,
+                  shards: int | None, fast: bool) -> StreamedTrack:
     engines = Shards(method, scene, params, shards)
     ids = np.array([a.id for a in scene.antennas], dtype=np.int64)
     by_id = np.argsort(ids)
-    stream = ReadsStream(reads_path, scene)
+    stream = ReadsStream(reads_path, scene, fast=fast)
     figures = TagFigures()
     turns = TurnEvidence(len(ids))
     channels: dict[tuple[float, int], int] = {}
@@ -375,7 +386,7 @@ def track_file(method: str, scene: Scene, reads_path, out_path, params: dict, *,
         rows=written[0], tracked_tags=int(np.count_nonzero(figures.rows)), skipped=skipped, stats=stats,
         latency=engines.latency(),
         summary_warnings=_unresolved_lines(figures, texts, unresolved_sigma_m) + _implausible_lines(figures, turns, texts),
-        reads=StreamedReads(stream.rows, texts, stream.reordered, counts), wall_s=time.perf_counter() - start,
+        reads=StreamedReads(stream.rows, texts, stream.reordered, counts), wall_s=0.0,
     )
 
 

@@ -5,16 +5,24 @@ import pytest
 
 from scattertrack import io
 from scattertrack.io import csvutil
-from scattertrack.io.reads_chunks import NeedsWholeFile, ReadsStream
+from scattertrack.io import reads_chunks
+from scattertrack.io.reads_chunks import NeedsCheckedReader, NeedsWholeFile, ReadsStream
 from scattertrack.io.types import FormatError
 
 HEADER = "time_s,epc,antenna,frequency_hz,phase_rad"
 
 
+@pytest.fixture(params=[True, False], ids=["pyarrow", "checked"])
+def fast(request):
+    """Both readers of the stream: pyarrow's fast path and the checked one."""
+    return request.param
+
+
 @pytest.fixture
 def small_chunks(monkeypatch):
-    """Chunks of 50 rows, so that a file of a few hundred rows spans several."""
+    """Chunks of 50 rows (blocks of 2 kB), so that a file of a few hundred rows spans several."""
     monkeypatch.setattr(csvutil, "CHUNK_ROWS", 50)
+    monkeypatch.setattr(reads_chunks, "ARROW_BLOCK_BYTES", 2000)
 
 
 def rows(n: int, tags: int = 3, step_s: float = 0.01) -> list[str]:
@@ -29,16 +37,21 @@ def write(tmp_path, lines, header=HEADER, name="reads.csv", newline="\n", bom=Fa
     return path
 
 
-def streamed(path):
-    stream = ReadsStream(path)
-    batches = list(stream)
+def streamed(path, fast=True):
+    """The stream's batches joined, read as track.streaming does: fast, then checked if need be."""
+    try:
+        stream = ReadsStream(path, fast=fast)
+        batches = list(stream)
+    except NeedsCheckedReader:
+        stream = ReadsStream(path, fast=False)
+        batches = list(stream)
     columns = {name: np.concatenate([b[name] for b in batches]) for name in batches[0]}
     return stream, columns
 
 
-def assert_same_as_in_memory(path):
+def assert_same_as_in_memory(path, fast=True):
     reads = io.read_reads(path)
-    stream, columns = streamed(path)
+    stream, columns = streamed(path, fast)
     np.testing.assert_array_equal(columns["time_s"], reads.time_s)
     np.testing.assert_array_equal(np.array(stream.epc_texts, dtype=object)[columns["epc"]], reads.epc)
     np.testing.assert_array_equal(columns["antenna"], reads.antenna)
@@ -52,11 +65,18 @@ def assert_same_as_in_memory(path):
     return stream
 
 
-def test_batches_are_the_in_memory_reads(small_chunks, tmp_path):
-    assert_same_as_in_memory(write(tmp_path, rows(400)))
+def test_batches_are_the_in_memory_reads(small_chunks, tmp_path, fast):
+    assert_same_as_in_memory(write(tmp_path, rows(400)), fast)
 
 
-def test_duplicates_and_reorders_within_the_window_across_chunks(small_chunks, tmp_path):
+def test_optional_columns_are_read_by_the_fast_path(small_chunks, tmp_path):
+    lines = [f"{line},-60.5,,{k % 3 + 1 if k % 5 else ''}" for k, line in enumerate(rows(200))]
+    path = write(tmp_path, lines, header=HEADER + ",rssi_dbm,doppler_hz,channel_index")
+    assert len(list(ReadsStream(path))) >= 1  # no NeedsCheckedReader
+    assert_same_as_in_memory(path)
+
+
+def test_duplicates_and_reorders_within_the_window_across_chunks(small_chunks, tmp_path, fast):
     lines = rows(400)
     lines[120], lines[121] = lines[121], lines[120]  # out of order by one row
     lines.insert(160, lines[100])  # a copy 60 rows (0.6 s) later: another chunk
@@ -64,31 +84,31 @@ def test_duplicates_and_reorders_within_the_window_across_chunks(small_chunks, t
     lines.insert(300, lines[299].replace("E2", "e2"))  # a case twin
     path = write(tmp_path, lines)
     with pytest.warns(io.InputWarning, match="differs from .* only in letter case"):
-        stream = assert_same_as_in_memory(path)
+        stream = assert_same_as_in_memory(path, fast)
     assert stream.reordered >= 1 and stream.skipped.counts["duplicate row"] == 2
 
 
-def test_bom_crlf_quotes_and_extra_columns(small_chunks, tmp_path):
+def test_bom_crlf_quotes_and_extra_columns(small_chunks, tmp_path, fast):
     lines = [f'{line},"x, y"' for line in rows(120)]
     path = write(tmp_path, lines, header=HEADER + ",note", newline="\r\n", bom=True)
-    assert_same_as_in_memory(path)
+    assert_same_as_in_memory(path, fast)
 
 
-def test_a_clock_jump_back_needs_the_whole_file(small_chunks, tmp_path):
+def test_a_clock_jump_back_needs_the_whole_file(small_chunks, tmp_path, fast):
     lines = rows(300)
     lines.insert(250, lines[10])
     with pytest.raises(NeedsWholeFile):
-        streamed(write(tmp_path, lines))
+        streamed(write(tmp_path, lines), fast)
 
 
-def test_a_forward_gap_is_warned_as_the_in_memory_reader_does(small_chunks, tmp_path):
+def test_a_forward_gap_is_warned_as_the_in_memory_reader_does(small_chunks, tmp_path, fast):
     lines = rows(200)
     shifted = [f"{float(l.split(',')[0]) + 100:.6f}," + l.split(",", 1)[1] for l in lines[120:]]
     path = write(tmp_path, lines[:120] + shifted)
     with pytest.warns(io.InputWarning) as in_memory:
         io.read_reads(path)
     with pytest.warns(io.InputWarning) as stream:
-        streamed(path)
+        streamed(path, fast)
     assert [str(w.message) for w in stream] == [str(w.message) for w in in_memory]
 
 
@@ -106,10 +126,36 @@ def test_an_error_in_a_later_chunk_names_its_true_line(small_chunks, tmp_path, r
     scene = _scene(tmp_path)
     with pytest.raises(FormatError) as in_memory:
         io.read_reads(path, scene)
+    with pytest.raises(NeedsCheckedReader):
+        list(ReadsStream(path, scene))  # pyarrow's fast path leaves the wording to the checked reader
     with pytest.raises(FormatError) as stream:
-        list(ReadsStream(path, scene))
+        list(ReadsStream(path, scene, fast=False))
     assert str(stream.value) == str(in_memory.value)
     assert stream.value.line == row + 2
+
+
+@pytest.mark.parametrize("cell", ["nan", "inf", "-inf", "NaN", " 0.07", "0.07 ", "\t0.07", "0.0_7", "0.0\uff17", "0x10",
+                                  "1e400", "+0.07", ".07", "7e-2", "7E-2", "0.070", "", "0,07", "0.07.1", "7e-2e"])
+def test_the_fast_path_takes_a_cell_only_as_the_checked_reader_does(tmp_path, cell):
+    lines = rows(20)
+    fields = lines[7].split(",")
+    fields[0] = f'"{cell}"' if "," in cell else cell
+    lines[7] = ",".join(fields)
+    path = write(tmp_path, lines)
+    try:
+        in_memory = io.read_reads(path)
+    except FormatError:
+        in_memory = None
+    try:
+        stream = ReadsStream(path)
+        batches = list(stream)
+        fast_columns = np.concatenate([b["time_s"] for b in batches])
+    except (NeedsCheckedReader, NeedsWholeFile):
+        return  # left to the checked reader
+    except FormatError:
+        pytest.fail("the fast path must not word errors itself")
+    assert in_memory is not None, f"the fast path took {cell!r}, which read_reads rejects"
+    np.testing.assert_array_equal(fast_columns, in_memory.time_s)
 
 
 def _scene(tmp_path):

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from scattertrack import io, track
-from scattertrack.io import csvutil
+from scattertrack.io import csvutil, reads_chunks  # noqa: F401 - io.reads_chunks below
 from scattertrack.sim import load_scenario, simulate
 from scattertrack.sim.simulation import write_simulation
 from scattertrack.track import plausibility, streaming
@@ -27,7 +27,9 @@ def session(tmp_path, name: str, duration_s: float = 6.0, static: bool = False):
 
 @pytest.fixture
 def small_chunks(monkeypatch):
+    """Many batches: chunks of 97 rows for the checked reader, blocks of 3 kB for pyarrow's."""
     monkeypatch.setattr(csvutil, "CHUNK_ROWS", 97)
+    monkeypatch.setattr(io.reads_chunks, "ARROW_BLOCK_BYTES", 3000)
 
 
 @pytest.mark.parametrize("name", ["glac-3d-arm-5tags", "glac-2d-40cms-hopping", "glac-2d-40cms-modpi"])
