@@ -13,7 +13,7 @@ What stays in memory: per-tag counters for the summary (rows, unresolved
 rows, the widest sigma) and, for the static-tag check
 (:mod:`scattertrack.track.plausibility`), per tag a sample of its track
 speeds and per tag and antenna one of its phase-turn speeds, each holding
-every value up to :data:`SAMPLE_CAPACITY` and a systematic sample of them
+every value up to :data:`SPEED_SAMPLES` (:data:`TURN_SAMPLES`) and a systematic sample of them
 beyond (every 2nd, 4th, ... value): the medians are exact for shorter
 tracks and close beyond. The full covariance is not kept: writers that need it
 (MCAP, ROS 2) take the in-memory path.
@@ -44,8 +44,11 @@ DECLINED = {
 }
 """The tracker's counters reported as skipped reads, worded as ``track.run`` words them (a test holds them equal)."""
 
-SAMPLE_CAPACITY = 2048
-"""Values kept per tag (track speeds) or tag and antenna (phase-turn speeds) for the static-tag check's medians."""
+SPEED_SAMPLES = 512
+"""Track speeds kept per tag for the static-tag check's median (4 kB a tag): every one up to 17 s of 30 rows/s."""
+
+TURN_SAMPLES = 256
+"""Phase-turn speeds kept per tag and antenna for that check (2 kB each)."""
 
 PAIR_PERIOD_RAD = 2.0 * math.pi
 """The phase period the static-tag check assumes, as ``track`` calls it (its default)."""
@@ -59,7 +62,7 @@ class Samples:
     stream is a multiple of the stride: deterministic, and bounded.
     """
 
-    def __init__(self, capacity: int = SAMPLE_CAPACITY):
+    def __init__(self, capacity: int):
         self.capacity = capacity
         self.slot = np.zeros(0, dtype=np.int64)  # group -> row of values, -1 before its first value
         self.values = np.zeros((0, capacity))
@@ -179,7 +182,7 @@ class TagFigures:
     last_unresolved: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
     widest: np.ndarray = field(default_factory=lambda: np.zeros(0))
     finite_speed: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=bool))
-    speeds: Samples = field(default_factory=Samples)
+    speeds: Samples = field(default_factory=lambda: Samples(SPEED_SAMPLES))
 
     def grow(self, tags: int) -> None:
         extra = tags - len(self.rows)
@@ -226,7 +229,7 @@ class TurnEvidence:
         self.antennas = antennas
         self.tail = None
         self.pairs = np.zeros(0, dtype=np.int64)  # per tag*antennas + antenna
-        self.samples = Samples()
+        self.samples = Samples(TURN_SAMPLES)
 
     def add(self, batch: dict, antenna_index: np.ndarray) -> None:
         columns = {"tag": batch["epc"], "antenna": antenna_index, "time_s": batch["time_s"],
