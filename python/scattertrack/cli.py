@@ -481,6 +481,7 @@ def track_streamed(args, scene, params: dict) -> bool:
     False (with a ``warning:`` line) when the file must be read whole."""
     from scattertrack.track import streaming
 
+    outputs_command.ros2_transform(args)  # a bad --transform fails here too, though nothing uses it
     try:
         result = streaming.track_file(args.method, scene, args.reads, Path(args.out), params, unresolved_sigma_m=UNRESOLVED_SIGMA_M)
     except streaming.NeedsWholeFile as reason:
