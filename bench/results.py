@@ -44,6 +44,7 @@ BENCHMARKS: list[tuple[str, list[str]]] = [
     ("live", [PY, "bench/live.py"]),
     ("calibration", [PY, "bench/calibration.py"]),
     ("batch", [PY, "bench/batch.py"]),
+    ("many-tags", [PY, "bench/many_tags.py"]),
 ]
 """(key, command): run from the repository root, in this order."""
 

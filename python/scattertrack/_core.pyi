@@ -47,6 +47,14 @@ class Engine:
         phase_rad: npt.NDArray[np.float64],
     ) -> dict[str, np.ndarray]:
         """Columns row, time_s, position (n,3), velocity (n,3), covariance (n,36), hypotheses, weight."""
+    @staticmethod
+    def format_track_rows(
+        time_s: npt.NDArray[np.float64],
+        epc: npt.NDArray[np.int64],
+        epc_cells: list[str],
+        values: npt.NDArray[np.float64],
+    ) -> bytes:
+        """track.csv rows: time, epc_cells[epc], every column of values (n, k); floats as Python's "%.6f", nan as "nan"."""
     def run_frames(
         self,
         tag: npt.NDArray[np.int64],

@@ -15,6 +15,7 @@ unresolved tags, speed).
 from __future__ import annotations
 
 import math
+import os
 import time
 from pathlib import Path
 
@@ -121,6 +122,8 @@ def track_reads(args, scene, params: dict) -> int:
     """``track`` for a COTS reader: reads.csv (and the ROS 2 files, if asked for)."""
     from scattertrack import io
 
+    if streams(args) and track_streamed(args, scene, params):
+        return 0
     reads = io.read_reads(args.reads, scene)
     say(f"read {plural(len(reads), 'read')} of {plural(len(reads.epcs()), 'tag')} from {args.reads}")
     say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
@@ -134,6 +137,35 @@ def track_reads(args, scene, params: dict) -> int:
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
     print_tracker_summary(result, reads, wall_s)
     return 0
+
+
+def streams(args) -> bool:
+    """Whether ``track`` streams (reads.csv to track.csv, no ROS 2 output; ``SCATTERTRACK_STREAM=0``: never)."""
+    from scattertrack.io.csvutil import is_parquet
+
+    return not (args.mcap or args.ros2_bag or is_parquet(args.out)) and os.environ.get("SCATTERTRACK_STREAM", "1") != "0"
+
+
+def track_streamed(args, scene, params: dict) -> bool:
+    """``track`` as a stream (scattertrack.track.streaming), printing what the in-memory path prints;
+    False (with a ``warning:`` line) when the file must be read whole."""
+    from scattertrack.track import streaming
+
+    outputs_command.ros2_transform(args)  # a bad --transform fails here too, though nothing uses it
+    try:
+        result = streaming.track_file(args.method, scene, args.reads, Path(args.out), params, unresolved_sigma_m=UNRESOLVED_SIGMA_M)
+    except streaming.NeedsWholeFile as reason:
+        say(f"warning: {args.reads}: {reason}: reading the whole file instead of streaming it")
+        return False
+    reads = result.reads
+    say(f"read {plural(len(reads), 'read')} of {plural(len(reads.tags), 'tag')} from {args.reads}")
+    say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
+    warn_about_geometry(scene, reads)
+    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} of {plural(result.tracked_tags, 'tag')} to {Path(args.out)}")
+    if not len(result):
+        say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
+    print_tracker_summary(result, reads, result.wall_s)
+    return True
 
 
 def warn_about_geometry(scene, reads) -> None:
@@ -357,9 +389,10 @@ def print_tracker_summary(result, reads, wall_s: float) -> None:
             f"{tag.get('reinitialisations', 0)} reinitialisations, "
             f"at most {tag.get('max_hypotheses', 0)} hypotheses"
         )
-    for line in unresolved_warnings(result):
+    streamed = getattr(result, "summary_warnings", None)  # a streamed track worked them out as it went
+    for line in unresolved_warnings(result) if streamed is None else streamed:
         say(line)
-    if reads is not None and hasattr(reads, "phase_rad"):
+    if streamed is None and reads is not None and hasattr(reads, "phase_rad"):
         from scattertrack.track.plausibility import implausible_speed_warnings
 
         for line in implausible_speed_warnings(result, reads):

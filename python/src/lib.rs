@@ -360,6 +360,52 @@ impl Engine {
         let l = self.inner.latency();
         quantiles.iter().map(|&q| l.percentile_ns(q)).collect()
     }
+
+    /// `track.csv` rows as UTF-8 bytes (the GIL is released): row `i` is
+    /// `time_s[i]`, `epc_cells[epc[i]]` (already quoted), then every column of
+    /// `values` (n, k), each float with 6 decimals as Python's `"%.6f"`
+    /// writes it (correctly rounded, half to even) and NaN as `nan`.
+    #[staticmethod]
+    fn format_track_rows<'py>(
+        py: Python<'py>,
+        time_s: PyReadonlyArray1<f64>,
+        epc: PyReadonlyArray1<i64>,
+        epc_cells: Vec<String>,
+        values: PyReadonlyArray2<f64>,
+    ) -> PyResult<Bound<'py, pyo3::types::PyBytes>> {
+        let (t, e, v) = (time_s.as_array(), epc.as_array(), values.as_array());
+        let n = t.len();
+        if e.len() != n || v.nrows() != n {
+            return Err(value_error("time_s, epc and values need one entry (row) per track row"));
+        }
+        if let Some(bad) = e.iter().position(|&k| k < 0 || k as usize >= epc_cells.len()) {
+            return Err(value_error(format!("row {bad}: epc code {} out of range", e[bad])));
+        }
+        let (t, e, v) = (t.to_vec(), e.to_vec(), v.to_owned());
+        let text = py.detach(move || {
+            use std::fmt::Write;
+            let mut out = String::with_capacity(n * (16 + 12 * v.ncols()));
+            let fixed = |out: &mut String, x: f64| {
+                if x.is_nan() {
+                    out.push_str("nan");
+                } else {
+                    let _ = write!(out, "{x:.6}");
+                }
+            };
+            for i in 0..n {
+                fixed(&mut out, t[i]);
+                out.push(',');
+                out.push_str(&epc_cells[e[i] as usize]);
+                for x in v.row(i).iter() {
+                    out.push(',');
+                    fixed(&mut out, *x);
+                }
+                out.push('\n');
+            }
+            out
+        });
+        Ok(pyo3::types::PyBytes::new(py, text.as_bytes()))
+    }
 }
 
 /// A reply's header as given from Python (validated).

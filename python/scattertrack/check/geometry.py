@@ -70,9 +70,15 @@ def _read_channels(scene: Scene, reads: Reads | None) -> tuple[list[float], floa
     evidence is the median count over those (antenna, channel) pairs."""
     if reads is None or not len(reads):
         return [], None
-    frequency = np.asarray(reads.frequency_hz, dtype=float)
-    antenna = np.asarray(reads.antenna)
-    values, counts = np.unique(np.round(frequency / 1e3), return_counts=True)
+    if hasattr(reads, "channel_counts"):
+        # A streamed recording (scattertrack.track.streaming) keeps only how
+        # many reads each (frequency, antenna) pair has: the same figures.
+        frequency, antenna, weight = reads.channel_counts
+    else:
+        frequency, antenna = np.asarray(reads.frequency_hz, dtype=float), np.asarray(reads.antenna)
+        weight = np.ones(len(frequency), dtype=np.int64)
+    values, inverse = np.unique(np.round(frequency / 1e3), return_inverse=True)
+    counts = np.bincount(inverse.reshape(-1), weights=weight, minlength=len(values)).astype(np.int64)
     order = np.argsort(-counts, kind="stable")
     ordered = [float(values[i] * 1e3) for i in order]
     calibrated = [f for f in ordered if any(abs(c.frequency_hz - f) <= 1e3 for c in scene.channel_offsets)]
@@ -81,7 +87,7 @@ def _read_channels(scene: Scene, reads: Reads | None) -> tuple[list[float], floa
     for f in joint:
         on_channel = np.abs(frequency - f) <= 1e3
         for a in scene.antennas:
-            per_pair.append(int(np.count_nonzero(on_channel & (antenna == a.id))))
+            per_pair.append(int(weight[on_channel & (antenna == a.id)].sum()))
     positions = 2 * int(scene.dimensions) + 1
     evidence = max(float(np.median(per_pair)) / positions, 1.0) if per_pair else None
     return ordered, evidence

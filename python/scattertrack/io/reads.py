@@ -74,21 +74,24 @@ def read_reads(path, scene: Scene | None = None) -> Reads:
     epcs = TextTable()
     with CsvReader(path, REQUIRED, OPTIONAL + [CHANNEL_INDEX]) as reader:
         for chunk in reader.chunks():
-            part = _parse_chunk(chunk, period, antenna_ids, epcs)
+            part = parse_chunk(chunk, period, antenna_ids, epcs)
             chunk.raise_first_problem()
             parts.append(part)
             lines.append(chunk.line_numbers())
     columns = {name: np.concatenate([p[name] for p in parts]) for name in parts[0]}
     lines = np.concatenate(lines)
     warn_clock_jumps(path, columns["time_s"], lines)
-    _warn_case_twins(path, epcs, columns["epc"], lines)
+    warn_case_twins(path, epcs, columns["epc"], lines)
     if scene is not None and CHANNEL_INDEX in columns:
         hop_table.warn_disagreements(path, columns["frequency_hz"], columns[CHANNEL_INDEX], lines, scene.hop_table)
     return _finish(columns, lines, epcs.texts())
 
 
-def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: TextTable) -> dict:
-    """Convert and check one chunk's columns (``epc`` as codes into ``epcs``); problems are recorded in the chunk."""
+def parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: TextTable) -> dict:
+    """Convert and check one chunk's columns (``epc`` as codes into ``epcs``); problems are recorded in the chunk.
+
+    Shared by :func:`read_reads` and the stream (:mod:`scattertrack.io.reads_chunks`), so both check alike.
+    """
     time = chunk.floats("time_s")
     epc = chunk.texts("epc", epcs, check=epc_problem)
     antenna = chunk.integers("antenna")
@@ -97,11 +100,9 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Tex
     frequency = chunk.floats("frequency_hz")
     chunk.flag_values("frequency_hz", frequency, units.frequency_outside(frequency), units.frequency_message)
     phase = chunk.floats("phase_rad")
-    outside = (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
+    outside = phase_outside(phase, period)
     chunk.flag_values("phase_rad", phase, outside, lambda text, value: units.phase_message(text, value, phase, period))
-    # Within the tolerance: fold rounding noise back into [0, P).
-    phase = np.where(phase >= period, phase - period, phase)
-    phase = np.where(phase < 0.0, 0.0, phase)
+    phase = fold_phase(phase, period)
     optional = {}
     for name in OPTIONAL:
         if chunk.has(name):
@@ -124,6 +125,17 @@ def _parse_chunk(chunk, period: float, antenna_ids: np.ndarray | None, epcs: Tex
     }
 
 
+def phase_outside(phase: np.ndarray, period: float) -> np.ndarray:
+    """Mask of phases (radians) outside [0, P) by more than :data:`PHASE_TOLERANCE_RAD`."""
+    return (phase < -PHASE_TOLERANCE_RAD) | (phase >= period + PHASE_TOLERANCE_RAD)
+
+
+def fold_phase(phase: np.ndarray, period: float) -> np.ndarray:
+    """Phases within the tolerance of [0, P) folded into it: rounding noise, not a reading."""
+    phase = np.where(phase >= period, phase - period, phase)
+    return np.where(phase < 0.0, 0.0, phase)
+
+
 def epc_problem(epc: str) -> str | None:
     """Why ``epc`` is not a hex EPC, or None if it is one."""
     if HEX.fullmatch(epc):
@@ -137,7 +149,7 @@ def epc_problem(epc: str) -> str | None:
     return f"EPC {epc!r} is not hex: EPCs are hex digits 0-9, a-f, A-F (any length, either case)"
 
 
-def _warn_case_twins(path, epcs: TextTable, codes: np.ndarray, lines: np.ndarray) -> None:
+def warn_case_twins(path, epcs: TextTable, codes: np.ndarray, lines: np.ndarray) -> None:
     """Warn when two EPCs differ only in letter case: they are tracked as two tags."""
     first_of: dict[str, str] = {}
     for epc in epcs.code_of:
