@@ -33,6 +33,7 @@ from scattertrack.arguments import (
     tracker_parameters,
 )
 from scattertrack.reporting import format_duration, format_nanoseconds, output_path
+from scattertrack.track.plausibility import UNRESOLVED_SIGMA_M, unresolved_warnings  # noqa: F401 - cli's names
 
 MAX_TAGS_LISTED = 10
 """Per-tag lines printed by ``track``; more tags are summarised in one line."""
@@ -410,39 +411,3 @@ def print_tracker_summary(result, reads, wall_s: float) -> None:
         _, mean_ns, max_ns = latency
         line += f"; tracker step {format_nanoseconds(mean_ns)} mean, {format_nanoseconds(max_ns)} max per read"
     say(line)
-
-
-# A row is unresolved while its largest sigma exceeds this (m): a quarter
-# of the λ/2 ≈ 16 cm candidate spacing, the scale at which competing
-# candidate trajectories (or geometric twins) still carry weight.
-UNRESOLVED_SIGMA_M = 0.04
-
-
-def unresolved_warnings(result) -> list[str]:
-    """One ``warning:`` line per tag whose track ends unresolved (its last
-    row's largest sigma above :data:`UNRESOLVED_SIGMA_M`), saying how much
-    of the track was; a tag that resolved says nothing."""
-    if result.sigma is None or len(result) == 0:
-        return []
-    largest = np.nanmax(result.sigma, axis=1)
-    unresolved = largest > UNRESOLVED_SIGMA_M
-    # Per tag in one pass over the rows (a recording may hold thousands of
-    # tags): its last row, its share of unresolved rows and its widest sigma.
-    epcs, tag = np.unique(result.epc.astype(str), return_inverse=True)
-    rows = np.arange(len(result))
-    first, last = np.full(len(epcs), len(result)), np.zeros(len(epcs), dtype=int)
-    np.minimum.at(first, tag, rows)
-    np.maximum.at(last, tag, rows)
-    widest = np.full(len(epcs), -np.inf)
-    np.maximum.at(widest, tag, largest)
-    share = np.bincount(tag, weights=unresolved, minlength=len(epcs)) / np.bincount(tag, minlength=len(epcs))
-    lines = []
-    for k in np.argsort(first, kind="stable"):  # in order of first appearance
-        if unresolved[last[k]]:
-            lines.append(
-                f"warning: tag {epcs[k]}: the reads did not resolve its position: "
-                f"{share[k] * 100:.0f} % of its rows, the last included, have a sigma above "
-                f"{UNRESOLVED_SIGMA_M * 100:.0f} cm (up to {widest[k] * 100:.0f} cm); "
-                "the sigmas cover the competing candidates, the position is the likeliest of them"
-            )
-    return lines

@@ -99,6 +99,21 @@ pub struct Scene {
 }
 
 impl Scene {
+    /// The plus-shaped localization-helper layout the tests, benches and
+    /// examples share: the transmitter at (0.4, 0.4, 0) m, four receivers
+    /// 40 cm around it in z = 0, a region in front of the array, 0.1 rad
+    /// phase noise. `dimensions` 2 tracks in the plane z = `plane_z`.
+    pub fn plus_helper(dimensions: usize, plane_z: f64) -> Self {
+        let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
+        let antennas = layout
+            .iter()
+            .enumerate()
+            .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
+            .collect();
+        let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
+        Self::new(dimensions, plane_z, 1.0, TWO_PI, 0.1, antennas, Some(region), vec![]).expect("the plus layout is a valid scene")
+    }
+
     /// A validated scene. Fails on no antennas, dimensions ∉ {2, 3}, a
     /// phase sign other than ±1, a period other than 2π or π, or an empty
     /// region.

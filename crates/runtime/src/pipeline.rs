@@ -762,20 +762,13 @@ impl<'a, U> Release<'a, U> {
 mod tests {
     use super::*;
     use nalgebra::Vector3;
-    use scattertrack_core::scene::{Antenna, Region, Role, Scene, SPEED_OF_LIGHT};
+    use scattertrack_core::scene::{Scene, SPEED_OF_LIGHT};
     use scattertrack_core::track::Params;
     use std::sync::atomic::AtomicUsize;
 
     /// A helper: tx in the middle, four rx 40 cm around it.
     fn scene() -> Scene {
-        let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
-        let antennas = layout
-            .iter()
-            .enumerate()
-            .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
-            .collect();
-        let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
-        Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+        Scene::plus_helper(3, 0.0)
     }
 
     fn frequencies() -> Vec<f64> {

@@ -7,19 +7,12 @@ use std::time::Duration;
 use nalgebra::Vector3;
 use num_complex::{Complex32, Complex64};
 use scattertrack_core::engine::Engine;
-use scattertrack_core::scene::{Antenna, Region, Role, Scene, SPEED_OF_LIGHT};
+use scattertrack_core::scene::{Scene, SPEED_OF_LIGHT};
 use scattertrack_core::track::Params;
 use scattertrack_runtime::{run, ChannelEstimator, Pacing, PassThroughFusion, PerAntenna, Reply, RuntimeConfig, Workers};
 
 fn scene() -> Scene {
-    let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
-    let antennas = layout
-        .iter()
-        .enumerate()
-        .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
-        .collect();
-    let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
-    Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+    Scene::plus_helper(3, 0.0)
 }
 
 fn frequencies() -> Vec<f64> {

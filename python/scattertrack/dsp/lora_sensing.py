@@ -71,7 +71,8 @@ from typing import Protocol
 
 import numpy as np
 
-from scattertrack.io.types import SPEED_OF_LIGHT, Features
+from scattertrack.io.types import Features
+from scattertrack.physics import SPEED_OF_LIGHT
 
 SENSING_DECLINE_REASONS = {
     "non_finite_samples": "LoRa epoch with non-finite samples (declined)",

@@ -91,10 +91,15 @@ class ReadsStream:
                     and reads_format.CHANNEL_INDEX in reader.column_position):
                 raise NeedsWholeFile("the hop-table check counts disagreements over the whole file")
             parts = self._arrow_parts(present) if self.fast else self._checked_parts(reader)
+            any_rows = False
             for part in parts:
+                any_rows = any_rows or len(part["time_s"]) > 0
                 ready = self._admit({name: part[name] for name in TRACKED})
                 if ready is not None:
                     yield ready
+            if self.fast and not any_rows:
+                # A header alone: the checked reader words that error (file, line).
+                raise NeedsCheckedReader("no data rows")
         if self._pending is not None and len(self._pending["time_s"]):
             yield _sorted(self._pending)
         self._pending = None

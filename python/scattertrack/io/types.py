@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from scattertrack.physics import SPEED_OF_LIGHT  # noqa: F401 - track/ still imports it from here
+from scattertrack.physics import SPEED_OF_LIGHT  # noqa: F401 - a public name of io.types (its home is physics)
 
 
 from scattertrack.io.errors import FormatError, InputWarning, warn_input  # noqa: F401 - the io contract's names

@@ -403,23 +403,18 @@ def _count_channels(channels: dict, batch: dict) -> None:
 
 
 def _unresolved_lines(figures: TagFigures, texts: list[str], sigma_m: float) -> list[str]:
-    """``cli.unresolved_warnings``'s lines from the per-tag figures (the wording is its, a test holds them equal)."""
+    """``cli.unresolved_warnings``'s lines from the per-tag figures (one wording: plausibility.unresolved_line)."""
     lines = []
     tracked = np.flatnonzero(figures.rows > 0)
     for k in tracked[np.argsort(figures.first_row[tracked], kind="stable")].tolist():
         if figures.last_unresolved[k]:
             share = figures.unresolved_rows[k] / figures.rows[k]
-            lines.append(
-                f"warning: tag {texts[k]}: the reads did not resolve its position: "
-                f"{share * 100:.0f} % of its rows, the last included, have a sigma above "
-                f"{sigma_m * 100:.0f} cm (up to {figures.widest[k] * 100:.0f} cm); "
-                "the sigmas cover the competing candidates, the position is the likeliest of them"
-            )
+            lines.append(plausibility.unresolved_line(texts[k], float(share), float(figures.widest[k]), sigma_m))
     return lines
 
 
 def _implausible_lines(figures: TagFigures, turns: TurnEvidence, texts: list[str]) -> list[str]:
-    """``plausibility.implausible_speed_warnings``'s lines from the samples (its wording; a test holds them equal)."""
+    """``plausibility.implausible_speed_warnings``'s lines from the samples (one wording: plausibility.static_line)."""
     lines = []
     tracked = np.flatnonzero(figures.rows > 0)
     for k in tracked[np.argsort(figures.first_row[tracked], kind="stable")].tolist():
@@ -427,10 +422,6 @@ def _implausible_lines(figures: TagFigures, turns: TurnEvidence, texts: list[str
             continue
         speed = figures.speeds.median(k)
         bound = turns.bound(k)
-        if np.isfinite(bound) and speed > 3.0 * bound + plausibility.MARGIN_M_S:
-            lines.append(
-                f"warning: tag {texts[k]}: its track moves at a median {speed:.2f} m/s, but its reads' phases allow at most "
-                f"about {bound:.3f} m/s of radial speed on any antenna: the tag is most likely static, which GLAC cannot "
-                "resolve without motion; locate it with scattertrack locate"
-            )
+        if plausibility.implausible(speed, bound):
+            lines.append(plausibility.static_line(texts[k], speed, bound))
     return lines

@@ -10,7 +10,7 @@ from scattertrack.io import csvutil, reads_chunks  # noqa: F401 - io.reads_chunk
 from scattertrack.sim import load_scenario, simulate
 from scattertrack.sim.simulation import write_simulation
 from scattertrack.track import plausibility, streaming
-from scattertrack.track.glac import _DECLINED
+from scattertrack.track.cots import _DECLINED
 
 UNRESOLVED_SIGMA_M = 0.04
 
@@ -48,7 +48,7 @@ def test_streamed_track_is_the_in_memory_track(small_chunks, tmp_path, name, sha
     assert len(result.reads) == len(reads) and result.reads.tags == reads.epcs()
     assert result.reads.reordered == reads.reordered
     assert result.latency[0] == expected.latency[0]
-    from scattertrack.cli import unresolved_warnings
+    from scattertrack.track.plausibility import unresolved_warnings
 
     in_memory = unresolved_warnings(expected) + plausibility.implausible_speed_warnings(expected, reads)
     assert result.summary_warnings == in_memory

@@ -7,7 +7,7 @@ use rand::rngs::StdRng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::StandardNormal;
 
-use scattertrack_core::scene::{Antenna, Region, Role, Scene, SPEED_OF_LIGHT};
+use scattertrack_core::scene::{Scene, SPEED_OF_LIGHT};
 use scattertrack_core::track::WidebandFrame;
 
 pub struct HelperOptions {
@@ -28,14 +28,7 @@ impl Default for HelperOptions {
 }
 
 pub fn helper_scene(dimensions: usize, plane_z: f64) -> Scene {
-    let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
-    let antennas = layout
-        .iter()
-        .enumerate()
-        .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
-        .collect();
-    let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
-    Scene::new(dimensions, plane_z, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+    Scene::plus_helper(dimensions, plane_z)
 }
 
 pub fn subcarriers() -> Vec<f64> {
