@@ -453,6 +453,7 @@ pub struct Glac {
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
     stats: TrackerStats,
+    work_mark: u64,
 }
 
 /// The registry's constructor of `glac`: the paper's tracker with the
@@ -492,6 +493,7 @@ impl Glac {
             seeded_s: f64::NEG_INFINITY,
             gated_since_seed: 0,
             stats: TrackerStats::default(),
+            work_mark: 0,
         })
     }
 
@@ -1268,6 +1270,12 @@ fn transition_log_density(x: &StateVector, predicted: &StateVector, t: &Transiti
 impl Glac {
     /// One phase reading (the body of [`Tracker::step`]).
     fn step_read(&mut self, m: &PhaseRead) -> Option<Estimate> {
+        let e = self.step_read_inner(m);
+        self.stats.max_expanded_per_read = self.stats.max_expanded_per_read.max(self.stats.filter_updates - self.work_mark);
+        self.work_mark = self.stats.filter_updates;
+        e
+    }
+    fn step_read_inner(&mut self, m: &PhaseRead) -> Option<Estimate> {
         self.stats.measurements += 1;
         let valid = m.antenna < self.scene.antennas.len()
             && m.time_s.is_finite()

@@ -191,6 +191,9 @@ pub struct TrackerStats {
     /// Times the particles moved to another lobe because its accumulated
     /// evidence passed the switch level (TurboTrack's lobe test).
     pub lobe_switches: u64,
+    /// Most work one read did (GLAC: hypothesis steps plus initial-search
+    /// work, in the units of its `read_budget`).
+    pub max_expanded_per_read: u64,
 }
 
 impl TrackerStats {
