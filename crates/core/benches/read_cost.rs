@@ -64,15 +64,21 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 fn main() {
     let params = GlacParams { phase_wander_rad: 0.1, ..GlacParams::default() };
     let row = |name| Row { name, costs_ns: Vec::new(), max_expanded: 0 };
-    let (mut converged, mut initialising) = (row("converged 3D"), row("initialising 3D"));
-    record(&Options { duration: 20.0, ..Default::default() }, &params, &mut converged, &mut initialising, None);
+    let (mut converged, mut initialising) = (row("converged 2D"), row("initialising 2D"));
+    record(&Options { dimensions: 2, duration: 20.0, ..Default::default() }, &params, &mut converged, &mut initialising, None);
+    let (mut tracking3, mut initialising3) = (row("converged 3D"), row("initialising 3D"));
+    record(&Options { duration: 20.0, ..Default::default() }, &params, &mut tracking3, &mut initialising3, None);
     let (mut c2, mut i2, mut pi2) = (row("-"), row("-"), row("mod-pi 2D"));
     record(&Options { dimensions: 2, mod_pi: true, speed: 0.4, duration: 10.0, ..Default::default() }, &params, &mut c2, &mut i2, Some(&mut pi2));
     let (mut c3, mut i3, mut pi3) = (row("-"), row("-"), row("mod-pi 3D"));
     record(&Options { dimensions: 3, mod_pi: true, duration: 10.0, ..Default::default() }, &params, &mut c3, &mut i3, Some(&mut pi3));
     println!("{:<18} {:>8} {:>9} {:>9} {:>10} {:>10} {:>13}", "per-read cost", "reads", "p50 µs", "p99 µs", "p99.99 µs", "max µs", "max expanded");
-    for r in [converged, initialising, pi2, pi3] {
+    for r in [converged, initialising, tracking3, initialising3, pi2, pi3] {
         let mut v = r.costs_ns;
+        if v.is_empty() {
+            println!("{:<18} {:>8}", r.name, 0);
+            continue;
+        }
         v.sort_by(|a, b| a.total_cmp(b));
         let us = |q: f64| quantile(&v, q) / 1e3;
         println!(

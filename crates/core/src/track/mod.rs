@@ -23,6 +23,7 @@ pub mod glac_params;
 mod initial;
 mod key_hash;
 mod line_twins;
+mod read_budget;
 pub mod lobes;
 pub mod registry;
 mod rfind;
