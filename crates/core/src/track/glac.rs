@@ -1547,9 +1547,16 @@ impl Glac {
             return None;
         }
         self.arrival_s = m.time_s;
-        self.pending.push_back(Pending { read: *m, replay: None });
+        let read = Pending { read: *m, replay: None };
         let mut budget = Budget::new(self.params.read_budget as u64);
-        self.work(&mut budget);
+        if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
+            // Nothing queued (a converged tag): straight in, without
+            // touching the queue's memory.
+            self.work(&mut budget, Some(read));
+        } else {
+            self.pending.push_back(read);
+            self.work(&mut budget, None);
+        }
         self.stats.max_expanded_per_read = self.stats.max_expanded_per_read.max(budget.expanded());
         if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
             self.result.take()
@@ -1561,8 +1568,9 @@ impl Glac {
     }
 
     /// Works off the job, the step under way and the queued reads, in that
-    /// order, while `budget` lasts.
-    fn work(&mut self, budget: &mut Budget) {
+    /// order, while `budget` lasts; `first`, a read that would be queued
+    /// last on an empty queue, goes first.
+    fn work(&mut self, budget: &mut Budget, mut first: Option<Pending>) {
         loop {
             if let Some(job) = self.job.take() {
                 self.job = self.advance_job(job, budget);
@@ -1578,16 +1586,22 @@ impl Glac {
                 }
                 continue;
             }
-            let Some(&next) = self.pending.front() else {
-                if let Some(job) = self.reseeding.take() {
-                    self.reseeding = self.advance_reseed(job, budget);
-                }
-                return;
+            let next = match first.take() {
+                Some(read) => read,
+                None => match self.pending.pop_front() {
+                    Some(read) => read,
+                    None => {
+                        if let Some(job) = self.reseeding.take() {
+                            self.reseeding = self.advance_reseed(job, budget);
+                        }
+                        return;
+                    }
+                },
             };
             if !budget.try_spend_overhead(1) {
+                self.pending.push_front(next);
                 return;
             }
-            self.pending.pop_front();
             self.begin_read(next, budget);
         }
     }
