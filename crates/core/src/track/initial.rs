@@ -147,8 +147,9 @@ const INTERSECTIONS_PER_UNIT: u64 = 2;
 /// fixes, the likelihood, and up to 64 velocity combinations.
 const REFINE_MAX_UNITS: u64 = 112;
 /// Work of taking one hypothesis off the heap and checking it against the
-/// kept ones (a grid lookup of the 27 neighbouring cells).
-const MERGE_UNITS: u64 = 4;
+/// kept ones (a grid lookup of the 27 neighbouring cells; ~0.25 µs per
+/// unit measured in this stage at 4 units, so 8).
+const MERGE_UNITS: u64 = 8;
 
 /// Where a search stands.
 #[derive(Debug, Clone)]
