@@ -163,8 +163,8 @@ pub struct GlacParams {
     /// re-seeding carry what is left to the tag's next reads (queued, and
     /// taken in order, so the result is the same); meanwhile the tag
     /// reports nothing, or the re-acquisition estimate after a restart.
-    /// 2,000 units keep a read near 0.5 ms; the naive and synchronous
-    /// variants bound only whole reads.
+    /// 2,000 units keep a read near 0.5 ms. Fast inference only: the
+    /// naive and synchronous variants run unbudgeted.
     pub read_budget: usize,
 }
 
@@ -1548,7 +1548,10 @@ impl Glac {
         }
         self.arrival_s = m.time_s;
         let read = Pending { read: *m, replay: None };
-        let mut budget = Budget::new(self.params.read_budget as u64);
+        // The variants' steps cannot be split (naive: every hypothesis
+        // times every candidate), so they run unbudgeted, as before.
+        let limit = if self.params.inference == Inference::Fast { self.params.read_budget as u64 } else { u64::MAX };
+        let mut budget = Budget::new(limit);
         if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
             // Nothing queued (a converged tag): straight in, without
             // touching the queue's memory.
