@@ -176,14 +176,53 @@ pub struct InitialSearch {
     triple: [usize; 3],
     r0: f64,
     stage: Stage,
-    points: Vec<Vector3<f64>>,
+    points: Chunked<Vector3<f64>>,
     /// Refined hypotheses, best (then earliest) first off the heap.
     ranked: std::collections::BinaryHeap<Ranked>,
-    hypotheses: Vec<Option<InitialHypothesis>>,
+    hypotheses: Chunked<Option<InitialHypothesis>>,
     kept: Vec<InitialHypothesis>,
     /// Kept positions by merge-distance cell (the merge test looks at the
     /// 27 cells around a position instead of every kept one).
     grid: std::collections::HashMap<[i64; 3], Vec<usize>>,
+}
+
+/// A growing list in fixed-size blocks: the search's points and refined
+/// hypotheses run to megabytes in mod-π 3D, and one `Vec` doubling there
+/// copies them all (and faults in fresh pages) within a single read.
+struct Chunked<T> {
+    blocks: Vec<Vec<T>>,
+    len: usize,
+}
+
+/// Elements per block of [`Chunked`].
+const BLOCK: usize = 4096;
+
+impl<T> Default for Chunked<T> {
+    fn default() -> Self {
+        Self { blocks: Vec::new(), len: 0 }
+    }
+}
+
+impl<T> Chunked<T> {
+    fn push(&mut self, value: T) {
+        if self.len % BLOCK == 0 {
+            self.blocks.push(Vec::with_capacity(BLOCK));
+        }
+        self.blocks.last_mut().expect("a block was pushed").push(value);
+        self.len += 1;
+    }
+
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn get(&self, i: usize) -> &T {
+        &self.blocks[i / BLOCK][i % BLOCK]
+    }
+
+    fn get_mut(&mut self, i: usize) -> &mut T {
+        &mut self.blocks[i / BLOCK][i % BLOCK]
+    }
 }
 
 /// A refined hypothesis' place in the best-first order: higher likelihood
@@ -256,9 +295,9 @@ impl InitialSearch {
             triple,
             r0,
             stage: Stage::Intersect { first: 0, second: 0 },
-            points: Vec::new(),
+            points: Chunked::default(),
             ranked: std::collections::BinaryHeap::new(),
-            hypotheses: Vec::new(),
+            hypotheses: Chunked::default(),
             kept: Vec::new(),
             grid: std::collections::HashMap::new(),
         })
@@ -296,7 +335,9 @@ impl InitialSearch {
                             if let Some(pair) =
                                 sphere_intersections(&a0, c0.distance, &a1, c1.distance, &a2, c2.distance, tolerance)
                             {
-                                self.points.extend(pair.into_iter().filter(in_region));
+                                for p in pair.into_iter().filter(in_region) {
+                                    self.points.push(p);
+                                }
                             }
                         } else if let Some(p) = perimeter_centroid(
                             [a0, a1, a2],
@@ -325,7 +366,7 @@ impl InitialSearch {
                     self.stage = Stage::Refine { next };
                     return None;
                 }
-                let (hypothesis, units) = self.refine(self.points[next], &in_region, &mut distances, &mut rates);
+                let (hypothesis, units) = self.refine(*self.points.get(next), &in_region, &mut distances, &mut rates);
                 budget.spend(units);
                 if let Some(h) = hypothesis {
                     self.ranked.push(Ranked { log_likelihood: h.log_likelihood, index: self.hypotheses.len() });
@@ -333,7 +374,7 @@ impl InitialSearch {
                 }
                 next += 1;
             }
-            self.points = Vec::new();
+            self.points = Chunked::default();
             self.stage = Stage::Merge;
         }
         // Best first, then merge near-duplicates (the same fix reached from
@@ -351,7 +392,7 @@ impl InitialSearch {
                 return None;
             }
             let Some(top) = self.ranked.pop() else { break };
-            let h = self.hypotheses[top.index].take().expect("each hypothesis leaves the heap once");
+            let h = self.hypotheses.get_mut(top.index).take().expect("each hypothesis leaves the heap once");
             let p: Vector3<f64> = h.state.fixed_rows::<3>(0).into();
             let c = cell(&p);
             let kept = &self.kept;
