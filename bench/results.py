@@ -36,6 +36,7 @@ BENCHMARKS: list[tuple[str, list[str]]] = [
     ("criterion-core", ["cargo", "bench", "-q", "-p", "scattertrack-core", "--bench", "glac", "--bench", "turbotrack", "--", "--quick"]),
     ("criterion-dsp", ["cargo", "bench", "-q", "-p", "scattertrack-dsp", "--bench", "dsp", "--", "--quick"]),
     ("glac", [PY, "bench/run.py"]),
+    ("read-cost", [PY, "bench/read_cost.py"]),
     ("glac-ambiguity", [PY, "bench/glac_ambiguity.py", "--seeds", "100"]),
     ("glac-ambiguity-modpi", [PY, "bench/glac_ambiguity.py", "--scenario", "glac-2d-40cms-modpi", "--seeds", "100", "--q", "2"]),
     ("glac-robustness", [PY, "bench/glac_robustness.py", "--seeds", "100", "--json", "out/bench/glac_robustness.json"]),

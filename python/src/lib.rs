@@ -33,6 +33,7 @@ fn stats_dict<'py>(py: Python<'py>, s: &TrackerStats) -> PyResult<Bound<'py, PyD
     d.set_item("filter_updates", s.filter_updates)?;
     d.set_item("reseeds", s.reseeds)?;
     d.set_item("lobe_switches", s.lobe_switches)?;
+    d.set_item("max_expanded_per_read", s.max_expanded_per_read)?;
     Ok(d)
 }
 

@@ -35,7 +35,8 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::candidates::nearest_candidate;
 use super::bias::{BiasPrediction, BiasStep};
-use super::initial::{initial_covariance, initial_hypotheses, InitialState};
+use super::initial::{initial_covariance, InitialSearch, InitialState};
+use super::read_budget::Budget;
 use super::line_twins::{line_layout, line_twins, LineLayout};
 use super::{Estimate, Measurement, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
@@ -156,6 +157,15 @@ pub struct GlacParams {
     /// than this are live; 0 disables it (the paper's pure nearest
     /// neighbour).
     pub max_branching_hypotheses: usize,
+    /// Most work one read does, in [`Budget`] units (one unit: about one
+    /// hypothesis through one read, ~0.2 µs). The initial search, the
+    /// replay of buffered reads through thousands of mod-π hypotheses and
+    /// re-seeding carry what is left to the tag's next reads (queued, and
+    /// taken in order, so the result is the same); meanwhile the tag
+    /// reports nothing, or the re-acquisition estimate after a restart.
+    /// 2,000 units keep a read near 0.5 ms. Fast inference only: the
+    /// naive and synchronous variants run unbudgeted.
+    pub read_budget: usize,
 }
 
 impl Default for GlacParams {
@@ -188,6 +198,7 @@ impl Default for GlacParams {
             manoeuvre_q: Some(1.0),
             model_switch_probability: 0.05,
             max_branching_hypotheses: 16,
+            read_budget: 2_000,
         }
     }
 }
@@ -253,6 +264,9 @@ impl GlacParams {
         if !(0.0..=0.5).contains(&self.model_switch_probability) {
             return Err(Error::Parameter { name: "model_switch_probability".into(), reason: "must be in [0, 0.5]".into() });
         }
+        if self.read_budget == 0 {
+            return Err(Error::Parameter { name: "read_budget".into(), reason: "must be at least 1".into() });
+        }
         if self.max_hypotheses == 0 {
             return Err(Error::Parameter { name: "max_hypotheses".into(), reason: "must be at least 1".into() });
         }
@@ -300,6 +314,18 @@ const RESEED_SIGMA_M: f64 = 0.04;
 pub const MAX_BIASES: usize = 8;
 
 impl Hypotheses {
+    fn with_capacity(n: usize) -> Self {
+        Self {
+            x: Vec::with_capacity(n),
+            p: Vec::with_capacity(n),
+            mu: Vec::with_capacity(n),
+            log_likelihood: Vec::with_capacity(n),
+            outliers: Vec::with_capacity(n),
+            bias: Vec::with_capacity(n),
+            bias_variance: Vec::with_capacity(n),
+        }
+    }
+
     fn len(&self) -> usize {
         self.x.len()
     }
@@ -363,13 +389,17 @@ impl Hypotheses {
         let mut w = 0;
         for r in 0..self.len() {
             if keep(r) {
-                self.x.swap(w, r);
-                self.p.swap(w, r);
-                self.mu.swap(w, r);
-                self.log_likelihood.swap(w, r);
-                self.outliers.swap(w, r);
-                self.bias.swap(w, r);
-                self.bias_variance.swap(w, r);
+                // Swapping a hypothesis with itself would copy its
+                // matrices three times for nothing.
+                if w != r {
+                    self.x.swap(w, r);
+                    self.p.swap(w, r);
+                    self.mu.swap(w, r);
+                    self.log_likelihood.swap(w, r);
+                    self.outliers.swap(w, r);
+                    self.bias.swap(w, r);
+                    self.bias_variance.swap(w, r);
+                }
                 w += 1;
             }
         }
@@ -453,7 +483,93 @@ pub struct Glac {
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
     stats: TrackerStats,
+    /// Time of the latest read accepted (out-of-order check), seconds.
+    arrival_s: f64,
+    /// Reads accepted but not yet taken through the tracker (the read
+    /// budget ran out), oldest first.
+    pending: std::collections::VecDeque<Pending>,
+    /// The fast step under way, when a read's hypotheses span reads.
+    progress: Option<StepProgress>,
+    /// The initial search under way, if any (reads wait for it).
+    job: Option<Job>,
+    /// The re-seeding under way, if any (on the budget the reads leave).
+    reseeding: Option<Reseed>,
+    /// The estimate after the latest read taken through the tracker.
+    result: Option<Estimate>,
 }
+
+/// A read waiting for the tracker.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    read: PhaseRead,
+    /// A buffered read replayed through fresh initial hypotheses (no
+    /// per-read bookkeeping: it was done when the read was buffered);
+    /// the time the estimate after it is reported at.
+    replay: Option<f64>,
+}
+
+/// Why a fast step runs.
+#[derive(Debug, Clone, Copy)]
+enum Purpose {
+    Track(Pending),
+    /// A re-seeding replay through the fresh candidates alone.
+    Reseed,
+}
+
+/// A fast step (see [`Glac::begin_fast`]) that may span several reads'
+/// budgets: hypotheses `next..n` are still to be stepped.
+struct StepProgress {
+    read: PhaseRead,
+    purpose: Purpose,
+    step: FastStep,
+    bias: BiasStep,
+    n: usize,
+    next: usize,
+    /// Ambiguity branches: (index, candidate, bias prediction, predicted
+    /// reading, its variance).
+    branches: Vec<(usize, f64, BiasPrediction, f64, f64)>,
+}
+
+/// A search spread over reads.
+enum Job {
+    /// Initial state pruning over the buffer, started by the read at `now_s`.
+    Initial { search: InitialSearch, last_s: f64, counts: Vec<usize>, now_s: f64 },
+    /// Its result, waiting for a budget that covers building the hypotheses.
+    /// A thousand hypotheses' filters are megabytes to write: built
+    /// [`BUILD_BLOCK`] at a time into `built`.
+    Commit { t_x: f64, initial: Vec<super::initial::InitialHypothesis>, built: Hypotheses, last_s: f64, counts: Vec<usize>, now_s: f64 },
+}
+
+/// Re-seeding, in the background: it runs on what the reads leave of
+/// their budgets, while the live hypotheses keep tracking.
+enum Reseed {
+    /// The search over the recent reads.
+    Search { search: InitialSearch, reads: Vec<PhaseRead> },
+    /// The replay of the reads after t_x (and of those tracked since, up
+    /// to `replayed_s`) through the candidates alone, with their own clock
+    /// and bias clocks.
+    Replay {
+        fresh: Hypotheses,
+        time_s: f64,
+        bias_time_s: Vec<f64>,
+        reads: std::collections::VecDeque<PhaseRead>,
+        replayed_s: f64,
+        progress: Option<StepProgress>,
+    },
+}
+
+/// Work units (see [`Budget`]) of building one hypothesis from an initial
+/// candidate (writing ~1 kB of fresh memory: measured near 0.5 µs).
+const BUILD_UNITS: u64 = 2;
+/// Hypotheses built per item.
+const BUILD_BLOCK: usize = 64;
+/// Hypotheses per unit of a step's end: normalisation, pruning and the
+/// estimate (the mixture covariance combines every hypothesis' IMM state)
+/// cost about half the filter step per hypothesis (measured).
+const FINISH_PER_UNIT: u64 = 2;
+/// Work units of checking one re-seeded candidate against the live
+/// hypotheses (a grid lookup), and of filing one live hypothesis in the grid.
+const JOIN_UNITS: u64 = 2;
 
 /// The registry's constructor of `glac`: the paper's tracker with the
 /// parameters as given (variants: [`super::variants`]).
@@ -492,6 +608,12 @@ impl Glac {
             seeded_s: f64::NEG_INFINITY,
             gated_since_seed: 0,
             stats: TrackerStats::default(),
+            arrival_s: f64::NEG_INFINITY,
+            pending: std::collections::VecDeque::new(),
+            progress: None,
+            job: None,
+            reseeding: None,
+            result: None,
         })
     }
 
@@ -538,15 +660,18 @@ impl Glac {
 
     fn restart(&mut self) {
         self.phase = Phase::Initialising;
+        self.reseeding = None;
         self.hypotheses.clear();
         self.group.clear();
         self.stats.reinitialisations += 1;
     }
 
-    /// Initial state pruning over the buffer; on success the hypotheses
-    /// start at t_x and the buffered reads after t_x are replayed through
-    /// them (all at or before the current read: still causal).
-    fn try_initialise(&mut self) -> bool {
+    /// Initial state pruning over the buffer, once it allows one: starts
+    /// the search as a job ([`Glac::advance_job`]; on success the
+    /// hypotheses start at t_x and the buffered reads after t_x are
+    /// replayed through them, all at or before the current read: still
+    /// causal). False when the search cannot start.
+    fn try_initialise(&mut self, now_s: f64) -> bool {
         let (first, last) = match (self.buffer.first(), self.buffer.last()) {
             (Some(f), Some(l)) => (f.time_s, l.time_s),
             _ => return false,
@@ -567,20 +692,32 @@ impl Glac {
         }
         let range_sigma = self.initial_range_sigma(self.buffer[0].frequency_hz);
         let with_velocity = self.params.motion.has_velocity();
-        let Some((t_x, initial)) =
-            initial_hypotheses(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity)
-        else {
-            // Slide the window: keep only the newest init_max_window_s.
-            let keep_from = last - self.params.init_max_window_s;
-            self.buffer.retain(|m| m.time_s >= keep_from);
-            return false;
-        };
-        let initial = self.reachable(initial, t_x);
-        self.hypotheses = self.hypotheses_from(&initial);
+        match InitialSearch::new(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity) {
+            Some(search) => {
+                self.job = Some(Job::Initial { search, last_s: last, counts, now_s });
+                true
+            }
+            None => {
+                self.slide_window(last);
+                false
+            }
+        }
+    }
+
+    /// After a failed search: keep only the newest init_max_window_s.
+    fn slide_window(&mut self, last_s: f64) {
+        let keep_from = last_s - self.params.init_max_window_s;
+        self.buffer.retain(|m| m.time_s >= keep_from);
+    }
+
+    /// The initial search's hypotheses go live: the buffered reads after
+    /// t_x are queued (first) to be replayed through them.
+    fn commit(&mut self, t_x: f64, hypotheses: Hypotheses, last_s: f64, counts: Vec<usize>, now_s: f64) {
+        self.hypotheses = hypotheses;
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
         self.bias_time_s.fill(f64::NEG_INFINITY);
-        self.seeded_s = last;
+        self.seeded_s = last_s;
         self.gated_since_seed = 0;
         self.recent.clear();
         self.recent.extend(self.buffer.iter().copied());
@@ -589,15 +726,47 @@ impl Glac {
         self.phase = Phase::Tracking;
         let replay: Vec<PhaseRead> = self.buffer.iter().copied().filter(|m| m.time_s > t_x).collect();
         self.buffer.clear();
-        for m in &replay {
-            self.track(m);
+        for m in replay.into_iter().rev() {
+            self.pending.push_front(Pending { read: m, replay: Some(now_s) });
         }
-        if self.hypotheses.len() == 0 {
-            // Every hypothesis died during the replay: keep collecting.
-            self.restart();
-            return false;
+        if !self.pending.front().is_some_and(|p| p.replay.is_some()) {
+            self.result = self.remember(self.best_estimate(now_s));
         }
-        true
+    }
+
+    /// Runs `job` on within `budget`: `Some` (the job) while work is left.
+    fn advance_job(&mut self, job: Job, budget: &mut Budget) -> Option<Job> {
+        match job {
+            Job::Initial { mut search, last_s, counts, now_s } => match search.advance(&self.scene, budget) {
+                None => Some(Job::Initial { search, last_s, counts, now_s }),
+                Some(None) => {
+                    self.slide_window(last_s);
+                    self.result = self.coasting_estimate(now_s);
+                    None
+                }
+                Some(Some((t_x, initial))) => {
+                    let initial = self.reachable(initial, t_x);
+                    let built = Hypotheses::with_capacity(initial.len());
+                    self.advance_job(Job::Commit { t_x, initial, built, last_s, counts, now_s }, budget)
+                }
+            },
+            Job::Commit { t_x, initial, mut built, last_s, counts, now_s } => {
+                while built.len() < initial.len() {
+                    let block = BUILD_BLOCK.min(initial.len() - built.len());
+                    if !budget.try_spend_overhead(block as u64 * BUILD_UNITS) {
+                        return Some(Job::Commit { t_x, initial, built, last_s, counts, now_s });
+                    }
+                    let from = built.len();
+                    self.build_hypotheses(&mut built, &initial[from..from + block]);
+                }
+                if !budget.try_spend_overhead(1 + initial.len() as u64 / FINISH_PER_UNIT) {
+                    return Some(Job::Commit { t_x, initial, built, last_s, counts, now_s });
+                }
+                built.normalise();
+                self.commit(t_x, built, last_s, counts, now_s);
+                None
+            }
+        }
     }
 
     /// Range sigma (m) of the initial search on carrier `frequency_hz`: the
@@ -611,9 +780,17 @@ impl Glac {
     /// Hypotheses (normalised) started from initial candidates, with the
     /// initial covariance; in 2D pinned to the tag's plane.
     fn hypotheses_from(&self, initial: &[super::initial::InitialHypothesis]) -> Hypotheses {
+        let mut hypotheses = Hypotheses::with_capacity(initial.len());
+        self.build_hypotheses(&mut hypotheses, initial);
+        hypotheses.normalise();
+        hypotheses
+    }
+
+    /// Appends hypotheses started from `initial` (unnormalised; see
+    /// [`Glac::hypotheses_from`]).
+    fn build_hypotheses(&self, hypotheses: &mut Hypotheses, initial: &[super::initial::InitialHypothesis]) {
         let v_sigma = if self.params.motion.has_velocity() { self.params.init_velocity_sigma_m_s } else { 0.0 };
         let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
-        let mut hypotheses = Hypotheses::default();
         for h in initial {
             let mut x = h.state;
             if self.axes == 2 {
@@ -622,8 +799,6 @@ impl Glac {
             }
             hypotheses.push(x, p0, h.log_likelihood);
         }
-        hypotheses.normalise();
-        hypotheses
     }
 
     /// Re-acquisition: of the initial candidates, those the tag can have
@@ -646,52 +821,126 @@ impl Glac {
         }
     }
 
+    /// Runs the re-seeding search `job` on within `budget` (what the reads
+    /// left of it): `Some` (the job) while work is left. Its candidates
+    /// are replayed, with their own clocks, through the recent reads up to
+    /// the latest one tracked, then join the live hypotheses.
+    fn advance_reseed(&mut self, job: Reseed, budget: &mut Budget) -> Option<Reseed> {
+        match job {
+            Reseed::Search { mut search, reads } => match search.advance(&self.scene, budget) {
+                None => Some(Reseed::Search { search, reads }),
+                Some(None) => None,
+                Some(Some((t_x, initial))) => {
+                    budget.spend_overhead(initial.len() as u64 * BUILD_UNITS);
+                    let fresh = self.hypotheses_from(&initial);
+                    let replayed_s = reads.last().map_or(t_x, |m| m.time_s);
+                    let reads = reads.into_iter().filter(|m| m.time_s > t_x).collect();
+                    let bias_time_s = vec![f64::NEG_INFINITY; self.bias_time_s.len()];
+                    self.advance_reseed(Reseed::Replay { fresh, time_s: t_x, bias_time_s, reads, replayed_s, progress: None }, budget)
+                }
+            },
+            Reseed::Replay { mut fresh, mut time_s, mut bias_time_s, mut reads, mut replayed_s, mut progress } => {
+                // The candidates and their clocks stand in for the live ones
+                // while they are stepped.
+                std::mem::swap(&mut self.hypotheses, &mut fresh);
+                std::mem::swap(&mut self.time_s, &mut time_s);
+                std::mem::swap(&mut self.bias_time_s, &mut bias_time_s);
+                let done = loop {
+                    if let Some(p) = progress.take() {
+                        progress = self.advance_step(p, budget);
+                        if progress.is_some() {
+                            break false;
+                        }
+                    }
+                    if reads.is_empty() {
+                        // Reads tracked since: the candidates follow them too.
+                        reads.extend(self.recent.iter().copied().filter(|m| m.time_s > replayed_s));
+                        replayed_s = reads.back().map_or(replayed_s, |m| m.time_s);
+                    }
+                    if self.hypotheses.len() == 0 || reads.is_empty() {
+                        break true;
+                    }
+                    if !budget.try_spend_overhead(1) {
+                        break false;
+                    }
+                    let m = reads.pop_front().expect("not empty");
+                    progress = Some(self.begin_fast(&m, Purpose::Reseed));
+                };
+                std::mem::swap(&mut self.hypotheses, &mut fresh);
+                std::mem::swap(&mut self.time_s, &mut time_s);
+                std::mem::swap(&mut self.bias_time_s, &mut bias_time_s);
+                let join = JOIN_UNITS * (fresh.len() + self.hypotheses.len()) as u64;
+                if !done || !budget.try_spend_overhead(1 + join + self.hypotheses.len() as u64 / FINISH_PER_UNIT) {
+                    return Some(Reseed::Replay { fresh, time_s, bias_time_s, reads, replayed_s, progress });
+                }
+                self.join_reseeded(&fresh);
+                None
+            }
+        }
+    }
+
     /// Re-seeding (see `reseed_interval_s`): the initial search over the
     /// recent reads; its candidates are brought to the current time by
     /// replaying those reads through them alone, and the ones no live
     /// hypothesis follows (none within `RESEED_DISTANCE_M`) join with a
     /// total weight of [`RESEED_WEIGHT`], split by their own likelihoods.
     /// The live hypotheses are untouched. Causal: only reads up to now.
+    #[cfg(test)]
     fn reseed(&mut self, now_s: f64) {
+        self.start_reseed(now_s);
+        while let Some(job) = self.reseeding.take() {
+            self.reseeding = self.advance_reseed(job, &mut Budget::unlimited());
+        }
+    }
+
+    /// Starts re-seeding in the background ([`Glac::advance_reseed`]).
+    fn start_reseed(&mut self, now_s: f64) {
         self.seeded_s = now_s;
         self.gated_since_seed = 0;
         self.stats.reseeds += 1;
         let reads: Vec<PhaseRead> = self.recent.iter().copied().collect();
-        let Some(first) = reads.first() else { return };
-        let range_sigma = self.initial_range_sigma(first.frequency_hz);
-        let with_velocity = self.params.motion.has_velocity();
-        // The likeliest few only: the search runs while tracking, and its
-        // replay costs a filter update per candidate and read.
-        let settings = InitialState { max_hypotheses: self.params.initial.max_hypotheses.min(RESEED_MAX_CANDIDATES), ..self.params.initial.clone() };
-        let Some((t_x, initial)) = initial_hypotheses(&self.scene, &reads, &settings, range_sigma, with_velocity) else {
-            return;
-        };
-        let fresh = self.hypotheses_from(&initial);
-        // Replay the reads after t_x through the candidates alone, with
-        // their own clocks; then put the live hypotheses back.
-        let live = std::mem::replace(&mut self.hypotheses, fresh);
-        let (time_s, bias_time_s) = (self.time_s, self.bias_time_s.clone());
-        self.time_s = t_x;
-        self.bias_time_s.fill(f64::NEG_INFINITY);
-        for m in reads.iter().filter(|m| m.time_s > t_x) {
-            if self.hypotheses.len() == 0 {
-                break;
-            }
-            self.step_fast(m);
+        let started = reads.first().and_then(|first| {
+            let range_sigma = self.initial_range_sigma(first.frequency_hz);
+            let with_velocity = self.params.motion.has_velocity();
+            // The likeliest few only: the search runs while tracking, and its
+            // replay costs a filter update per candidate and read.
+            let settings = InitialState { max_hypotheses: self.params.initial.max_hypotheses.min(RESEED_MAX_CANDIDATES), ..self.params.initial.clone() };
+            InitialSearch::new(&self.scene, &reads, &settings, range_sigma, with_velocity)
+        });
+        self.reseeding = started.map(|search| Reseed::Search { search, reads });
+    }
+
+    /// The re-seeded candidates (brought to the current time) that no live
+    /// hypothesis follows join the live ones.
+    fn join_reseeded(&mut self, fresh: &Hypotheses) {
+        // Live positions by RESEED_DISTANCE_M cell: a candidate is followed
+        // when a live hypothesis lies within that distance, so only the 27
+        // cells around it can hold one.
+        let cell = |x: &StateVector| [0, 1, 2].map(|k| (x[k] / RESEED_DISTANCE_M).floor() as i64);
+        let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
+        for j in 0..self.hypotheses.len() {
+            grid.entry(cell(&self.hypotheses.x[j][0])).or_default().push(j);
         }
-        let fresh = std::mem::replace(&mut self.hypotheses, live);
-        self.time_s = time_s;
-        self.bias_time_s = bias_time_s;
-        let followed = |x: &StateVector, h: &Hypotheses| {
-            (0..h.len()).any(|j| (h.x[j][0] - x).fixed_rows::<3>(0).norm() < RESEED_DISTANCE_M)
+        let live = &self.hypotheses;
+        let followed = |x: &StateVector| {
+            let c = cell(x);
+            (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    (-1..=1).any(|dz| {
+                        grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]).is_some_and(|ids| {
+                            ids.iter().any(|&j| (live.x[j][0] - x).fixed_rows::<3>(0).norm() < RESEED_DISTANCE_M)
+                        })
+                    })
+                })
+            })
         };
-        let joining: Vec<usize> = (0..fresh.len()).filter(|&i| !followed(&fresh.x[i][0], &self.hypotheses)).collect();
+        let joining: Vec<usize> = (0..fresh.len()).filter(|&i| !followed(&fresh.x[i][0])).collect();
         if joining.is_empty() {
             return;
         }
         let log_share = RESEED_WEIGHT.ln();
         for &i in &joining {
-            self.hypotheses.append_from(&fresh, i, log_share + fresh.log_likelihood[i]);
+            self.hypotheses.append_from(fresh, i, log_share + fresh.log_likelihood[i]);
         }
         self.prune();
     }
@@ -700,7 +949,11 @@ impl Glac {
     /// into the current group (synchronous).
     fn track(&mut self, m: &PhaseRead) {
         match self.params.inference {
-            Inference::Fast => self.step_fast(m),
+            Inference::Fast => {
+                let mut progress = self.begin_fast(m, Purpose::Reseed);
+                self.run_fast(&mut progress, &mut Budget::unlimited());
+                self.finish_fast(&progress);
+            }
             Inference::Naive => self.step_naive(m),
             Inference::Synchronous => self.step_synchronous(m),
         }
@@ -717,7 +970,13 @@ impl Glac {
     /// the second-nearest candidate, so a cycle slip leaves the true
     /// trajectory alive; the wrong branch dies by quick stop within a few
     /// readings. Bounded by `max_branching_hypotheses`.
-    fn step_fast(&mut self, m: &PhaseRead) {
+    ///
+    /// Spread over reads ([`StepProgress`]): `begin_fast` sets the step up,
+    /// `run_fast` steps hypotheses while the budget lasts, `finish_fast`
+    /// takes the branches and prunes. A chunked step never branches: it
+    /// spans reads only when far more hypotheses than
+    /// `max_branching_hypotheses` are live.
+    fn begin_fast(&mut self, m: &PhaseRead, purpose: Purpose) -> StepProgress {
         let dt = (m.time_s - self.time_s).max(0.0);
         let step = FastStep {
             transition: self.params.motion.transition(dt, self.axes),
@@ -732,36 +991,70 @@ impl Glac {
             axes: self.axes,
         };
         let bias = self.bias_step(m);
+        StepProgress { read: *m, purpose, step, bias, n: self.hypotheses.len(), next: 0, branches: Vec::new() }
+    }
+
+    /// Steps hypotheses `next..n` while `budget` lasts (one unit each);
+    /// true when all are done.
+    fn run_fast(&mut self, s: &mut StepProgress, budget: &mut Budget) -> bool {
         let h = &mut self.hypotheses;
-        let n = h.len();
+        let (n, step, bias) = (s.n, &s.step, &s.bias);
         let branch_limit = self.params.max_branching_hypotheses;
-        // A branch is an exact copy of the predicted hypothesis: it keeps
-        // that prediction (bias, predicted reading, its variance).
-        let mut branches: Vec<(usize, f64, BiasPrediction, f64, f64)> = Vec::new();
-        for i in 0..n {
+        while s.next < n {
+            if !budget.try_spend(1) {
+                return false;
+            }
+            let i = s.next;
+            s.next += 1;
             let (range, variance) = step.predict(h, i);
-            let b = predict_bias(&bias, h, i);
+            let b = predict_bias(bias, h, i);
             // The reading predicts range + bias, with both uncertainties.
             let (predicted, variance) = (range + b.mean, variance + b.variance);
             let z = nearest_candidate(step.residue, step.spacing, predicted);
-            if n + branches.len() < branch_limit && 9.0 * variance > 0.25 * step.spacing * step.spacing {
+            if n + s.branches.len() < branch_limit && 9.0 * variance > 0.25 * step.spacing * step.spacing {
                 let second = if predicted > z { z + step.spacing } else { z - step.spacing };
                 if second >= 0.0 {
+                    // A branch is an exact copy of the predicted hypothesis: it
+                    // keeps that prediction (bias, predicted reading, its variance).
                     h.duplicate(i);
-                    branches.push((h.len() - 1, second, b, predicted, variance));
+                    s.branches.push((h.len() - 1, second, b, predicted, variance));
                 }
             }
             step.update(h, i, z - b.mean, b.variance);
-            update_bias(&bias, h, i, &b, z - predicted, variance);
+            update_bias(bias, h, i, &b, z - predicted, variance);
         }
-        for &(j, z, b, predicted, variance) in &branches {
-            step.update(h, j, z - b.mean, b.variance);
-            update_bias(&bias, h, j, &b, z - predicted, variance);
+        true
+    }
+
+    /// The branches' updates, the counters, the clock and pruning.
+    fn finish_fast(&mut self, s: &StepProgress) {
+        let h = &mut self.hypotheses;
+        for &(j, z, b, predicted, variance) in &s.branches {
+            s.step.update(h, j, z - b.mean, b.variance);
+            update_bias(&s.bias, h, j, &b, z - predicted, variance);
         }
-        let models = if step.manoeuvre.is_some() { 2 } else { 1 };
+        let models = if s.step.manoeuvre.is_some() { 2 } else { 1 };
         self.stats.filter_updates += (h.len() * models) as u64;
-        self.time_s = m.time_s;
+        self.time_s = s.read.time_s;
         self.prune();
+    }
+
+    /// Advances a spread fast step: `Some` while hypotheses are left; at
+    /// its end (when the budget covers it) the step finishes and a tracked
+    /// read gets its per-read handling.
+    fn advance_step(&mut self, mut s: StepProgress, budget: &mut Budget) -> Option<StepProgress> {
+        if !self.run_fast(&mut s, budget) {
+            return Some(s);
+        }
+        let finish = 1 + s.branches.len() as u64 + self.hypotheses.len() as u64 / FINISH_PER_UNIT;
+        if !budget.try_spend_overhead(finish) {
+            return Some(s);
+        }
+        self.finish_fast(&s);
+        if let Purpose::Track(p) = s.purpose {
+            self.after_track(p);
+        }
+        None
     }
 
     /// Naive inference: every hypothesis branches into one child per
@@ -1266,7 +1559,10 @@ fn transition_log_density(x: &StateVector, predicted: &StateVector, t: &Transiti
 }
 
 impl Glac {
-    /// One phase reading (the body of [`Tracker::step`]).
+    /// One phase reading (the body of [`Tracker::step`]): queued, then
+    /// the queue is worked off within the read budget. The estimate is the
+    /// one after this read when the tracker caught up; while work is left,
+    /// nothing (or, re-initialising, the re-acquisition estimate).
     fn step_read(&mut self, m: &PhaseRead) -> Option<Estimate> {
         self.stats.measurements += 1;
         let valid = m.antenna < self.scene.antennas.len()
@@ -1278,37 +1574,136 @@ impl Glac {
             self.stats.invalid += 1;
             return None;
         }
-        if m.time_s < self.last_time_s {
+        if m.time_s < self.arrival_s {
             self.stats.out_of_order += 1;
             return None;
         }
-        if self.phase == Phase::Tracking && m.time_s - self.last_time_s > self.params.reinit_gap_s {
-            self.restart();
+        self.arrival_s = m.time_s;
+        let read = Pending { read: *m, replay: None };
+        // The variants' steps cannot be split (naive: every hypothesis
+        // times every candidate), so they run unbudgeted, as before.
+        let limit = if self.params.inference == Inference::Fast { self.params.read_budget as u64 } else { u64::MAX };
+        let mut budget = Budget::new(limit);
+        if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
+            // Nothing queued (a converged tag): straight in, without
+            // touching the queue's memory.
+            self.work(&mut budget, Some(read));
+        } else {
+            self.pending.push_back(read);
+            self.work(&mut budget, None);
         }
-        self.last_time_s = m.time_s;
-        self.last_frequency_hz = m.frequency_hz;
-        if !self.first_frequency_hz.is_finite() {
-            self.first_frequency_hz = m.frequency_hz;
-        } else if (m.frequency_hz - self.first_frequency_hz).abs() > 1e3 {
-            self.hopped = true;
+        self.stats.max_expanded_per_read = self.stats.max_expanded_per_read.max(budget.expanded());
+        if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
+            self.result.take()
+        } else if self.phase == Phase::Initialising {
+            self.coasting_estimate(m.time_s)
+        } else {
+            None
         }
-        self.antenna_interval_s[m.antenna] = m.time_s - self.antenna_read_s[m.antenna];
-        self.antenna_read_s[m.antenna] = m.time_s;
+    }
+
+    /// Works off the job, the step under way and the queued reads, in that
+    /// order, while `budget` lasts; `first`, a read that would be queued
+    /// last on an empty queue, goes first.
+    fn work(&mut self, budget: &mut Budget, mut first: Option<Pending>) {
+        loop {
+            if let Some(job) = self.job.take() {
+                self.job = self.advance_job(job, budget);
+                if self.job.is_some() {
+                    return;
+                }
+                continue;
+            }
+            if let Some(progress) = self.progress.take() {
+                self.progress = self.advance_step(progress, budget);
+                if self.progress.is_some() {
+                    return;
+                }
+                continue;
+            }
+            let next = match first.take() {
+                Some(read) => read,
+                None => match self.pending.pop_front() {
+                    Some(read) => read,
+                    None => {
+                        if let Some(job) = self.reseeding.take() {
+                            self.reseeding = self.advance_reseed(job, budget);
+                        }
+                        return;
+                    }
+                },
+            };
+            if !budget.try_spend_overhead(1) {
+                self.pending.push_front(next);
+                return;
+            }
+            self.begin_read(next, budget);
+        }
+    }
+
+    /// Takes queued read `p` in: its bookkeeping (a fresh read), then the
+    /// initial buffer or the hypotheses.
+    fn begin_read(&mut self, p: Pending, budget: &mut Budget) {
+        let m = &p.read;
+        if p.replay.is_none() {
+            if self.phase == Phase::Tracking && m.time_s - self.last_time_s > self.params.reinit_gap_s {
+                self.restart();
+            }
+            self.last_time_s = m.time_s;
+            self.last_frequency_hz = m.frequency_hz;
+            if !self.first_frequency_hz.is_finite() {
+                self.first_frequency_hz = m.frequency_hz;
+            } else if (m.frequency_hz - self.first_frequency_hz).abs() > 1e3 {
+                self.hopped = true;
+            }
+            self.antenna_interval_s[m.antenna] = m.time_s - self.antenna_read_s[m.antenna];
+            self.antenna_read_s[m.antenna] = m.time_s;
+        }
         if self.phase == Phase::Initialising {
             self.stats.initialising += 1;
             self.buffer.push(*m);
-            if !self.try_initialise() {
-                return self.coasting_estimate(m.time_s);
+            self.result = None;
+            if !self.try_initialise(m.time_s) {
+                self.result = self.coasting_estimate(m.time_s);
             }
-            return self.remember(self.best_estimate(m.time_s));
+            return;
         }
-        self.track(m);
+        match self.params.inference {
+            Inference::Fast => self.progress = Some(self.begin_fast(m, Purpose::Track(p))),
+            // The variants' steps run whole (their cost: every hypothesis,
+            // times every candidate for the naive one).
+            Inference::Naive | Inference::Synchronous => {
+                let before = self.stats.filter_updates;
+                self.track(m);
+                budget.spend(self.stats.filter_updates - before);
+                self.after_track(p);
+            }
+        }
+    }
+
+    /// The per-read handling after read `p` went through the hypotheses.
+    fn after_track(&mut self, p: Pending) {
+        let m = &p.read;
+        if let Some(report_s) = p.replay {
+            if self.hypotheses.len() == 0 {
+                // Every hypothesis died during the replay: keep collecting.
+                while self.pending.front().is_some_and(|q| q.replay.is_some()) {
+                    self.pending.pop_front();
+                }
+                self.restart();
+                self.result = self.coasting_estimate(report_s);
+            } else if !self.pending.front().is_some_and(|q| q.replay.is_some()) {
+                self.result = self.remember(self.best_estimate(report_s));
+            }
+            return;
+        }
         if self.hypotheses.len() == 0 {
             // Every hypothesis lost lock: start over from this read.
             self.restart();
             self.buffer.push(*m);
             self.stats.initialising += 1;
-            return self.coasting_estimate(m.time_s);
+            self.result = self.coasting_estimate(m.time_s);
+            return;
         }
         if self.params.inference != Inference::Naive && self.best_gated_last() {
             self.stats.outliers += 1;
@@ -1322,14 +1717,16 @@ impl Glac {
             }
             let last_sigma = self.last_good.map_or(0.0, |(_, _, c)| largest_sigma(&c));
             let unresolved = self.hypotheses.len() > 1 && last_sigma > RESEED_SIGMA_M;
-            if m.time_s - self.seeded_s >= self.params.reseed_interval_s && (unresolved || self.gated_since_seed >= 2) {
-                self.reseed(m.time_s);
+            let due = m.time_s - self.seeded_s >= self.params.reseed_interval_s && (unresolved || self.gated_since_seed >= 2);
+            if due && self.reseeding.is_none() {
+                self.start_reseed(m.time_s);
             }
         }
         if self.params.inference == Inference::Synchronous && !self.group.is_empty() {
-            return None; // no new estimate until the group completes
+            self.result = None; // no new estimate until the group completes
+            return;
         }
-        self.remember(self.best_estimate(m.time_s))
+        self.result = self.remember(self.best_estimate(m.time_s));
     }
 
     /// Keeps `estimate` as the last good state (for re-acquisition).
@@ -1394,6 +1791,12 @@ impl Tracker for Glac {
 
     fn reset(&mut self) {
         self.phase = Phase::Initialising;
+        self.pending.clear();
+        self.progress = None;
+        self.job = None;
+        self.reseeding = None;
+        self.result = None;
+        self.arrival_s = f64::NEG_INFINITY;
         self.buffer.clear();
         self.hypotheses.clear();
         self.group.clear();
@@ -1716,6 +2119,76 @@ mod tests {
         assert_eq!(tracker.stats().initialising as usize, first + 1);
         tracker.reset();
         assert_eq!(tracker.hypothesis_count(), 0);
+    }
+
+    /// A mod-π 3D recording (a slow 3D loop, 30 reads/s, σφ ≈ 0.05 rad):
+    /// the initial search leaves thousands of hypotheses.
+    fn mod_pi_3d() -> (Scene, Vec<PhaseRead>, impl Fn(f64) -> Vector3<f64>) {
+        let pos = [[0.0, 0.0], [0.3, 0.0], [0.0, 0.8], [0.8, 0.8]];
+        let antennas = pos
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.9 * i as f64, role: Default::default() })
+            .collect();
+        let region = Region { min: Vector3::new(-0.1, -0.3, 0.05), max: Vector3::new(1.2, 1.2, 1.2) };
+        let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::PI, 0.05, antennas, Some(region), vec![]).unwrap();
+        let truth = |t: f64| {
+            let a = 0.5 * t;
+            Vector3::new(0.45 + 0.2 * a.cos(), 0.4 + 0.2 * a.sin(), 0.6 + 0.1 * a.sin())
+        };
+        let mut state = 7u64;
+        let reads = (0..240)
+            .map(|k| {
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                let noise = 0.1 * (((state >> 11) as f64) / (1u64 << 53) as f64 - 0.5);
+                let t = 0.033 * k as f64;
+                let a = k % 4;
+                let d = (truth(t) - scene.antennas[a].position).norm();
+                let phase = (scene.ideal_phase(a, 915.25e6, d) + noise).rem_euclid(std::f64::consts::PI);
+                PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: phase }
+            })
+            .collect();
+        (scene, reads, truth)
+    }
+
+    /// The read budget bounds the hypotheses expanded (and initial
+    /// candidates scored) per read on a mod-π 3D recording, whose search,
+    /// replay and re-seeding would take many budgets at once; the work is
+    /// carried, not dropped. Without re-seeding (which runs in the
+    /// background, so its candidates join later) every estimate, once
+    /// caught up, is the one an unlimited budget gives.
+    #[test]
+    fn the_read_budget_bounds_each_read_and_keeps_the_result() {
+        let (scene, reads, truth) = mod_pi_3d();
+        let run = |read_budget: usize, reseed_interval_s: f64| {
+            let params = GlacParams { read_budget, reseed_interval_s, ..GlacParams::default() };
+            let mut tracker = Glac::new(scene.clone(), params).unwrap();
+            let estimates: Vec<Option<Estimate>> = reads.iter().map(|m| tracker.step(&Measurement::Phase(*m))).collect();
+            (tracker.stats(), estimates)
+        };
+        let count = |e: &[Option<Estimate>]| e.iter().filter(|e| e.is_some()).count();
+        let budget = 2_000;
+        for reseed_interval_s in [0.0, 1.0] {
+            let (bounded, late) = run(budget, reseed_interval_s);
+            let (unbounded, prompt) = run(usize::MAX, reseed_interval_s);
+            assert!(bounded.max_expanded_per_read <= budget as u64, "{bounded:?}");
+            assert!(unbounded.max_expanded_per_read > 4 * budget as u64, "the recording must need the budget: {unbounded:?}");
+            assert!(bounded.max_hypotheses > budget as u64, "a step through more hypotheses than the budget spans reads");
+            assert!(count(&late) > 100 && count(&late) < count(&prompt), "{} of {}", count(&late), count(&prompt));
+            let error = |e: &[Option<Estimate>]| {
+                let last = e.last().unwrap().as_ref().expect("caught up by the end");
+                (Vector3::from(last.position) - truth(reads.last().unwrap().time_s)).norm()
+            };
+            assert!(error(&late) <= error(&prompt) + 0.005);
+            if reseed_interval_s == 0.0 {
+                assert_eq!(bounded.filter_updates, unbounded.filter_updates, "the same work, spread");
+                for (k, (a, b)) in late.iter().zip(&prompt).enumerate() {
+                    if let (Some(a), Some(b)) = (a, b) {
+                        assert_eq!((a.position, a.covariance), (b.position, b.covariance), "read {k}");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

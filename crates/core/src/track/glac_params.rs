@@ -237,6 +237,14 @@ pub fn glac_table() -> Table<GlacParams> {
                 |p, v| p.model_switch_probability = v,
             ),
             integer(
+                "read_budget",
+                Range::at_least(1.0),
+                "units",
+                "most work one read does (1 unit ~ one hypothesis through one read, ~0.2 us): the initial search, replays and re-seeding carry the rest to the tag's next reads, which report nothing (or the re-acquisition estimate) until it is done (fast inference)",
+                |p| p.read_budget,
+                |p, v| p.read_budget = v,
+            ),
+            integer(
                 "max_branching_hypotheses",
                 Range::NON_NEGATIVE,
                 "hypotheses",

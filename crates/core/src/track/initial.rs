@@ -23,6 +23,7 @@
 use nalgebra::{Matrix3, Vector2, Vector3};
 
 use super::candidates::nearest_candidate;
+use super::read_budget::Budget;
 use super::PhaseRead;
 use crate::filter::log_gaussian;
 use crate::geometry::{circle_intersections, multilaterate, sphere_intersections};
@@ -125,7 +126,8 @@ impl AntennaCandidates {
 ///
 /// `reads` must be time-ordered. `range_sigma_m` is the 1-sigma range noise
 /// implied by the phase noise (σ_φ λ / 4π). `with_velocity == false` gives
-/// zero velocities (the no-velocity variant).
+/// zero velocities (the no-velocity variant). The whole search at once:
+/// [`InitialSearch`] runs it a budget at a time.
 pub fn initial_hypotheses(
     scene: &Scene,
     reads: &[PhaseRead],
@@ -133,91 +135,311 @@ pub fn initial_hypotheses(
     range_sigma_m: f64,
     with_velocity: bool,
 ) -> Option<(f64, Vec<InitialHypothesis>)> {
-    let n_antennas = scene.antennas.len();
-    let mut per_antenna: Vec<Vec<&PhaseRead>> = vec![Vec::new(); n_antennas];
-    for m in reads {
-        per_antenna[m.antenna].push(m);
-    }
-    let usable: Vec<usize> = (0..n_antennas).filter(|&a| per_antenna[a].len() >= 2).collect();
-    if usable.len() < 3 {
-        return None;
-    }
-    // t_x: the latest time at which every usable antenna has been read, so
-    // the hypotheses start as late (as close to "now") as possible and one
-    // antenna's value at t_x is a reading, not an interpolation.
-    let t_x = usable.iter().map(|&a| per_antenna[a].last().unwrap().time_s).fold(f64::INFINITY, f64::min);
+    let mut search = InitialSearch::new(scene, reads, settings, range_sigma_m, with_velocity)?;
+    search.advance(scene, &mut Budget::unlimited()).expect("an unlimited budget completes the search")
+}
 
-    let axes = scene.dimensions;
-    let (usable, lists): (Vec<usize>, Vec<AntennaCandidates>) = usable
-        .iter()
-        .filter_map(|&a| synchronise(scene, a, &per_antenna[a], t_x, settings).map(|l| (a, l)))
-        .unzip();
-    if usable.len() < 3 || lists.iter().any(|l| l.candidates.is_empty()) {
-        return None;
+/// Work units (see [`Budget`]) of one trilateration of a candidate triple
+/// (a sphere or circle intersection with its region test: half a hypothesis
+/// step, measured).
+const INTERSECTIONS_PER_UNIT: u64 = 2;
+/// Largest work of refining one intersection point: two least-squares
+/// fixes, the likelihood, and up to 64 velocity combinations.
+const REFINE_MAX_UNITS: u64 = 112;
+/// Work of taking one hypothesis off the heap and checking it against the
+/// kept ones (a grid lookup of the 27 neighbouring cells; ~0.25 µs per
+/// unit measured in this stage at 4 units, so 8).
+const MERGE_UNITS: u64 = 8;
+
+/// Where a search stands.
+#[derive(Debug, Clone)]
+enum Stage {
+    /// Trilaterating candidate triples: the next (first, second) antenna
+    /// candidate indices of the best triple.
+    Intersect { first: usize, second: usize },
+    /// Refining the intersection points, the next one.
+    Refine { next: usize },
+    /// Taking hypotheses best first and merging near-duplicates.
+    Merge,
+}
+
+/// Initial state pruning run a budget at a time ([`InitialSearch::advance`]):
+/// the same steps and the same result as [`initial_hypotheses`], spread
+/// over as many calls as the budgets need.
+pub struct InitialSearch {
+    t_x: f64,
+    axes: usize,
+    settings: InitialState,
+    with_velocity: bool,
+    anchors: Vec<Vector3<f64>>,
+    lists: Vec<AntennaCandidates>,
+    triple: [usize; 3],
+    r0: f64,
+    stage: Stage,
+    points: Chunked<Vector3<f64>>,
+    /// Refined hypotheses, best (then earliest) first off the heap.
+    ranked: std::collections::BinaryHeap<Ranked>,
+    hypotheses: Chunked<Option<InitialHypothesis>>,
+    kept: Vec<InitialHypothesis>,
+    /// Kept positions by merge-distance cell (the merge test looks at the
+    /// 27 cells around a position instead of every kept one).
+    grid: std::collections::HashMap<[i64; 3], Vec<usize>>,
+}
+
+/// A growing list in fixed-size blocks: the search's points and refined
+/// hypotheses run to megabytes in mod-π 3D, and one `Vec` doubling there
+/// copies them all (and faults in fresh pages) within a single read.
+struct Chunked<T> {
+    blocks: Vec<Vec<T>>,
+    len: usize,
+}
+
+/// Elements per block of [`Chunked`].
+const BLOCK: usize = 4096;
+
+impl<T> Default for Chunked<T> {
+    fn default() -> Self {
+        Self { blocks: Vec::new(), len: 0 }
+    }
+}
+
+impl<T> Chunked<T> {
+    fn push(&mut self, value: T) {
+        if self.len % BLOCK == 0 {
+            self.blocks.push(Vec::with_capacity(BLOCK));
+        }
+        self.blocks.last_mut().expect("a block was pushed").push(value);
+        self.len += 1;
     }
 
-    let anchors: Vec<Vector3<f64>> = usable.iter().map(|&a| scene.antennas[a].position).collect();
-    let triple = best_triple(&anchors, axes)?;
-    let tolerance = settings.residual_threshold_m;
-    let mut points: Vec<Vector3<f64>> = Vec::new();
-    let (l0, l1, l2) = (&lists[triple[0]], &lists[triple[1]], &lists[triple[2]]);
-    let (a0, a1, a2) = (anchors[triple[0]], anchors[triple[1]], anchors[triple[2]]);
-    let in_region = |p: &Vector3<f64>| {
-        scene.region.as_ref().is_none_or(|r| r.contains(p, settings.region_margin_m, axes))
-    };
-    for c0 in &l0.candidates {
-        for c1 in &l1.candidates {
-            if (c0.distance - c1.distance).abs() > (a0 - a1).norm() + tolerance {
-                continue; // spheres cannot meet: skip the inner loop early
-            }
-            for c2 in &l2.candidates {
-                if axes == 3 {
-                    if let Some(pair) =
-                        sphere_intersections(&a0, c0.distance, &a1, c1.distance, &a2, c2.distance, tolerance)
-                    {
-                        points.extend(pair.into_iter().filter(in_region));
+    fn len(&self) -> usize {
+        self.len
+    }
+
+    fn get(&self, i: usize) -> &T {
+        &self.blocks[i / BLOCK][i % BLOCK]
+    }
+
+    fn get_mut(&mut self, i: usize) -> &mut T {
+        &mut self.blocks[i / BLOCK][i % BLOCK]
+    }
+}
+
+/// A refined hypothesis' place in the best-first order: higher likelihood
+/// first, ties by discovery order (what a stable sort gives).
+#[derive(Debug, Clone, Copy)]
+struct Ranked {
+    log_likelihood: f64,
+    index: usize,
+}
+
+impl PartialEq for Ranked {
+    fn eq(&self, other: &Self) -> bool {
+        self.cmp(other) == std::cmp::Ordering::Equal
+    }
+}
+impl Eq for Ranked {}
+impl PartialOrd for Ranked {
+    fn partial_cmp(&self, other: &Self) -> Option<std::cmp::Ordering> {
+        Some(self.cmp(other))
+    }
+}
+impl Ord for Ranked {
+    fn cmp(&self, other: &Self) -> std::cmp::Ordering {
+        self.log_likelihood.total_cmp(&other.log_likelihood).then(other.index.cmp(&self.index))
+    }
+}
+
+impl InitialSearch {
+    /// Synchronises the reads (cheap: a few candidates per antenna) and
+    /// sets the search up; `None` when the reads do not allow one.
+    pub fn new(
+        scene: &Scene,
+        reads: &[PhaseRead],
+        settings: &InitialState,
+        range_sigma_m: f64,
+        with_velocity: bool,
+    ) -> Option<Self> {
+        let n_antennas = scene.antennas.len();
+        let mut per_antenna: Vec<Vec<&PhaseRead>> = vec![Vec::new(); n_antennas];
+        for m in reads {
+            per_antenna[m.antenna].push(m);
+        }
+        let usable: Vec<usize> = (0..n_antennas).filter(|&a| per_antenna[a].len() >= 2).collect();
+        if usable.len() < 3 {
+            return None;
+        }
+        // t_x: the latest time at which every usable antenna has been read, so
+        // the hypotheses start as late (as close to "now") as possible and one
+        // antenna's value at t_x is a reading, not an interpolation.
+        let t_x = usable.iter().map(|&a| per_antenna[a].last().unwrap().time_s).fold(f64::INFINITY, f64::min);
+
+        let axes = scene.dimensions;
+        let (usable, lists): (Vec<usize>, Vec<AntennaCandidates>) = usable
+            .iter()
+            .filter_map(|&a| synchronise(scene, a, &per_antenna[a], t_x, settings).map(|l| (a, l)))
+            .unzip();
+        if usable.len() < 3 || lists.iter().any(|l| l.candidates.is_empty()) {
+            return None;
+        }
+        let anchors: Vec<Vector3<f64>> = usable.iter().map(|&a| scene.antennas[a].position).collect();
+        let triple = best_triple(&anchors, axes)?;
+        let r0 = range_sigma_m * range_sigma_m + settings.interpolation_sigma_m.powi(2);
+        Some(Self {
+            t_x,
+            axes,
+            settings: settings.clone(),
+            with_velocity,
+            anchors,
+            lists,
+            triple,
+            r0,
+            stage: Stage::Intersect { first: 0, second: 0 },
+            points: Chunked::default(),
+            ranked: std::collections::BinaryHeap::new(),
+            hypotheses: Chunked::default(),
+            kept: Vec::new(),
+            grid: std::collections::HashMap::new(),
+        })
+    }
+
+    /// Runs the search on within `budget`: `None` while work is left (call
+    /// again with the next read's budget), then the result of
+    /// [`initial_hypotheses`].
+    pub fn advance(&mut self, scene: &Scene, budget: &mut Budget) -> Option<Option<(f64, Vec<InitialHypothesis>)>> {
+        let axes = self.axes;
+        let settings = &self.settings;
+        let in_region = |p: &Vector3<f64>| {
+            scene.region.as_ref().is_none_or(|r| r.contains(p, settings.region_margin_m, axes))
+        };
+        if let Stage::Intersect { mut first, mut second } = self.stage {
+            let tolerance = settings.residual_threshold_m;
+            let [t0, t1, t2] = self.triple;
+            let (l0, l1, l2) = (&self.lists[t0], &self.lists[t1], &self.lists[t2]);
+            let (a0, a1, a2) = (self.anchors[t0], self.anchors[t1], self.anchors[t2]);
+            let row_units = (l2.candidates.len() as u64).div_ceil(INTERSECTIONS_PER_UNIT);
+            while first < l0.candidates.len() {
+                let c0 = l0.candidates[first];
+                while second < l1.candidates.len() {
+                    let c1 = l1.candidates[second];
+                    if (c0.distance - c1.distance).abs() > (a0 - a1).norm() + tolerance {
+                        second += 1;
+                        continue; // spheres cannot meet: skip the inner loop early
                     }
-                } else if let Some(p) = perimeter_centroid(
-                    [a0, a1, a2],
-                    [c0.distance, c1.distance, c2.distance],
-                    scene.plane_z,
-                    settings.perimeter_threshold_m,
-                    tolerance,
-                ) {
-                    if in_region(&p) {
-                        points.push(p);
+                    if !budget.try_spend(row_units) {
+                        self.stage = Stage::Intersect { first, second };
+                        return None;
                     }
+                    for c2 in &l2.candidates {
+                        if axes == 3 {
+                            if let Some(pair) =
+                                sphere_intersections(&a0, c0.distance, &a1, c1.distance, &a2, c2.distance, tolerance)
+                            {
+                                for p in pair.into_iter().filter(in_region) {
+                                    self.points.push(p);
+                                }
+                            }
+                        } else if let Some(p) = perimeter_centroid(
+                            [a0, a1, a2],
+                            [c0.distance, c1.distance, c2.distance],
+                            scene.plane_z,
+                            settings.perimeter_threshold_m,
+                            tolerance,
+                        ) {
+                            if in_region(&p) {
+                                self.points.push(p);
+                            }
+                        }
+                    }
+                    second += 1;
                 }
+                second = 0;
+                first += 1;
+            }
+            self.stage = Stage::Refine { next: 0 };
+        }
+        if let Stage::Refine { mut next } = self.stage {
+            let mut distances = vec![0.0; self.lists.len()];
+            let mut rates = vec![0.0; self.lists.len()];
+            while next < self.points.len() {
+                if !budget.affords(REFINE_MAX_UNITS) {
+                    self.stage = Stage::Refine { next };
+                    return None;
+                }
+                let (hypothesis, units) = self.refine(*self.points.get(next), &in_region, &mut distances, &mut rates);
+                budget.spend(units);
+                if let Some(h) = hypothesis {
+                    self.ranked.push(Ranked { log_likelihood: h.log_likelihood, index: self.hypotheses.len() });
+                    self.hypotheses.push(Some(h));
+                }
+                next += 1;
+            }
+            self.points = Chunked::default();
+            self.stage = Stage::Merge;
+        }
+        // Best first, then merge near-duplicates (the same fix reached from
+        // several intersection points).
+        let md = settings.merge_distance_m;
+        let cell = |p: &Vector3<f64>| {
+            if md > 0.0 {
+                [(p.x / md).floor() as i64, (p.y / md).floor() as i64, (p.z / md).floor() as i64]
+            } else {
+                [0; 3]
+            }
+        };
+        while self.kept.len() < settings.max_hypotheses {
+            if !budget.try_spend(MERGE_UNITS) {
+                return None;
+            }
+            let Some(top) = self.ranked.pop() else { break };
+            let h = self.hypotheses.get_mut(top.index).take().expect("each hypothesis leaves the heap once");
+            let p: Vector3<f64> = h.state.fixed_rows::<3>(0).into();
+            let c = cell(&p);
+            let kept = &self.kept;
+            let near = (-1..=1).any(|dx| {
+                (-1..=1).any(|dy| {
+                    (-1..=1).any(|dz| {
+                        self.grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]).is_some_and(|ids| {
+                            ids.iter().any(|&k| (kept[k].state.fixed_rows::<3>(0) - p).norm() <= md)
+                        })
+                    })
+                })
+            });
+            if !near {
+                self.grid.entry(c).or_default().push(self.kept.len());
+                self.kept.push(h);
             }
         }
+        let kept = std::mem::take(&mut self.kept);
+        Some(if kept.is_empty() { None } else { Some((self.t_x, kept)) })
     }
 
-    let r0 = range_sigma_m * range_sigma_m + settings.interpolation_sigma_m.powi(2);
-    let mut hypotheses: Vec<InitialHypothesis> = Vec::new();
-    let mut distances = vec![0.0; lists.len()];
-    let mut rates = vec![0.0; lists.len()];
-    for start in points {
+    /// Refines one intersection point (two rounds of "pick nearest
+    /// candidates, then least squares": the first pick at the rough
+    /// intersection, the second at the refined position), scores it and
+    /// finds its velocity: the hypothesis, if it passes, and the work done.
+    fn refine(
+        &self,
+        start: Vector3<f64>,
+        in_region: &impl Fn(&Vector3<f64>) -> bool,
+        distances: &mut [f64],
+        rates: &mut [f64],
+    ) -> (Option<InitialHypothesis>, u64) {
+        let (axes, lists, anchors, settings) = (self.axes, &self.lists, &self.anchors, &self.settings);
         let mut p = start;
-        // Two rounds of "pick nearest candidates, then least squares": the
-        // first pick is made at the rough intersection, the second at the
-        // refined position.
-        let mut ok = true;
         for _ in 0..2 {
             for (k, list) in lists.iter().enumerate() {
                 let c = list.nearest((p - anchors[k]).norm());
                 distances[k] = c.distance;
                 rates[k] = c.range_rate;
             }
-            match multilaterate(&anchors, &distances, p, axes, 6) {
+            match multilaterate(anchors, distances, p, axes, 6) {
                 Some(fix) => p = fix.position,
-                None => {
-                    ok = false;
-                    break;
-                }
+                None => return (None, 8),
             }
         }
-        if !ok || !in_region(&p) {
-            continue;
+        if !in_region(&p) {
+            return (None, 8);
         }
         let mut log_likelihood = 0.0;
         let mut max_residual: f64 = 0.0;
@@ -227,39 +449,21 @@ pub fn initial_hypotheses(
             distances[k] = c.distance;
             rates[k] = c.range_rate;
             max_residual = max_residual.max((d - c.distance).abs());
-            log_likelihood += log_gaussian(d - c.distance, r0);
+            log_likelihood += log_gaussian(d - c.distance, self.r0);
         }
         if max_residual > settings.residual_threshold_m {
-            continue;
+            return (None, 8);
         }
-        let velocity = if with_velocity {
-            best_velocity(&p, &anchors, &lists, &mut rates, axes, r0, settings)
+        let (velocity, combinations) = if self.with_velocity {
+            best_velocity(&p, anchors, lists, rates, axes, self.r0, settings)
         } else {
-            Vector3::zeros()
+            (Vector3::zeros(), 0)
         };
         let mut state = StateVector::zeros();
         state.fixed_rows_mut::<3>(0).copy_from(&p);
         state.fixed_rows_mut::<3>(3).copy_from(&velocity);
-        hypotheses.push(InitialHypothesis { state, log_likelihood, max_residual_m: max_residual });
-    }
-
-    // Best first, then merge near-duplicates (the same fix reached from
-    // several intersection points).
-    hypotheses.sort_by(|a, b| b.log_likelihood.total_cmp(&a.log_likelihood));
-    let mut kept: Vec<InitialHypothesis> = Vec::new();
-    for h in hypotheses {
-        let p = h.state.fixed_rows::<3>(0);
-        if kept.iter().all(|k| (k.state.fixed_rows::<3>(0) - p).norm() > settings.merge_distance_m) {
-            kept.push(h);
-            if kept.len() >= settings.max_hypotheses {
-                break;
-            }
-        }
-    }
-    if kept.is_empty() {
-        None
-    } else {
-        Some((t_x, kept))
+        let units = (16 + 3 * combinations as u64 / 2).min(REFINE_MAX_UNITS);
+        (Some(InitialHypothesis { state, log_likelihood, max_residual_m: max_residual }), units)
     }
 }
 
@@ -404,7 +608,8 @@ fn perimeter_centroid(
 /// threshold is tried (at most 64), and the one whose least-squares
 /// velocity explains the range rates best wins, with a weak prior towards
 /// slow motion (σ = max_speed / 2) that decides when there is no
-/// redundancy (three antennas). Writes the chosen rates into `rates`.
+/// redundancy (three antennas). Writes the chosen rates into `rates`;
+/// returns the velocity and the combinations tried.
 fn best_velocity(
     p: &Vector3<f64>,
     anchors: &[Vector3<f64>],
@@ -413,7 +618,7 @@ fn best_velocity(
     axes: usize,
     range_variance: f64,
     settings: &InitialState,
-) -> Vector3<f64> {
+) -> (Vector3<f64>, usize) {
     let options: Vec<Vec<Candidate>> = lists
         .iter()
         .zip(anchors)
@@ -421,7 +626,7 @@ fn best_velocity(
         .collect();
     let combinations: usize = options.iter().map(|o| o.len()).product();
     if combinations == 1 {
-        return projected_velocity(p, anchors, rates, axes);
+        return (projected_velocity(p, anchors, rates, axes), 1);
     }
     let prior = 1.0 / (0.5 * settings.max_speed_m_s).powi(2);
     let mut trial = rates.to_vec();
@@ -449,7 +654,7 @@ fn best_velocity(
             rates.copy_from_slice(&trial);
         }
     }
-    best_velocity
+    (best_velocity, combinations.min(64))
 }
 
 /// Least-squares velocity from projected velocities: eᵢ · V = ṙᵢ with eᵢ

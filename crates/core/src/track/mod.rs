@@ -23,6 +23,7 @@ pub mod glac_params;
 mod initial;
 mod key_hash;
 mod line_twins;
+mod read_budget;
 pub mod lobes;
 pub mod registry;
 mod rfind;
@@ -191,6 +192,9 @@ pub struct TrackerStats {
     /// Times the particles moved to another lobe because its accumulated
     /// evidence passed the switch level (TurboTrack's lobe test).
     pub lobe_switches: u64,
+    /// Most work one read did (GLAC: hypothesis steps plus initial-search
+    /// work, in the units of its `read_budget`).
+    pub max_expanded_per_read: u64,
 }
 
 impl TrackerStats {
