@@ -309,6 +309,10 @@ const RESEED_DISTANCE_M: f64 = 0.01;
 /// quarter of the λ/2 candidate spacing.
 const RESEED_SIGMA_M: f64 = 0.04;
 
+/// Hypothesis arrays larger than this (and four times what is live) are
+/// shrunk after pruning ([`Hypotheses::retain`]).
+const SHRINK_CAPACITY: usize = 32;
+
 /// Antennas (by index) that get a bias state; further ones count their
 /// bias as white noise. Fixed-size so a hypothesis allocates nothing.
 pub const MAX_BIASES: usize = 8;
@@ -410,6 +414,21 @@ impl Hypotheses {
         self.outliers.truncate(w);
         self.bias.truncate(w);
         self.bias_variance.truncate(w);
+        // A tag that has narrowed to a few trajectories gives back the room
+        // its search needed (about 0.8 kB a hypothesis; 100+ while it
+        // initialises): 10,000 converged tags then hold kilobytes each,
+        // not the initial search's peak. Regrowing on a later branching is
+        // one allocation per array.
+        if self.x.capacity() > SHRINK_CAPACITY && self.x.capacity() > 4 * w {
+            let room = w.max(SHRINK_CAPACITY / 2);
+            self.x.shrink_to(room);
+            self.p.shrink_to(room);
+            self.mu.shrink_to(room);
+            self.log_likelihood.shrink_to(room);
+            self.outliers.shrink_to(room);
+            self.bias.shrink_to(room);
+            self.bias_variance.shrink_to(room);
+        }
     }
 
     /// Index of the likeliest hypothesis (the one reported), if any.
@@ -1829,6 +1848,30 @@ pub fn correlated_variance_factor(rho: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::scene::{Antenna, Region};
+
+    #[test]
+    fn pruning_to_a_few_hypotheses_gives_back_their_room() {
+        let mut h = Hypotheses::with_capacity(200);
+        for k in 0..200 {
+            h.push(StateVector::repeat(k as f64), StateMatrix::identity(), -(k as f64));
+        }
+        h.retain(|i| i % 10 == 0); // 20 of 200 left: shrunk to what is live
+        assert_eq!(h.len(), 20);
+        assert!(h.x.capacity() < 200 && h.p.capacity() < 200 && h.bias_variance.capacity() < 200);
+        h.retain(|i| i == 3);
+        assert_eq!(h.len(), 1);
+        assert_eq!(h.x[0][0][0], 30.0, "retain keeps order and contents");
+        for capacity in [h.x.capacity(), h.p.capacity(), h.mu.capacity(), h.log_likelihood.capacity(), h.outliers.capacity(), h.bias.capacity()] {
+            assert!(capacity <= SHRINK_CAPACITY, "capacity {capacity} after converging");
+        }
+        // Small arrays are left alone (no churn while a few hypotheses live).
+        let mut small = Hypotheses::with_capacity(SHRINK_CAPACITY);
+        for _ in 0..SHRINK_CAPACITY {
+            small.push(StateVector::zeros(), StateMatrix::identity(), 0.0);
+        }
+        small.retain(|i| i == 0);
+        assert_eq!(small.x.capacity(), SHRINK_CAPACITY);
+    }
 
     fn scene() -> Scene {
         let pos = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]];
