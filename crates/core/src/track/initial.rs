@@ -205,7 +205,12 @@ impl<T> Default for Chunked<T> {
 
 impl<T> Chunked<T> {
     fn push(&mut self, value: T) {
-        if self.len % BLOCK == 0 {
+        // The first block grows as a Vec (a small search, the common case,
+        // holds only what it found: 10,000 tags may search at once); full
+        // blocks after it are allocated whole.
+        if self.blocks.is_empty() {
+            self.blocks.push(Vec::new());
+        } else if self.len % BLOCK == 0 {
             self.blocks.push(Vec::with_capacity(BLOCK));
         }
         self.blocks.last_mut().expect("a block was pushed").push(value);
