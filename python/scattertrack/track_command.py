@@ -126,16 +126,14 @@ def track_reads(args, scene, params: dict) -> int:
     if streams(args) and track_streamed(args, scene, params):
         return 0
     reads = io.read_reads(args.reads, scene)
-    say(f"read {plural(len(reads), 'read')} of {plural(len(reads.epcs()), 'tag')} from {args.reads}")
-    say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
+    say_reads_loaded(len(reads), len(reads.epcs()), args.reads, reads.reordered)
     warn_about_geometry(scene, reads)
     ros2_out = bool(args.mcap or args.ros2_bag)
     transform = outputs_command.ros2_transform(args)
     result, wall_s = run_tracker(args.method, scene, reads, params, show_progress(args), covariance=ros2_out)
     say_tracked(args.method, result, write_track_file(args.out, result))
     outputs_command.write_ros2_files(args, result, scene, transform)
-    if not len(result):
-        say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
+    say_if_no_estimates(result)
     print_tracker_summary(result, reads, wall_s)
     return 0
 
@@ -159,14 +157,24 @@ def track_streamed(args, scene, params: dict) -> bool:
         say(f"warning: {args.reads}: {reason}: reading the whole file instead of streaming it")
         return False
     reads = result.reads
-    say(f"read {plural(len(reads), 'read')} of {plural(len(reads.tags), 'tag')} from {args.reads}")
-    say(f"  {reads.reordered} rows out of time order (sorted, not dropped)")
+    say_reads_loaded(len(reads), len(reads.tags), args.reads, reads.reordered)
     warn_about_geometry(scene, reads)
-    say(f"tracked with {args.method}: wrote {plural(len(result), 'row')} of {plural(result.tracked_tags, 'tag')} to {Path(args.out)}")
-    if not len(result):
-        say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
+    say_tracked(args.method, result, Path(args.out), tags=result.tracked_tags)
+    say_if_no_estimates(result)
     print_tracker_summary(result, reads, result.wall_s)
     return True
+
+
+def say_reads_loaded(count: int, tags: int, path, reordered: int) -> None:
+    """The lines after reading reads.csv: reads, tags, and rows sorted back into time order."""
+    say(f"read {plural(count, 'read')} of {plural(tags, 'tag')} from {path}")
+    say(f"  {reordered} rows out of time order (sorted, not dropped)")
+
+
+def say_if_no_estimates(result) -> None:
+    """Why a reads track came out empty."""
+    if not len(result):
+        say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
 
 
 def warn_about_geometry(scene, reads) -> None:
@@ -363,9 +371,11 @@ def write_track_file(path, result) -> Path:
     return out
 
 
-def say_tracked(method: str, result, out: Path) -> None:
-    """The line after tracking tags: rows and tags written, and where."""
-    say(f"tracked with {method}: wrote {plural(len(result), 'row')} of {plural(len(set(result.epc.tolist())), 'tag')} to {out}")
+def say_tracked(method: str, result, out: Path, tags: int | None = None) -> None:
+    """The line after tracking tags: rows and tags written (``tags``, or counted from the track), and where."""
+    if tags is None:
+        tags = len(set(result.epc.tolist()))
+    say(f"tracked with {method}: wrote {plural(len(result), 'row')} of {plural(tags, 'tag')} to {out}")
 
 
 def run_tracker(method: str, scene, reads, params: dict, progress: bool, covariance: bool = False):

@@ -13,15 +13,11 @@ from __future__ import annotations
 import numpy as np
 
 from scattertrack.io.types import Reads, Scene, Track
-from scattertrack.track.columns import track_from_columns
+from scattertrack.track.columns import READS_DECLINED, track_from_columns
 from scattertrack.track.core import CoreTracker
 
 # Reasons under which declined reads are reported (Track.skipped).
-_DECLINED = {
-    "out_of_order": "read out of time order (declined by tracker)",
-    "invalid": "invalid read (declined by tracker)",
-    "outliers": "outlier read (3-sigma gate: replaced by prediction)",
-}
+_DECLINED = READS_DECLINED
 
 
 def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chunk: int = 50_000, covariance: bool = False, **params) -> Track:

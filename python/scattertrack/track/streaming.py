@@ -35,15 +35,12 @@ from scattertrack.io.types import Scene, SkipReport
 from scattertrack.physics import SPEED_OF_LIGHT
 from scattertrack.track import make
 from scattertrack.track import plausibility
+from scattertrack.track.columns import READS_DECLINED, declined_skips, position_sigma
 
 __all__ = ["NeedsWholeFile", "StreamedReads", "StreamedTrack", "track_file"]
 
-DECLINED = {
-    "out_of_order": "read out of time order (declined by tracker)",
-    "invalid": "invalid read (declined by tracker)",
-    "outliers": "outlier read (3-sigma gate: replaced by prediction)",
-}
-"""The tracker's counters reported as skipped reads, worded as ``track.run`` words them (a test holds them equal)."""
+DECLINED = READS_DECLINED
+"""The tracker's counters reported as skipped reads (the same table as ``track.run``'s)."""
 
 SPEED_SAMPLES = 512
 """Track speeds kept per tag for the static-tag check's median (4 kB a tag): every one up to 17 s of 30 rows/s."""
@@ -347,8 +344,7 @@ def _track_stream(method: str, scene: Scene, reads_path, out_path, params: dict,
         row = out["row"]
         if not len(row):
             return
-        covariance = out["covariance"]
-        sigma = np.sqrt(np.clip(covariance[:, [0, 7, 14]], 0.0, None))
+        sigma = position_sigma(out["covariance"])
         tag = batch["epc"][row]
         writer.write(out["time_s"], tag, texts, out["position"], out["velocity"], sigma)
         figures.add(written[0], tag, sigma, out["velocity"], unresolved_sigma_m)
@@ -377,11 +373,7 @@ def _track_stream(method: str, scene: Scene, reads_path, out_path, params: dict,
     texts = stream.epc_texts
     names = sorted(range(len(texts)), key=texts.__getitem__)
     stats = {texts[code]: engines.stats(code) for code in names}
-    skipped = SkipReport(dict(stream.skipped.counts), {k: list(v) for k, v in stream.skipped.examples.items()})
-    for tag_stats in stats.values():
-        for key, reason in DECLINED.items():
-            if tag_stats.get(key, 0):
-                skipped.add(reason, n=int(tag_stats[key]))
+    skipped = declined_skips(stream.skipped, stats, DECLINED)
     figures.grow(len(texts))
     keys = list(channels)
     counts = (np.array([k[0] for k in keys], dtype=np.float64), np.array([k[1] for k in keys], dtype=np.int64),
