@@ -391,6 +391,8 @@ def _names(text: str, known, what: str) -> list[str]:
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=100, help="seeds per cell, 0..N-1 (default 100)")
+    parser.add_argument("--first-seed", type=int, default=0,
+                        help="first seed (default 0; defaults are chosen on 1000 and above)")
     parser.add_argument("--layouts", default=",".join(LAYOUTS), help=f"comma-separated (default {','.join(LAYOUTS)})")
     parser.add_argument(
         "--conditions", default=",".join(CONDITIONS), help=f"comma-separated (default {','.join(CONDITIONS)})"
@@ -411,7 +413,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     layouts = _names(args.layouts, LAYOUTS, "layout")
     conditions = _names(args.conditions, CONDITIONS, "condition")
-    seeds = list(range(args.seeds))
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     started = time.perf_counter()
     params = st_parameters.parse("glac", [tuple(p.split("=", 1)) for p in args.param])
     cells, realistic_row = run_cells(

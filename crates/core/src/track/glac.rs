@@ -133,6 +133,14 @@ pub struct GlacParams {
     /// weight ([`RESEED_WEIGHT`]). A true trajectory that the first search
     /// missed, or that was pruned, can so come back.
     pub reseed_interval_s: f64,
+    /// Longest interval between re-seeding searches while the track stays
+    /// unresolved, seconds: each search started only because competing
+    /// hypotheses remain doubles the interval up to this, and gated reads
+    /// or a resolved track bring it back to `reseed_interval_s`. A tag
+    /// whose reads cannot decide (a near-twin geometry) keeps its
+    /// candidates alive; searching again every second would find the same
+    /// ones at ~200 times the cost of tracking them.
+    pub reseed_max_interval_s: f64,
     /// Fastest the tag can move, m/s: after a restart (a read gap, or lost
     /// lock) the new search keeps only candidates within
     /// `max_speed_m_s · gap + 3σ` of the last estimate, and until it
@@ -192,6 +200,7 @@ impl Default for GlacParams {
             reinit_gap_s: 1.0,
             max_speed_m_s: 1.0,
             reseed_interval_s: 1.0,
+            reseed_max_interval_s: 8.0,
             region_margin_m: 0.05,
             merge_distance_m: 0.002,
             max_hypotheses: 200_000,
@@ -223,6 +232,7 @@ impl GlacParams {
             ("gate_sigmas", self.gate_sigmas),
             ("reinit_gap_s", self.reinit_gap_s),
             ("max_speed_m_s", self.max_speed_m_s),
+            ("reseed_max_interval_s", self.reseed_max_interval_s),
             ("phase_wander_s", self.phase_wander_s),
             ("bias_time_s", self.bias_time_s),
         ];
@@ -498,6 +508,10 @@ pub struct Glac {
     seeded_s: f64,
     /// Reads the reported hypothesis gated since then.
     gated_since_seed: u32,
+    /// Consecutive re-seeding searches started only because the track was
+    /// unresolved (the interval doubles with each; see
+    /// `reseed_max_interval_s`).
+    reseed_streak: u32,
     /// The latest estimate (time s, position m, its 3×3 covariance m²):
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
@@ -626,6 +640,7 @@ impl Glac {
             recent: std::collections::VecDeque::new(),
             seeded_s: f64::NEG_INFINITY,
             gated_since_seed: 0,
+            reseed_streak: 0,
             stats: TrackerStats::default(),
             arrival_s: f64::NEG_INFINITY,
             pending: std::collections::VecDeque::new(),
@@ -679,6 +694,7 @@ impl Glac {
 
     fn restart(&mut self) {
         self.phase = Phase::Initialising;
+        self.reseed_streak = 0;
         self.reseeding = None;
         self.hypotheses.clear();
         self.group.clear();
@@ -912,6 +928,15 @@ impl Glac {
         }
     }
 
+    /// Seconds until the next re-seeding search may start: doubling with
+    /// each search an unresolved track started on its own, capped at
+    /// `reseed_max_interval_s`.
+    fn reseed_interval(&self) -> f64 {
+        let doubled = self.params.reseed_interval_s * 2f64.powi(self.reseed_streak.min(30) as i32);
+        // A cap below the base interval leaves the base interval.
+        doubled.min(self.params.reseed_max_interval_s.max(self.params.reseed_interval_s))
+    }
+
     /// Starts re-seeding in the background ([`Glac::advance_reseed`]).
     fn start_reseed(&mut self, now_s: f64) {
         self.seeded_s = now_s;
@@ -936,7 +961,7 @@ impl Glac {
         // when a live hypothesis lies within that distance, so only the 27
         // cells around it can hold one.
         let cell = |x: &StateVector| [0, 1, 2].map(|k| (x[k] / RESEED_DISTANCE_M).floor() as i64);
-        let mut grid: std::collections::HashMap<[i64; 3], Vec<usize>> = std::collections::HashMap::new();
+        let mut grid: super::key_hash::CellMap<Vec<usize>> = Default::default();
         for j in 0..self.hypotheses.len() {
             grid.entry(cell(&self.hypotheses.x[j][0])).or_default().push(j);
         }
@@ -1736,8 +1761,15 @@ impl Glac {
             }
             let last_sigma = self.last_good.map_or(0.0, |(_, _, c)| largest_sigma(&c));
             let unresolved = self.hypotheses.len() > 1 && last_sigma > RESEED_SIGMA_M;
-            let due = m.time_s - self.seeded_s >= self.params.reseed_interval_s && (unresolved || self.gated_since_seed >= 2);
+            let lost = self.gated_since_seed >= 2;
+            if lost || !unresolved {
+                self.reseed_streak = 0;
+            }
+            let due = m.time_s - self.seeded_s >= self.reseed_interval() && (unresolved || lost);
             if due && self.reseeding.is_none() {
+                if !lost {
+                    self.reseed_streak = self.reseed_streak.saturating_add(1);
+                }
                 self.start_reseed(m.time_s);
             }
         }

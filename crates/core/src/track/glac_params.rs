@@ -188,6 +188,14 @@ pub fn glac_table() -> Table<GlacParams> {
                 |p, v| p.reseed_interval_s = v,
             ),
             float(
+                "reseed_max_interval_s",
+                Range::POSITIVE,
+                "s",
+                "longest interval between re-seeding searches while the track stays unresolved: each search started only because candidates still compete doubles the interval up to this; gated reads or a resolved track restart at reseed_interval_s",
+                |p| p.reseed_max_interval_s,
+                |p, v| p.reseed_max_interval_s = v,
+            ),
+            float(
                 "max_speed_m_s",
                 Range::POSITIVE,
                 "m/s",

@@ -183,7 +183,7 @@ pub struct InitialSearch {
     kept: Vec<InitialHypothesis>,
     /// Kept positions by merge-distance cell (the merge test looks at the
     /// 27 cells around a position instead of every kept one).
-    grid: std::collections::HashMap<[i64; 3], Vec<usize>>,
+    grid: super::key_hash::CellMap<Vec<usize>>,
 }
 
 /// A growing list in fixed-size blocks: the search's points and refined
@@ -304,7 +304,7 @@ impl InitialSearch {
             ranked: std::collections::BinaryHeap::new(),
             hypotheses: Chunked::default(),
             kept: Vec::new(),
-            grid: std::collections::HashMap::new(),
+            grid: Default::default(),
         })
     }
 
