@@ -138,8 +138,10 @@ pub struct GlacParams {
     /// hypotheses remain doubles the interval up to this, and gated reads
     /// or a resolved track bring it back to `reseed_interval_s`. A tag
     /// whose reads cannot decide (a near-twin geometry) keeps its
-    /// candidates alive; searching again every second would find the same
-    /// ones at ~200 times the cost of tracking them.
+    /// candidates alive, and searching again every second costs ~200 times
+    /// tracking them; but under multipath the searches' newcomers are what
+    /// keeps the sigmas honest (docs/glac.md, "Re-seeding"), so the default
+    /// equals `reseed_interval_s`: no back-off.
     pub reseed_max_interval_s: f64,
     /// Fastest the tag can move, m/s: after a restart (a read gap, or lost
     /// lock) the new search keeps only candidates within
@@ -200,7 +202,7 @@ impl Default for GlacParams {
             reinit_gap_s: 1.0,
             max_speed_m_s: 1.0,
             reseed_interval_s: 1.0,
-            reseed_max_interval_s: 8.0,
+            reseed_max_interval_s: 1.0,
             region_margin_m: 0.05,
             merge_distance_m: 0.002,
             max_hypotheses: 200_000,
@@ -2114,6 +2116,26 @@ mod tests {
         };
         let (with, without) = (error(true), error(false));
         assert!(with < 0.8 * without, "mean error with bias states {with} m, without {without} m");
+    }
+
+    /// Searches an unresolved track starts on its own double the interval
+    /// up to `reseed_max_interval_s`; a cap below the base leaves the base.
+    #[test]
+    fn the_reseed_interval_backs_off_up_to_its_cap() {
+        let params = GlacParams { reseed_interval_s: 1.0, reseed_max_interval_s: 8.0, ..GlacParams::default() };
+        let mut tracker = Glac::new(scene(), params).unwrap();
+        let intervals: Vec<f64> = (0..6)
+            .map(|streak| {
+                tracker.reseed_streak = streak;
+                tracker.reseed_interval()
+            })
+            .collect();
+        assert_eq!(intervals, [1.0, 2.0, 4.0, 8.0, 8.0, 8.0]);
+        let mut tracker = Glac::new(scene(), GlacParams { reseed_interval_s: 2.0, reseed_max_interval_s: 1.0, ..GlacParams::default() }).unwrap();
+        tracker.reseed_streak = 3;
+        assert_eq!(tracker.reseed_interval(), 2.0);
+        tracker.restart();
+        assert_eq!(tracker.reseed_streak, 0);
     }
 
     /// Re-seeding brings back a true trajectory the hypotheses lost: with
