@@ -27,7 +27,7 @@ tag's estimates from 2 s on (read outages of 0.5 s or more taken out) and
 the ``warning:`` lines the CLI printed. A scene the CLI rejects is reported
 by its error line.
 
-    .venv/bin/python bench/glac_robustness.py [--seeds 100] [--layouts raised,walls]
+    .venv/bin/python bench/glac_robustness.py [--seeds 100] [--first-seed 0] [--layouts raised,walls]
         [--conditions baseline,stop-8s] [--outside DIR] [--json FILE] [--workers 2]
 """
 
@@ -391,6 +391,7 @@ def _names(text: str, known, what: str) -> list[str]:
 def parse_args(argv=None):
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--seeds", type=int, default=100, help="seeds per cell, 0..N-1 (default 100)")
+    parser.add_argument("--first-seed", type=int, default=0, help="first seed (dev seeds: 1000 on; default 0)")
     parser.add_argument("--layouts", default=",".join(LAYOUTS), help=f"comma-separated (default {','.join(LAYOUTS)})")
     parser.add_argument(
         "--conditions", default=",".join(CONDITIONS), help=f"comma-separated (default {','.join(CONDITIONS)})"
@@ -411,7 +412,7 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     layouts = _names(args.layouts, LAYOUTS, "layout")
     conditions = _names(args.conditions, CONDITIONS, "condition")
-    seeds = list(range(args.seeds))
+    seeds = list(range(args.first_seed, args.first_seed + args.seeds))
     started = time.perf_counter()
     params = st_parameters.parse("glac", [tuple(p.split("=", 1)) for p in args.param])
     cells, realistic_row = run_cells(
