@@ -27,7 +27,7 @@ tag's estimates from 2 s on (read outages of 0.5 s or more taken out) and
 the ``warning:`` lines the CLI printed. A scene the CLI rejects is reported
 by its error line.
 
-    .venv/bin/python bench/glac_robustness.py [--seeds 100] [--layouts raised,walls]
+    .venv/bin/python bench/glac_robustness.py [--seeds 100] [--first-seed 0] [--layouts raised,walls]
         [--conditions baseline,stop-8s] [--outside DIR] [--json FILE] [--workers 2]
 """
 

@@ -103,6 +103,19 @@ pub struct GlacParams {
     pub bias_state: bool,
     /// Correlation time τ_b of the bias, seconds.
     pub bias_time_s: f64,
+    /// A second bias level σ_b (rad) run beside `bias_sigma_rad` as a
+    /// bank of two trackers ([`super::glac_bank`]; `glac`, fast inference
+    /// with `bias_state`): the one whose accumulated evidence of the reads
+    /// is larger is reported. `None`: one tracker.
+    pub bank_sigma_rad: Option<f64>,
+    /// The bias correlation time of that second tracker, seconds; `None`:
+    /// `bias_time_s`.
+    pub bank_time_s: Option<f64>,
+    /// The bank switches the reported tracker when another's log evidence
+    /// is ahead by this many nats.
+    pub bank_switch_nats: f64,
+    /// ... and drops a tracker behind the best by this many nats.
+    pub bank_drop_nats: f64,
     /// Collect at least this long before initialising, seconds.
     pub init_window_s: f64,
     /// Give up waiting for every antenna after this long, seconds.
@@ -190,6 +203,10 @@ impl Default for GlacParams {
             bias_sigma_rad: 0.07,
             bias_state: true,
             bias_time_s: 0.5,
+            bank_sigma_rad: None,
+            bank_time_s: None,
+            bank_switch_nats: 3.0,
+            bank_drop_nats: 20.0,
             init_window_s: 0.3,
             init_max_window_s: 1.0,
             initial: InitialState::default(),
@@ -245,6 +262,14 @@ impl GlacParams {
         }
         if !(self.bias_sigma_rad >= 0.0 && self.bias_sigma_rad.is_finite()) {
             return Err(Error::Parameter { name: "bias_sigma_rad".into(), reason: "must be zero or positive".into() });
+        }
+        for (name, v) in [("bank_sigma_rad", self.bank_sigma_rad), ("bank_time_s", self.bank_time_s)] {
+            if v.is_some_and(|v| !(v > 0.0 && v.is_finite())) {
+                return Err(Error::Parameter { name: name.into(), reason: "must be positive".into() });
+            }
+        }
+        if !(self.bank_switch_nats > 0.0 && self.bank_drop_nats >= self.bank_switch_nats) {
+            return Err(Error::Parameter { name: "bank_drop_nats".into(), reason: "must be at least bank_switch_nats (both positive)".into() });
         }
         if !(self.phase_wander_rad >= 0.0 && self.phase_wander_rad.is_finite()) {
             return Err(Error::Parameter { name: "phase_wander_rad".into(), reason: "must be zero or positive".into() });
@@ -531,6 +556,9 @@ pub struct Glac {
     reseeding: Option<Reseed>,
     /// The estimate after the latest read taken through the tracker.
     result: Option<Estimate>,
+    /// When recorded (a bank of noise levels, [`super::glac_bank`]): per
+    /// read tracked, its time and log p(z_k | z_1:k−1), oldest first.
+    evidence: Option<std::collections::VecDeque<(f64, f64)>>,
 }
 
 /// A read waiting for the tracker.
@@ -563,6 +591,9 @@ struct StepProgress {
     /// Ambiguity branches: (index, candidate, bias prediction, predicted
     /// reading, its variance).
     branches: Vec<(usize, f64, BiasPrediction, f64, f64)>,
+    /// The hypotheses those branches copied (the evidence splits their
+    /// prior weight between the two).
+    origins: Vec<usize>,
 }
 
 /// A search spread over reads.
@@ -609,7 +640,16 @@ const JOIN_UNITS: u64 = 2;
 /// The registry's constructor of `glac`: the paper's tracker with the
 /// parameters as given (variants: [`super::variants`]).
 pub fn build(scene: &Scene, params: &super::Params) -> Result<Box<dyn Tracker>> {
-    Ok(Box::new(Glac::new(scene.clone(), params.glac.clone())?))
+    let p = &params.glac;
+    match p.bank_sigma_rad {
+        Some(level) if p.inference == Inference::Fast && p.bias_state => {
+            p.validate()?;
+            let base = GlacParams { bank_sigma_rad: None, ..p.clone() };
+            let other = GlacParams { bias_sigma_rad: level, bias_time_s: p.bank_time_s.unwrap_or(p.bias_time_s), ..base.clone() };
+            Ok(Box::new(super::glac_bank::GlacBank::of(scene.clone(), vec![base, other], p.bank_switch_nats, p.bank_drop_nats)?))
+        }
+        _ => Ok(Box::new(Glac::new(scene.clone(), p.clone())?)),
+    }
 }
 
 impl Glac {
@@ -650,11 +690,24 @@ impl Glac {
             job: None,
             reseeding: None,
             result: None,
+            evidence: None,
         })
     }
 
     pub fn params(&self) -> &GlacParams {
         &self.params
+    }
+
+    /// Starts recording each tracked read's log evidence
+    /// ([`Glac::take_evidence`]).
+    pub(crate) fn record_evidence(&mut self) {
+        self.evidence.get_or_insert_with(Default::default);
+    }
+
+    /// The (read time s, log evidence) of the reads tracked since the
+    /// last call, oldest first.
+    pub(crate) fn take_evidence(&mut self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.evidence.iter_mut().flat_map(|log| log.drain(..))
     }
 
     /// Live hypotheses.
@@ -1037,7 +1090,7 @@ impl Glac {
             axes: self.axes,
         };
         let bias = self.bias_step(m);
-        StepProgress { read: *m, purpose, step, bias, n: self.hypotheses.len(), next: 0, branches: Vec::new() }
+        StepProgress { read: *m, purpose, step, bias, n: self.hypotheses.len(), next: 0, branches: Vec::new(), origins: Vec::new() }
     }
 
     /// Steps hypotheses `next..n` while `budget` lasts (one unit each);
@@ -1064,6 +1117,7 @@ impl Glac {
                     // keeps that prediction (bias, predicted reading, its variance).
                     h.duplicate(i);
                     s.branches.push((h.len() - 1, second, b, predicted, variance));
+                    s.origins.push(i);
                 }
             }
             step.update(h, i, z - b.mean, b.variance);
@@ -1081,6 +1135,11 @@ impl Glac {
         }
         let models = if s.step.manoeuvre.is_some() { 2 } else { 1 };
         self.stats.filter_updates += (h.len() * models) as u64;
+        if let (Some(log), Purpose::Track(_)) = (self.evidence.as_mut(), s.purpose) {
+            if h.len() > 0 {
+                log.push_back((s.read.time_s, read_evidence(h, s)));
+            }
+        }
         self.time_s = s.read.time_s;
         self.prune();
     }
@@ -1451,6 +1510,20 @@ fn mixture_covariance(h: &Hypotheses, centre: &StateVector, temperature: f64) ->
 /// Largest per-axis 1-sigma of a position covariance, metres.
 fn largest_sigma(covariance: &Matrix3<f64>) -> f64 {
     covariance.diagonal().iter().fold(0.0f64, |m, v| m.max(*v)).sqrt()
+}
+
+/// log p(z_k | z_1:k−1) of a fast step, before pruning: the log of
+/// Σᵢ wᵢ p(z_k | hypothesis i) over the normalised prior weights wᵢ, which
+/// is the log-sum-exp of the updated log-likelihoods (what `normalise`
+/// subtracts), except that an ambiguity branch and the hypothesis it
+/// copied share that hypothesis' prior weight (each carries it whole).
+fn read_evidence(h: &Hypotheses, s: &StepProgress) -> f64 {
+    let max = h.log_likelihood.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let mut sum: f64 = h.log_likelihood.iter().map(|l| (l - max).exp()).sum();
+    for (&(j, ..), &i) in s.branches.iter().zip(&s.origins) {
+        sum -= 0.5 * ((h.log_likelihood[i] - max).exp() + (h.log_likelihood[j] - max).exp());
+    }
+    max + sum.max(f64::MIN_POSITIVE).ln()
 }
 
 /// [`BiasStep`] applied to hypothesis `i`'s state of the step's antenna.
@@ -1861,6 +1934,9 @@ impl Tracker for Glac {
         self.first_frequency_hz = f64::NAN;
         self.hopped = false;
         self.bias_time_s.fill(f64::NEG_INFINITY);
+        if let Some(log) = self.evidence.as_mut() {
+            log.clear();
+        }
     }
 }
 

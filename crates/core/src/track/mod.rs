@@ -19,6 +19,7 @@ mod bias;
 mod candidates;
 mod ellipse_intersection;
 mod glac;
+mod glac_bank;
 pub mod glac_params;
 mod initial;
 mod key_hash;
