@@ -1955,7 +1955,7 @@ pub fn correlated_variance_factor(rho: f64) -> f64 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::scene::{Antenna, Region};
 
@@ -1984,6 +1984,12 @@ mod tests {
     }
 
     fn scene() -> Scene {
+        planar_scene(0.1)
+    }
+
+    /// The paper's 2D layout (four antennas in the plane z = 0) with a
+    /// region that excludes the mirror, phase noise `phase_noise_rad`.
+    pub(crate) fn planar_scene(phase_noise_rad: f64) -> Scene {
         let pos = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]];
         let antennas = pos
             .iter()
@@ -1991,7 +1997,7 @@ mod tests {
             .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
         let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
-        Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
+        Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, phase_noise_rad, antennas, Some(region), vec![]).unwrap()
     }
 
     fn reads(scene: &Scene, n: usize) -> Vec<PhaseRead> {

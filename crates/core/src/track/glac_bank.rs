@@ -208,7 +208,6 @@ impl Tracker for GlacBank {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Antenna, Region};
     use crate::track::PhaseRead;
     use nalgebra::Vector3;
     use rand::rngs::StdRng;
@@ -216,14 +215,7 @@ mod tests {
     use rand_distr::StandardNormal;
 
     fn scene() -> Scene {
-        let pos = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]];
-        let antennas = pos
-            .iter()
-            .enumerate()
-            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0, role: Default::default() })
-            .collect();
-        let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
-        Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, 0.02, antennas, Some(region), vec![]).unwrap()
+        crate::track::glac::tests::planar_scene(0.02)
     }
 
     /// 30 reads/s round the four antennas for `seconds`, a tag on a slow
