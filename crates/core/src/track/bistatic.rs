@@ -227,6 +227,35 @@ fn intersection_covariance(
     }
 }
 
+/// The position covariance (m²) that a per-receiver calibration residual
+/// of 1-sigma `sigma_m` on each path sum puts on a fix at `p` from the
+/// receivers at `receivers` (m; every receive antenna of the scene: the
+/// filter's fix draws on all of them over its frames): `σ² (JᵀJ)⁻¹`, J the gradients of the path sums
+/// |p − tx| + |p − rxᵢ| (a least-squares fix moves by (JᵀJ)⁻¹Jᵀ b for
+/// path biases b). Such a bias is the same on every frame, so no number of
+/// frames averages it away; the filter's own spread does not contain it.
+/// Planar scenes get z = 0. None when the receivers cannot fix `p`.
+pub fn calibration_covariance(geometry: &HelperGeometry, receivers: &[Vector3<f64>], p: &Vector3<f64>, sigma_m: f64) -> Option<Matrix3<f64>> {
+    let planar = geometry.dimensions == 2;
+    let mut information = Matrix3::zeros();
+    for rx in receivers {
+        let (_, mut gradient) = bistatic_distance(p, &geometry.tx_position, rx);
+        if planar {
+            gradient.z = 0.0;
+        }
+        information += gradient * gradient.transpose();
+    }
+    let c = if planar {
+        let block = information.fixed_view::<2, 2>(0, 0).into_owned().try_inverse()?;
+        let mut c = Matrix3::zeros();
+        c.fixed_view_mut::<2, 2>(0, 0).copy_from(&block);
+        c
+    } else {
+        information.try_inverse()?
+    } * (sigma_m * sigma_m);
+    c.iter().all(|v| v.is_finite()).then_some(c)
+}
+
 /// The Gaussian of one candidate tuple `indices` (candidate index per
 /// receiver, see [`Candidates::distance`]): every subset of `needed`
 /// receivers is intersected (eq. 5.4), the solution nearest `near` kept

@@ -49,7 +49,7 @@ use crate::model::wideband::CandidateParams;
 use crate::scene::Scene;
 
 use super::bistatic::{
-    frame_receivers, log_normal, mixture_log_likelihood_with, tuple_gaussian, tuple_gaussian_lenient, usable_subsets, Decline, HelperGeometry,
+    calibration_covariance, frame_receivers, log_normal, mixture_log_likelihood_with, tuple_gaussian, tuple_gaussian_lenient, usable_subsets, Decline, HelperGeometry,
     MixtureLogs, PositionGaussian, Receiver,
 };
 use super::key_hash::KeyMap;
@@ -102,6 +102,31 @@ pub struct TurboTrackParams {
     /// Frame interval the step sigma refers to, s (300 frames/s); the
     /// variance scales with the actual interval (a random walk).
     pub reference_interval_s: f64,
+    /// 1-sigma per axis of the random-walk step of a particle in the
+    /// *static* motion mode over one `reference_interval_s`, m. Every
+    /// particle carries a mode (moving: `transition_sigma_m`; static:
+    /// this), switching as a Markov chain (`static_entry_probability`,
+    /// `static_exit_probability`): a jump-Markov prior whose weights
+    /// choose the mode, so a tag at rest is averaged over many frames
+    /// instead of following each frame's noise, and a tag that starts
+    /// moving is followed by the moving particles that the switching keeps
+    /// alive.
+    pub static_sigma_m: f64,
+    /// Probability that a moving particle turns static over one
+    /// `reference_interval_s` (scaled to the actual interval). 0 keeps
+    /// every particle moving (the thesis's single random walk).
+    pub static_entry_probability: f64,
+    /// Probability that a static particle turns moving over one
+    /// `reference_interval_s`. Large against the entry: a static particle
+    /// lives a few frames and its lineage lasts only while the weights keep
+    /// choosing it, so few static particles linger (and lag) once the tag
+    /// moves; a symmetric chain (half the cloud static) lagged a slow tag
+    /// in the poorly observed directions (docs/notes/turbotrack-experiments.md).
+    pub static_exit_probability: f64,
+    /// 1-sigma residual of each receiver's calibration on its path sum, m:
+    /// a bias no frame reveals, added to the reported covariance as
+    /// `σ² (JᵀJ)⁻¹` ([`calibration_covariance`]). 0: none.
+    pub calibration_sigma_m: f64,
     /// Resample when `N̂_eff < resample_threshold · N`.
     pub resample_threshold: f64,
     /// Perimeter threshold T of the thesis's initial pruning, m (doubled up
@@ -166,6 +191,10 @@ impl Default for TurboTrackParams {
             particles: 100,
             transition_sigma_m: 0.005,
             reference_interval_s: 1.0 / 300.0,
+            static_sigma_m: 0.001,
+            static_entry_probability: 0.01,
+            static_exit_probability: 0.2,
+            calibration_sigma_m: 0.004,
             resample_threshold: 0.5,
             perimeter_threshold_m: 0.03,
             max_initial_components: 64,
@@ -201,6 +230,18 @@ impl TurboTrackParams {
         }
         if !(self.transition_sigma_m > 0.0) || !(self.reference_interval_s > 0.0) {
             return bad("transition_sigma_m", "must be positive");
+        }
+        if !(self.calibration_sigma_m >= 0.0 && self.calibration_sigma_m.is_finite()) {
+            return bad("calibration_sigma_m", "must be finite and at least 0");
+        }
+        if !(self.static_sigma_m > 0.0) {
+            return bad("static_sigma_m", "must be positive");
+        }
+        if !(self.static_entry_probability >= 0.0 && self.static_entry_probability < 1.0) {
+            return bad("static_entry_probability", "must be in [0, 1)");
+        }
+        if !(self.static_exit_probability > 0.0 && self.static_exit_probability <= 1.0) {
+            return bad("static_exit_probability", "must be in (0, 1]");
         }
         if !(self.resample_threshold >= 0.0 && self.resample_threshold <= 1.0) {
             return bad("resample_threshold", "must be in [0, 1]");
@@ -246,6 +287,8 @@ pub struct TurboTrack {
     positions: Vec<Vector3<f64>>,
     /// Normalised log-weights.
     log_weights: Vec<f64>,
+    /// Per particle: its motion mode (true: static, see `static_sigma_m`).
+    modes: Vec<bool>,
     /// Ancestry per frame (after resampling): positions and the parent
     /// index into the previous frame's arrays, for backtracking.
     history: VecDeque<(f64, Vec<Vector3<f64>>, Vec<usize>)>,
@@ -262,6 +305,24 @@ pub struct TurboTrack {
     scratch_positions: Vec<Vector3<f64>>,
     scratch_keys: Vec<u64>,
     scratch_ancestors: Vec<usize>,
+}
+
+/// The cluster proposal of Gaussian `g` (its inverse covariance `s_inv`)
+/// under a random-walk step of inverse covariance `sigma_v_inv`: the
+/// product of the two Gaussians (planar scenes keep z out of it).
+fn cluster_proposal(g: &PositionGaussian, s_inv: &Matrix3<f64>, sigma_v_inv: &Matrix3<f64>, dims: usize) -> Option<ClusterProposal> {
+    let mut p_inv = sigma_v_inv + s_inv;
+    if dims == 2 {
+        p_inv[(2, 2)] = 1.0;
+        p_inv[(0, 2)] = 0.0;
+        p_inv[(1, 2)] = 0.0;
+        p_inv[(2, 0)] = 0.0;
+        p_inv[(2, 1)] = 0.0;
+    }
+    let pm = p_inv.try_inverse()?;
+    let l = pm.cholesky()?.l();
+    let log_det_p = if dims == 3 { pm.determinant().ln() } else { (pm[(0, 0)] * pm[(1, 1)] - pm[(0, 1)] * pm[(1, 0)]).ln() };
+    Some(ClusterProposal { a: pm * sigma_v_inv, b: pm * (s_inv * g.mean), l, p_inv, log_det_p, centroid: g.mean })
 }
 
 /// Packs a candidate-index tuple into a hash key (8 bits per receiver,
@@ -284,6 +345,7 @@ impl TurboTrack {
             rng,
             positions: Vec::new(),
             log_weights: Vec::new(),
+            modes: Vec::new(),
             history: VecDeque::new(),
             recent: VecDeque::new(),
             last_time_s: f64::NEG_INFINITY,
@@ -317,6 +379,17 @@ impl TurboTrack {
 
     fn best_particle(&self) -> Option<usize> {
         self.log_weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i)
+    }
+
+    /// The motion-mode chain's stationary share of static particles,
+    /// entry / (entry + exit) (0 when particles never turn static).
+    fn static_share(&self) -> f64 {
+        let (entry, exit) = (self.params.static_entry_probability, self.params.static_exit_probability);
+        if entry > 0.0 {
+            entry / (entry + exit)
+        } else {
+            0.0
+        }
     }
 
     fn in_region(&self, p: &Vector3<f64>) -> bool {
@@ -369,9 +442,10 @@ impl TurboTrack {
     /// variance grows linearly with time; at least a quarter step so
     /// bursts of nearly simultaneous frames still move). Planar scenes get
     /// a unit z variance that is never sampled.
-    fn transition(&self, dt: f64) -> Matrix3<f64> {
+    fn transition(&self, dt: f64, resting: bool) -> Matrix3<f64> {
         let scale = (dt / self.params.reference_interval_s).clamp(0.25, 1e4);
-        let v = self.params.transition_sigma_m.powi(2) * scale;
+        let sigma = if resting { self.params.static_sigma_m } else { self.params.transition_sigma_m };
+        let v = sigma.powi(2) * scale;
         let vz = if self.scene.dimensions == 3 { v } else { 1.0 };
         Matrix3::from_diagonal(&Vector3::new(v, v, vz))
     }
@@ -458,9 +532,15 @@ impl TurboTrack {
                 self.log_weights.push(log_l - log_q);
             }
         }
+        // The Markov chain's stationary share of the particles starts at
+        // rest, spread evenly over the draw; the first frames' weights choose.
+        let share = self.static_share();
+        let count = self.positions.len();
+        self.modes = (0..count).map(|i| ((i as f64 + 0.5) / count as f64) < share).collect();
         if normalise_log_weights(&mut self.log_weights) == f64::NEG_INFINITY {
             self.positions.clear();
             self.log_weights.clear();
+            self.modes.clear();
             return false;
         }
         self.history.push_back((time_s, self.positions.clone(), (0..n).collect()));
@@ -580,18 +660,39 @@ impl TurboTrack {
     /// Algorithm 1, one iteration. Returns false when the frame is an outlier.
     fn sequential_step(&mut self, time_s: f64, receivers: &[Receiver]) -> bool {
         let dt = (time_s - self.last_time_s).max(0.0);
-        let sigma_v = self.transition(dt);
-        let sigma_v_inv = sigma_v.try_inverse().expect("diagonal, positive");
-        let sigma_v_chol = sigma_v.cholesky().expect("diagonal, positive").l();
         let dims = self.scene.dimensions;
-        let log_det_v = if dims == 3 { sigma_v.determinant().ln() } else { (sigma_v[(0, 0)] * sigma_v[(1, 1)]).ln() };
+        // Σ_v per motion mode (0: moving, 1: static), its inverse, Cholesky
+        // factor and log-determinant.
+        let motion: [(Matrix3<f64>, Matrix3<f64>, Matrix3<f64>, f64); 2] = [false, true].map(|resting| {
+            let sigma_v = self.transition(dt, resting);
+            let inverse = sigma_v.try_inverse().expect("diagonal, positive");
+            let chol = sigma_v.cholesky().expect("diagonal, positive").l();
+            let log_det = if dims == 3 { sigma_v.determinant().ln() } else { (sigma_v[(0, 0)] * sigma_v[(1, 1)]).ln() };
+            (sigma_v, inverse, chol, log_det)
+        });
         let subset_list = self.subset_list(receivers);
         let logs = MixtureLogs::new(receivers, self.params.weight_floor);
         let n = self.positions.len();
 
-        // Cluster keys: the nearest comb tooth of every receiver.
+        // Modes first (the Markov chain's switch over dt), so that the
+        // proposals below use each particle's new mode: sampled from its
+        // prior, the mode's probability cancels in the weight.
+        let steps = (dt / self.params.reference_interval_s).max(0.0);
+        let over_dt = |p: f64| 1.0 - (1.0 - p).powf(steps);
+        let (entry, exit) = (over_dt(self.params.static_entry_probability), over_dt(self.params.static_exit_probability));
+        let mut new_modes = self.modes.clone();
+        if entry > 0.0 {
+            for mode in new_modes.iter_mut() {
+                if self.rng.random::<f64>() < if *mode { exit } else { entry } {
+                    *mode = !*mode;
+                }
+            }
+        }
+
+        // Cluster keys: the nearest comb tooth of every receiver. A
+        // cluster's proposal is computed once per motion mode.
         self.scratch_keys.clear();
-        let mut tuples: KeyMap<Option<ClusterProposal>> = KeyMap::default();
+        let mut tuples: KeyMap<Option<[ClusterProposal; 2]>> = KeyMap::default();
         let mut indices = vec![0i64; receivers.len()];
         for i in 0..n {
             let p = self.positions[i];
@@ -606,18 +707,9 @@ impl TurboTrack {
                     tuple_gaussian(&self.geometry, receivers, &indices, &subset_list, &p, self.params.intersection_tolerance_m)
                         .and_then(|g| {
                             let s_inv = g.covariance.try_inverse()?;
-                            let mut p_inv = sigma_v_inv + s_inv;
-                            if dims == 2 {
-                                p_inv[(2, 2)] = 1.0;
-                                p_inv[(0, 2)] = 0.0;
-                                p_inv[(1, 2)] = 0.0;
-                                p_inv[(2, 0)] = 0.0;
-                                p_inv[(2, 1)] = 0.0;
-                            }
-                            let pm = p_inv.try_inverse()?;
-                            let l = pm.cholesky()?.l();
-                            let log_det_p = if dims == 3 { pm.determinant().ln() } else { (pm[(0, 0)] * pm[(1, 1)] - pm[(0, 1)] * pm[(1, 0)]).ln() };
-                            Some(ClusterProposal { a: pm * sigma_v_inv, b: pm * (s_inv * g.mean), l, p_inv, log_det_p, centroid: g.mean })
+                            let moving = cluster_proposal(&g, &s_inv, &motion[0].1, dims)?;
+                            let resting = cluster_proposal(&g, &s_inv, &motion[1].1, dims)?;
+                            Some([moving, resting])
                         });
                 tuples.insert(key, proposal);
             }
@@ -630,9 +722,12 @@ impl TurboTrack {
         let mut best_chi2 = f64::INFINITY;
         for i in 0..n {
             let prev = self.positions[i];
+            let mode = usize::from(new_modes[i]);
+            let (_, sigma_v_inv, sigma_v_chol, log_det_v) = &motion[mode];
             let z = self.normal3();
             let (mut x, log_correction) = match tuples.get(&self.scratch_keys[i]).and_then(|c| c.as_ref()) {
-                Some(c) => {
+                Some(proposals) => {
+                    let c = &proposals[mode];
                     let mean = c.a * prev + c.b;
                     let x = mean + c.l * z;
                     let mut r_prior = x - prev;
@@ -641,7 +736,7 @@ impl TurboTrack {
                         r_prior.z = 0.0;
                         r_prop.z = 0.0;
                     }
-                    let log_prior = log_gaussian3(&r_prior, &sigma_v_inv, log_det_v, dims);
+                    let log_prior = log_gaussian3(&r_prior, sigma_v_inv, *log_det_v, dims);
                     let log_prop = log_gaussian3(&r_prop, &c.p_inv, c.log_det_p, dims);
                     (x, log_prior - log_prop)
                 }
@@ -667,7 +762,7 @@ impl TurboTrack {
                 let key = self.scratch_keys[best];
                 match tuples.get(&key) {
                     Some(Some(c)) => {
-                        (c.centroid - self.positions[best]).norm() > self.params.outlier_jump_m + self.params.max_speed_m_s * dt
+                        (c[0].centroid - self.positions[best]).norm() > self.params.outlier_jump_m + self.params.max_speed_m_s * dt
                     }
                     _ => false,
                 }
@@ -678,6 +773,7 @@ impl TurboTrack {
         }
         self.scratch_positions = std::mem::replace(&mut self.positions, new_positions);
         self.log_weights = new_log_weights;
+        self.modes = new_modes;
 
         // Resample on low effective sample size.
         let mut parents: Vec<usize> = (0..n).collect();
@@ -685,8 +781,10 @@ impl TurboTrack {
             let u = self.rng.random::<f64>();
             systematic_resample(&self.log_weights, u, &mut self.scratch_ancestors);
             let old = self.positions.clone();
+            let old_modes = self.modes.clone();
             for (i, &a) in self.scratch_ancestors.iter().enumerate() {
                 self.positions[i] = old[a];
+                self.modes[i] = old_modes[a];
                 parents[i] = a;
             }
             let uniform = -(n as f64).ln();
@@ -746,6 +844,13 @@ impl TurboTrack {
             // Unresolved lobes widen the reported covariance (a mixture about the reported mean).
             covariance += self.lobes.spread(&mean);
         }
+        if self.params.calibration_sigma_m > 0.0 {
+            let receivers: Vec<Vector3<f64>> =
+                self.scene.antennas.iter().filter(|a| a.role == crate::scene::Role::Rx).map(|a| a.position).collect();
+            if let Some(c) = calibration_covariance(&self.geometry, &receivers, &mean, self.params.calibration_sigma_m) {
+                covariance += c;
+            }
+        }
         self.recent.push_back((time_s, mean));
         while self.recent.front().is_some_and(|(t, _)| time_s - t > self.params.velocity_window_s) {
             self.recent.pop_front();
@@ -774,6 +879,7 @@ impl TurboTrack {
         self.initialised = false;
         self.positions.clear();
         self.log_weights.clear();
+        self.modes.clear();
         self.history.clear();
         self.recent.clear();
         self.last_estimate = None;
@@ -920,6 +1026,17 @@ mod tests {
     /// `exp(−j 2π f d / c)`), 20 subcarriers over 100 MHz, complex noise of
     /// rms 0.1 relative to the channel.
     fn frames(scene: &Scene, path: impl Fn(f64) -> Vector3<f64>, duration_s: f64, seed: u64) -> Vec<(WidebandFrame, Vector3<f64>)> {
+        noisy_frames(scene, path, duration_s, seed, 0.1)
+    }
+
+    /// [`frames`] with complex noise of rms `noise` relative to the channel.
+    fn noisy_frames(
+        scene: &Scene,
+        path: impl Fn(f64) -> Vector3<f64>,
+        duration_s: f64,
+        seed: u64,
+        noise_rms: f64,
+    ) -> Vec<(WidebandFrame, Vector3<f64>)> {
         let mut rng = StdRng::seed_from_u64(seed);
         let frequencies: Vec<f64> = (0..20).map(|k| 867.5e6 + 5e6 * k as f64).collect();
         let tx = scene.antennas[0].position;
@@ -935,7 +1052,7 @@ mod tests {
                     for &f in &frequencies {
                         let noise: (f64, f64) = (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
                         let clean = Complex::from_polar(1.0, -std::f64::consts::TAU * f * d / SPEED_OF_LIGHT);
-                        h.push(clean + Complex::new(noise.0, noise.1) * (0.1 / 2f64.sqrt()));
+                        h.push(clean + Complex::new(noise.0, noise.1) * (noise_rms / 2f64.sqrt()));
                     }
                 }
                 (WidebandFrame { time_s: t, tx: 0, rx: rx.clone(), frequencies_hz: frequencies.clone(), h }, p)
@@ -1006,6 +1123,105 @@ mod tests {
         tracker.reset();
         assert_eq!(tracker.stats().measurements, 62, "reset keeps the counters");
         assert!(tracker.trajectory().is_empty(), "reset forgets the trajectory");
+    }
+
+    /// Median 3D error (m) of the estimates from `from_s` on.
+    fn median_error(tracker: &mut TurboTrack, frames: Vec<(WidebandFrame, Vector3<f64>)>, from_s: f64) -> f64 {
+        let mut errors = Vec::new();
+        for (frame, p) in frames {
+            let t = frame.time_s;
+            if let Some(e) = tracker.step(&Measurement::Wideband(frame)) {
+                if t >= from_s {
+                    errors.push((Vector3::from(e.position) - p).norm());
+                }
+            }
+        }
+        errors.sort_by(f64::total_cmp);
+        errors[errors.len() / 2]
+    }
+
+    /// At low SNR a tag at rest is averaged over many frames by the static
+    /// mode's particles; with every particle moving (the thesis's single
+    /// random walk) the estimate follows each frame's noise.
+    #[test]
+    fn the_static_mode_averages_a_tag_at_rest() {
+        let truth = Vector3::new(0.5, 1.2, 0.8);
+        let run = |entry: f64| {
+            let params = TurboTrackParams { particles: 300, static_entry_probability: entry, ..TurboTrackParams::default() };
+            let mut tracker = TurboTrack::new(scene(), params).unwrap();
+            let error = median_error(&mut tracker, noisy_frames(&scene(), |_| truth, 3.0, 11, 1.0), 1.0);
+            let static_weight: f64 =
+                tracker.modes.iter().zip(&tracker.log_weights).filter(|(m, _)| **m).map(|(_, w)| w.exp()).sum();
+            (error, static_weight)
+        };
+        let ((with_mode, static_weight), (single, none)) = (run(0.01), run(0.0));
+        assert!(with_mode < 0.75 * single, "static mode {with_mode} m against the single random walk {single} m");
+        // The prior share of static particles is 0.01 / 0.21 ≈ 5 %: the
+        // weights, not the prior, put the tag at rest.
+        assert!(static_weight > 0.2, "weight on static particles {static_weight}");
+        assert_eq!(none, 0.0);
+    }
+
+    /// A tag that rests and then moves is followed by the moving particles
+    /// that the mode switching keeps alive.
+    #[test]
+    fn a_tag_that_starts_moving_is_followed() {
+        let path = |t: f64| Vector3::new(0.4 + 0.2 * (t - 1.0).max(0.0), 1.1, 0.8);
+        let mut tracker = tracker();
+        let mut worst: f64 = 0.0;
+        for (frame, p) in noisy_frames(&scene(), path, 2.5, 12, 0.3) {
+            let t = frame.time_s;
+            if let Some(e) = tracker.step(&Measurement::Wideband(frame)) {
+                if t >= 1.5 {
+                    worst = worst.max((Vector3::from(e.position) - p).norm());
+                }
+            }
+        }
+        assert!(worst < 0.02, "worst error after the start {worst} m");
+    }
+
+    /// σ² (JᵀJ)⁻¹ with J from finite differences of the path sums: the
+    /// analytic gradients agree, a planar scene has no z, and the spread
+    /// grows as the tag nears the receivers' plane (z poorly fixed there).
+    #[test]
+    fn calibration_covariance_matches_finite_differences() {
+        let s = scene();
+        let geometry = HelperGeometry::new(&s).unwrap();
+        let rx: Vec<Vector3<f64>> = s.antennas.iter().filter(|a| a.role == Role::Rx).map(|a| a.position).collect();
+        let sigma = 0.004;
+        let p = Vector3::new(0.7, 1.1, 0.6);
+        let path = |q: &Vector3<f64>, r: &Vector3<f64>| (q - geometry.tx_position).norm() + (q - r).norm();
+        let mut information = Matrix3::zeros();
+        for r in &rx {
+            let h = 1e-6;
+            let g = Vector3::from_fn(|k, _| {
+                let mut dq = Vector3::zeros();
+                dq[k] = h;
+                (path(&(p + dq), r) - path(&(p - dq), r)) / (2.0 * h)
+            });
+            information += g * g.transpose();
+        }
+        let expected = information.try_inverse().unwrap() * sigma * sigma;
+        let c = calibration_covariance(&geometry, &rx, &p, sigma).unwrap();
+        assert!((c - expected).norm() < 1e-6 * expected.norm(), "{c} against {expected}");
+        let low = calibration_covariance(&geometry, &rx, &Vector3::new(0.7, 1.1, 0.15), sigma).unwrap();
+        assert!(low[(2, 2)] > 4.0 * c[(2, 2)], "z variance {} near the plane against {}", low[(2, 2)], c[(2, 2)]);
+        let planar = HelperGeometry::new(&Scene::plus_helper(2, 0.0)).unwrap();
+        let c2 = calibration_covariance(&planar, &rx, &Vector3::new(0.7, 1.1, 0.0), sigma).unwrap();
+        assert_eq!([c2[(2, 2)], c2[(0, 2)], c2[(2, 1)]], [0.0; 3]);
+        assert!(c2[(0, 0)] > 0.0 && c2[(1, 1)] > 0.0);
+    }
+
+    #[test]
+    fn rejects_invalid_mode_parameters() {
+        for params in [
+            TurboTrackParams { static_sigma_m: 0.0, ..TurboTrackParams::default() },
+            TurboTrackParams { static_entry_probability: 1.0, ..TurboTrackParams::default() },
+            TurboTrackParams { static_exit_probability: 0.0, ..TurboTrackParams::default() },
+            TurboTrackParams { calibration_sigma_m: -1e-3, ..TurboTrackParams::default() },
+        ] {
+            assert!(matches!(TurboTrack::new(scene(), params), Err(Error::Parameter { .. })));
+        }
     }
 
     #[test]

@@ -55,6 +55,8 @@ pub fn gaussian_pf(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
     w.proposal = Proposal::Prior;
     // §7.2(a): the strongest candidate by FFT amplitude.
     w.candidates.weighting = CandidateWeighting::Amplitude;
+    // The thesis's baselines have one random walk, no static mode.
+    w.static_entry_probability = 0.0;
     Ok(Box::new(TurboTrack::new(scene.clone(), w)?))
 }
 
@@ -65,5 +67,6 @@ pub fn uniform_pf(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
     // prior as proposal, the same mixture likelihood.
     w.initial_sampling = InitialSampling::Uniform;
     w.proposal = Proposal::Prior;
+    w.static_entry_probability = 0.0;
     Ok(Box::new(TurboTrack::new(scene.clone(), w)?))
 }
