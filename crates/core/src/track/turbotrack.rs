@@ -4,7 +4,10 @@
 //! Each frame gives, per receive antenna, path-length candidates one
 //! wavelength apart with weights (eq. 5.1, `model::wideband`). The state
 //! is the tag position `x_t` with the random-walk prior of eq. 5.3,
-//! `x_t = x_{t−1} + v_t, v_t ~ N(0, Σ_v)`; the likelihood is the product
+//! `x_t = x_{t−1} + v_t, v_t ~ N(0, Σ_v)`, here with a motion mode per
+//! particle (moving: the thesis's Σ_v; static: a small step), switching
+//! as a Markov chain so that the weights can put a resting tag at rest
+//! (docs/turbotrack.md, "Where we depart", 13); the likelihood is the product
 //! over receivers of mixtures of Gaussians (eq. 5.2). Inference is a
 //! sequential importance sampler:
 //!
