@@ -292,6 +292,9 @@ pub struct TurboTrack {
     log_weights: Vec<f64>,
     /// Per particle: its motion mode (true: static, see `static_sigma_m`).
     modes: Vec<bool>,
+    /// Positions of the scene's receive antennas, m (the calibration term's
+    /// geometry; fixed for the tracker's life).
+    receive_positions: Vec<Vector3<f64>>,
     /// Ancestry per frame (after resampling): positions and the parent
     /// index into the previous frame's arrays, for backtracking.
     history: VecDeque<(f64, Vec<Vector3<f64>>, Vec<usize>)>,
@@ -349,6 +352,7 @@ impl TurboTrack {
             positions: Vec::new(),
             log_weights: Vec::new(),
             modes: Vec::new(),
+            receive_positions: scene.antennas.iter().filter(|a| a.role == crate::scene::Role::Rx).map(|a| a.position).collect(),
             history: VecDeque::new(),
             recent: VecDeque::new(),
             last_time_s: f64::NEG_INFINITY,
@@ -664,14 +668,14 @@ impl TurboTrack {
     fn sequential_step(&mut self, time_s: f64, receivers: &[Receiver]) -> bool {
         let dt = (time_s - self.last_time_s).max(0.0);
         let dims = self.scene.dimensions;
-        // Σ_v per motion mode (0: moving, 1: static), its inverse, Cholesky
+        // Per motion mode (0: moving, 1: static): Σ_v's inverse, Cholesky
         // factor and log-determinant.
-        let motion: [(Matrix3<f64>, Matrix3<f64>, Matrix3<f64>, f64); 2] = [false, true].map(|resting| {
+        let motion: [(Matrix3<f64>, Matrix3<f64>, f64); 2] = [false, true].map(|resting| {
             let sigma_v = self.transition(dt, resting);
             let inverse = sigma_v.try_inverse().expect("diagonal, positive");
             let chol = sigma_v.cholesky().expect("diagonal, positive").l();
             let log_det = if dims == 3 { sigma_v.determinant().ln() } else { (sigma_v[(0, 0)] * sigma_v[(1, 1)]).ln() };
-            (sigma_v, inverse, chol, log_det)
+            (inverse, chol, log_det)
         });
         let subset_list = self.subset_list(receivers);
         let logs = MixtureLogs::new(receivers, self.params.weight_floor);
@@ -710,8 +714,8 @@ impl TurboTrack {
                     tuple_gaussian(&self.geometry, receivers, &indices, &subset_list, &p, self.params.intersection_tolerance_m)
                         .and_then(|g| {
                             let s_inv = g.covariance.try_inverse()?;
-                            let moving = cluster_proposal(&g, &s_inv, &motion[0].1, dims)?;
-                            let resting = cluster_proposal(&g, &s_inv, &motion[1].1, dims)?;
+                            let moving = cluster_proposal(&g, &s_inv, &motion[0].0, dims)?;
+                            let resting = cluster_proposal(&g, &s_inv, &motion[1].0, dims)?;
                             Some([moving, resting])
                         });
                 tuples.insert(key, proposal);
@@ -726,7 +730,7 @@ impl TurboTrack {
         for i in 0..n {
             let prev = self.positions[i];
             let mode = usize::from(new_modes[i]);
-            let (_, sigma_v_inv, sigma_v_chol, log_det_v) = &motion[mode];
+            let (sigma_v_inv, sigma_v_chol, log_det_v) = &motion[mode];
             let z = self.normal3();
             let (mut x, log_correction) = match tuples.get(&self.scratch_keys[i]).and_then(|c| c.as_ref()) {
                 Some(proposals) => {
@@ -848,9 +852,7 @@ impl TurboTrack {
             covariance += self.lobes.spread(&mean);
         }
         if self.params.calibration_sigma_m > 0.0 {
-            let receivers: Vec<Vector3<f64>> =
-                self.scene.antennas.iter().filter(|a| a.role == crate::scene::Role::Rx).map(|a| a.position).collect();
-            if let Some(c) = calibration_covariance(&self.geometry, &receivers, &mean, self.params.calibration_sigma_m) {
+            if let Some(c) = calibration_covariance(&self.geometry, &self.receive_positions, &mean, self.params.calibration_sigma_m) {
                 covariance += c;
             }
         }
