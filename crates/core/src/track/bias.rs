@@ -5,7 +5,10 @@
 //! tag moves). Per antenna a and hypothesis, with ρ = exp(−Δt/τ_b) since
 //! the antenna's previous read (ρ = 0 on its first: the stationary prior):
 //!
-//! * predict: `b ← ρ b`, `V ← ρ² V + σ_b² (1 − ρ²)`;
+//! * predict: `b ← ρ b`, `V ← ρ² V + σ_b² (1 − ρ²)`, plus `σ_h²` when the
+//!   read is on another carrier than the antenna's previous one (a hopping
+//!   reader: the channel's calibration residual and its multipath phase are
+//!   that channel's own, so that share is drawn afresh);
 //! * the reading then predicts range + b, with variance H P Hᵀ + V + R;
 //! * update, after the state's: `b ← b + V/S · ν`, `V ← V − V²/S`, with ν
 //!   and S the reading's innovation and its variance.
@@ -14,6 +17,21 @@
 //! carry is dropped (a decoupled scalar filter per antenna): that overstates
 //! the next innovation's variance a little (conservative) and keeps a step
 //! O(1) in the number of antennas.
+
+/// When, and on which carrier, an antenna's bias states were last
+/// propagated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BiasClock {
+    /// Seconds; −∞: not yet (the next read starts the states).
+    pub time_s: f64,
+    /// Hz.
+    pub frequency_hz: f64,
+}
+
+impl BiasClock {
+    /// No read yet.
+    pub const UNSET: BiasClock = BiasClock { time_s: f64::NEG_INFINITY, frequency_hz: f64::NAN };
+}
 
 /// One antenna's bias prediction for one hypothesis at the reading's time:
 /// mean (m) and variance (m²).
@@ -60,6 +78,12 @@ impl BiasStep {
         Self { antenna: Some(antenna), rho, drive: stationary_m2 * (1.0 - rho * rho) }
     }
 
+    /// The same step with `jump_m2` (m²) more drive: a share of the bias
+    /// drawn afresh (on a new carrier), independent of the rest.
+    pub fn with_jump(self, jump_m2: f64) -> Self {
+        Self { drive: self.drive + jump_m2, ..self }
+    }
+
     /// The prediction from a hypothesis' last `(mean, variance)`.
     pub fn predict(&self, mean: f64, variance: f64) -> BiasPrediction {
         BiasPrediction { mean: self.rho * mean, variance: self.rho * self.rho * variance + self.drive }
@@ -86,6 +110,16 @@ mod tests {
     fn the_stationary_variance_is_kept() {
         let step = BiasStep::new(0, 0.13, 2e-6, 0.5);
         assert!((step.predict(0.0, 2e-6).variance - 2e-6).abs() < 1e-18);
+    }
+
+    /// A jump adds its variance to the drive and leaves ρ alone.
+    #[test]
+    fn a_jump_adds_independent_variance() {
+        let step = BiasStep::new(1, 0.25, 4e-6, 0.5).with_jump(1e-6);
+        let plain = BiasStep::new(1, 0.25, 4e-6, 0.5);
+        assert_eq!(step.rho, plain.rho);
+        assert!((step.predict(2e-3, 1e-6).variance - (plain.predict(2e-3, 1e-6).variance + 1e-6)).abs() < 1e-18);
+        assert_eq!(step.predict(2e-3, 1e-6).mean, plain.predict(2e-3, 1e-6).mean);
     }
 
     /// The update is the scalar Kalman update with gain V/S.

@@ -34,7 +34,7 @@
 use nalgebra::{Matrix3, Vector3};
 
 use super::candidates::nearest_candidate;
-use super::bias::{BiasPrediction, BiasStep};
+use super::bias::{BiasClock, BiasPrediction, BiasStep};
 use super::initial::{initial_covariance, InitialSearch, InitialState};
 use super::read_budget::Budget;
 use super::line_twins::{line_layout, line_twins, LineLayout};
@@ -103,6 +103,11 @@ pub struct GlacParams {
     pub bias_state: bool,
     /// Correlation time τ_b of the bias, seconds.
     pub bias_time_s: f64,
+    /// 1-sigma of the bias share that changes with the carrier (per-channel
+    /// calibration residual, multipath), radians: when an antenna's read is
+    /// on another channel than its previous one, this variance is added to
+    /// its bias states. 0: the bias ignores hops.
+    pub hop_bias_sigma_rad: f64,
     /// A second bias level σ_b (rad) run beside `bias_sigma_rad` as a
     /// bank of two trackers ([`super::glac_bank`]; `glac`, fast inference
     /// with `bias_state`): the one whose accumulated evidence of the reads
@@ -203,6 +208,7 @@ impl Default for GlacParams {
             bias_sigma_rad: 0.07,
             bias_state: true,
             bias_time_s: 0.5,
+            hop_bias_sigma_rad: 0.1,
             bank_sigma_rad: None,
             bank_time_s: None,
             bank_switch_nats: 3.0,
@@ -262,6 +268,9 @@ impl GlacParams {
         }
         if !(self.bias_sigma_rad >= 0.0 && self.bias_sigma_rad.is_finite()) {
             return Err(Error::Parameter { name: "bias_sigma_rad".into(), reason: "must be zero or positive".into() });
+        }
+        if !(self.hop_bias_sigma_rad >= 0.0 && self.hop_bias_sigma_rad.is_finite()) {
+            return Err(Error::Parameter { name: "hop_bias_sigma_rad".into(), reason: "must be zero or positive".into() });
         }
         for (name, v) in [("bank_sigma_rad", self.bank_sigma_rad), ("bank_time_s", self.bank_time_s)] {
             if v.is_some_and(|v| !(v > 0.0 && v.is_finite())) {
@@ -526,9 +535,10 @@ pub struct Glac {
     /// Three or more antennas on a line and one off it (3D): the free
     /// antenna's integer cannot be fixed on one channel (`line_twins`).
     line_layout: Option<LineLayout>,
-    /// Per antenna: time the hypotheses' bias states were last
-    /// propagated to, seconds (−∞: not yet, the next read starts it).
-    bias_time_s: Vec<f64>,
+    /// Per antenna: time (s) and carrier (Hz) the hypotheses' bias states
+    /// were last propagated to ([`BiasClock::UNSET`]: the next read starts
+    /// them).
+    bias_clock: Vec<BiasClock>,
     /// Reads of the last `init_max_window_s` while tracking (re-seeding).
     recent: std::collections::VecDeque<PhaseRead>,
     /// Time of the last (re-)seeding search, seconds.
@@ -617,7 +627,7 @@ enum Reseed {
     Replay {
         fresh: Hypotheses,
         time_s: f64,
-        bias_time_s: Vec<f64>,
+        bias_clock: Vec<BiasClock>,
         reads: std::collections::VecDeque<PhaseRead>,
         replayed_s: f64,
         progress: Option<StepProgress>,
@@ -677,7 +687,7 @@ impl Glac {
             first_frequency_hz: f64::NAN,
             hopped: false,
             line_layout,
-            bias_time_s: vec![f64::NEG_INFINITY; n_antennas],
+            bias_clock: vec![BiasClock::UNSET; n_antennas],
             last_good: None,
             recent: std::collections::VecDeque::new(),
             seeded_s: f64::NEG_INFINITY,
@@ -806,7 +816,7 @@ impl Glac {
         self.hypotheses = hypotheses;
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
-        self.bias_time_s.fill(f64::NEG_INFINITY);
+        self.bias_clock.fill(BiasClock::UNSET);
         self.seeded_s = last_s;
         self.gated_since_seed = 0;
         self.recent.clear();
@@ -925,16 +935,16 @@ impl Glac {
                     let fresh = self.hypotheses_from(&initial);
                     let replayed_s = reads.last().map_or(t_x, |m| m.time_s);
                     let reads = reads.into_iter().filter(|m| m.time_s > t_x).collect();
-                    let bias_time_s = vec![f64::NEG_INFINITY; self.bias_time_s.len()];
-                    self.advance_reseed(Reseed::Replay { fresh, time_s: t_x, bias_time_s, reads, replayed_s, progress: None }, budget)
+                    let bias_clock = vec![BiasClock::UNSET; self.bias_clock.len()];
+                    self.advance_reseed(Reseed::Replay { fresh, time_s: t_x, bias_clock, reads, replayed_s, progress: None }, budget)
                 }
             },
-            Reseed::Replay { mut fresh, mut time_s, mut bias_time_s, mut reads, mut replayed_s, mut progress } => {
+            Reseed::Replay { mut fresh, mut time_s, mut bias_clock, mut reads, mut replayed_s, mut progress } => {
                 // The candidates and their clocks stand in for the live ones
                 // while they are stepped.
                 std::mem::swap(&mut self.hypotheses, &mut fresh);
                 std::mem::swap(&mut self.time_s, &mut time_s);
-                std::mem::swap(&mut self.bias_time_s, &mut bias_time_s);
+                std::mem::swap(&mut self.bias_clock, &mut bias_clock);
                 let done = loop {
                     if let Some(p) = progress.take() {
                         progress = self.advance_step(p, budget);
@@ -958,10 +968,10 @@ impl Glac {
                 };
                 std::mem::swap(&mut self.hypotheses, &mut fresh);
                 std::mem::swap(&mut self.time_s, &mut time_s);
-                std::mem::swap(&mut self.bias_time_s, &mut bias_time_s);
+                std::mem::swap(&mut self.bias_clock, &mut bias_clock);
                 let join = JOIN_UNITS * (fresh.len() + self.hypotheses.len()) as u64;
                 if !done || !budget.try_spend_overhead(1 + join + self.hypotheses.len() as u64 / FINISH_PER_UNIT) {
-                    return Some(Reseed::Replay { fresh, time_s, bias_time_s, reads, replayed_s, progress });
+                    return Some(Reseed::Replay { fresh, time_s, bias_clock, reads, replayed_s, progress });
                 }
                 self.join_reseeded(&fresh);
                 None
@@ -1436,11 +1446,18 @@ impl Glac {
         if !self.params.bias_state || m.antenna >= MAX_BIASES || self.params.bias_sigma_rad == 0.0 {
             return BiasStep::NONE;
         }
-        let interval_s = m.time_s - self.bias_time_s[m.antenna];
-        self.bias_time_s[m.antenna] = m.time_s;
+        let clock = self.bias_clock[m.antenna];
+        self.bias_clock[m.antenna] = BiasClock { time_s: m.time_s, frequency_hz: m.frequency_hz };
         let to_range = Scene::range_per_radian(m.frequency_hz);
         let stationary = (self.params.bias_sigma_rad * to_range).powi(2);
-        BiasStep::new(m.antenna, interval_s, stationary, self.params.bias_time_s)
+        let step = BiasStep::new(m.antenna, m.time_s - clock.time_s, stationary, self.params.bias_time_s);
+        // A new carrier brings its own calibration residual and multipath
+        // phase: that share of the bias is drawn afresh.
+        if clock.time_s.is_finite() && clock.frequency_hz != m.frequency_hz {
+            step.with_jump((self.params.hop_bias_sigma_rad * to_range).powi(2))
+        } else {
+            step
+        }
     }
 
     /// Three antennas on a line (one off it, one channel): the twins of the
@@ -1933,7 +1950,7 @@ impl Tracker for Glac {
         self.last_good = None;
         self.first_frequency_hz = f64::NAN;
         self.hopped = false;
-        self.bias_time_s.fill(f64::NEG_INFINITY);
+        self.bias_clock.fill(BiasClock::UNSET);
         if let Some(log) = self.evidence.as_mut() {
             log.clear();
         }
@@ -2162,6 +2179,31 @@ pub(crate) mod tests {
         assert!((next.drive - stationary * (1.0 - next.rho * next.rho)).abs() < 1e-18);
         let mut off = Glac::new(scene.clone(), GlacParams { bias_state: false, ..GlacParams::default() }).unwrap();
         assert_eq!(off.bias_step(&read(1.0)).antenna, None);
+    }
+
+    /// A read on another carrier than the antenna's previous one adds the
+    /// hop share of the bias to the drive; the same carrier, or another
+    /// antenna's clock, does not.
+    #[test]
+    fn a_new_carrier_draws_the_hop_share_of_the_bias_afresh() {
+        let scene = scene();
+        let mut tracker = Glac::new(scene.clone(), GlacParams { hop_bias_sigma_rad: 0.1, ..GlacParams::default() }).unwrap();
+        let read = |t: f64, antenna: usize, f: f64| PhaseRead { time_s: t, antenna, frequency_hz: f, phase_rad: 0.0 };
+        let first = tracker.bias_step(&read(1.0, 1, 915e6));
+        assert_eq!(first.rho, 0.0);
+        let other_antenna = tracker.bias_step(&read(1.1, 2, 903e6));
+        assert_eq!(other_antenna.rho, 0.0, "antenna 2's first read is its stationary prior");
+        let same = tracker.bias_step(&read(1.25, 1, 915e6));
+        let hopped = tracker.bias_step(&read(1.5, 1, 903e6));
+        let (rho, stationary) = ((-0.25f64 / 0.5).exp(), |f: f64| (0.07 * Scene::range_per_radian(f)).powi(2));
+        assert!((same.drive - stationary(915e6) * (1.0 - rho * rho)).abs() < 1e-18);
+        let jump = (0.1 * Scene::range_per_radian(903e6)).powi(2);
+        assert!((hopped.rho - rho).abs() < 1e-12);
+        assert!((hopped.drive - (stationary(903e6) * (1.0 - rho * rho) + jump)).abs() < 1e-18);
+        let mut off = Glac::new(scene, GlacParams { hop_bias_sigma_rad: 0.0, ..GlacParams::default() }).unwrap();
+        off.bias_step(&read(1.0, 1, 915e6));
+        let no_jump = off.bias_step(&read(1.25, 1, 903e6));
+        assert!((no_jump.drive - stationary(903e6) * (1.0 - rho * rho)).abs() < 1e-18);
     }
 
     /// A slow phase bias on one antenna (0.15 rad, a 3 s sinusoid, as

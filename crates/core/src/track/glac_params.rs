@@ -113,6 +113,14 @@ pub fn glac_table() -> Table<GlacParams> {
                 |p, v| p.bias_state = v,
             ),
             float("bias_time_s", Range::POSITIVE, "s", "correlation time of the bias", |p| p.bias_time_s, |p, v| p.bias_time_s = v),
+            float(
+                "hop_bias_sigma_rad",
+                Range::NON_NEGATIVE,
+                "rad",
+                "1-sigma of the bias share drawn afresh when an antenna's read is on another channel than its previous one (per-channel calibration residual, multipath); 0: the bias ignores hops",
+                |p| p.hop_bias_sigma_rad,
+                |p, v| p.hop_bias_sigma_rad = v,
+            ),
             optional_float(
                 "bank_sigma_rad",
                 Range::POSITIVE,
