@@ -13,6 +13,7 @@ from __future__ import annotations
 import numpy as np
 
 from scattertrack.io.types import Reads, Scene, Track
+from scattertrack.track import parameters
 from scattertrack.track.columns import READS_DECLINED, track_from_columns
 from scattertrack.track.core import CoreTracker
 
@@ -28,9 +29,10 @@ def run(method: str, scene: Scene, reads: Reads, *, progress: bool = False, chun
     own skip report (duplicates) is carried over, and reads the trackers
     declined are added to it by reason. ``covariance=True`` keeps every
     row's full 6×6 covariance in ``Track.covariance`` (for the ROS 2
-    writers; 288 bytes a row).
+    writers; 288 bytes a row). Offline, a read's deferred work is done at
+    once (:func:`scattertrack.track.parameters.offline`).
     """
-    tracker = CoreTracker(method, scene, **params)
+    tracker = CoreTracker(method, scene, **parameters.offline(method, params))
     order = np.argsort(reads.time_s, kind="stable")
     # Sort every column once; the chunks below are views into these.
     epcs = reads.epc[order]

@@ -35,6 +35,25 @@ def table(method: str):
     return drone_table(method)
 
 
+OFFLINE_READ_BUDGET = 2**62
+"""``read_budget`` of an offline run: no bound in practice."""
+
+
+def offline(method: str, params: dict) -> dict:
+    """``params`` for an offline run (a file, a batch of recordings).
+
+    ``read_budget`` bounds the work one read may do so that a live read is
+    answered within about a millisecond; the rest (initial search, replay,
+    re-seeding) waits for the tag's next reads. Offline nothing waits for a
+    read, and deferring only delays the track (a mod-π 3D tag's first fix by
+    seconds), so offline runs do that work at once unless ``read_budget`` is
+    given. Methods without the parameter are unchanged.
+    """
+    if "read_budget" in params or "read_budget" not in default_params(method):
+        return dict(params)
+    return {**params, "read_budget": OFFLINE_READ_BUDGET}
+
+
 def default_params(method: str) -> dict:
     """name -> default of every parameter ``method`` accepts (SI units)."""
     return dict(table(method).defaults())

@@ -34,7 +34,7 @@ from scattertrack.io.track_chunks import TrackWriter
 from scattertrack.io.types import Scene, SkipReport
 from scattertrack.physics import SPEED_OF_LIGHT
 from scattertrack.track import make
-from scattertrack.track import plausibility
+from scattertrack.track import parameters, plausibility
 from scattertrack.track.columns import READS_DECLINED, declined_skips, position_sigma
 
 __all__ = ["NeedsWholeFile", "StreamedReads", "StreamedTrack", "track_file"]
@@ -330,7 +330,7 @@ def track_file(method: str, scene: Scene, reads_path, out_path, params: dict, *,
 
 def _track_stream(method: str, scene: Scene, reads_path, out_path, params: dict, unresolved_sigma_m: float,
                   shards: int | None, fast: bool) -> StreamedTrack:
-    engines = Shards(method, scene, params, shards)
+    engines = Shards(method, scene, parameters.offline(method, params), shards)
     ids = np.array([a.id for a in scene.antennas], dtype=np.int64)
     by_id = np.argsort(ids)
     stream = ReadsStream(reads_path, scene, fast=fast)

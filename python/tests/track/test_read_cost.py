@@ -39,3 +39,23 @@ def test_read_budget_is_a_parameter():
     assert default_params("glac")["read_budget"] == 2_000
     with pytest.raises(ValueError, match="read_budget"):
         run("glac", _mod_pi("glac-2d-40cms-modpi", 1.0).scene, _mod_pi("glac-2d-40cms-modpi", 1.0).reads, read_budget=0)
+
+
+def test_offline_runs_do_deferred_work_at_once():
+    """``run`` (offline) leaves ``read_budget`` unbounded unless it is given;
+    a tracker stepped read by read (``make``, as live input is) keeps the
+    table's default, and its mod-π 3D tag reports later."""
+    from scattertrack.track import make, parameters
+
+    assert parameters.offline("glac", {})["read_budget"] == parameters.OFFLINE_READ_BUDGET
+    assert parameters.offline("glac", {"read_budget": 500}) == {"read_budget": 500}
+    assert "read_budget" not in parameters.offline("turbotrack", {})
+    sim = _mod_pi("glac-3d-arm", 4.0)
+    offline = run("glac", sim.scene, sim.reads)
+    epc = next(iter(offline.stats))
+    assert offline.stats[epc]["max_expanded_per_read"] > default_params("glac")["read_budget"]
+    tracker = make("glac", sim.scene)
+    r = sim.reads
+    stepped = [t for t, e, a, f, p in zip(r.time_s, r.epc, r.antenna, r.frequency_hz, r.phase_rad)
+               if tracker.step_read(t, e, int(a), f, p) is not None]
+    assert len(offline) and (not stepped or stepped[0] > offline.time_s[0])

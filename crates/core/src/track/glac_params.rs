@@ -288,7 +288,7 @@ pub fn glac_table() -> Table<GlacParams> {
                 "read_budget",
                 Range::at_least(1.0),
                 "units",
-                "most work one read does (1 unit ~ one hypothesis through one read, ~0.2 us): the initial search, replays and re-seeding carry the rest to the tag's next reads, which report nothing (or the re-acquisition estimate) until it is done (fast inference)",
+                "most work one read does (1 unit ~ one hypothesis through one read, ~0.2 us): the initial search, replays and re-seeding carry the rest to the tag's next reads, which report nothing (or the re-acquisition estimate) until it is done (fast inference); for live input: offline runs (track, batch, st.track.run) are unbounded unless it is given",
                 |p| p.read_budget,
                 |p, v| p.read_budget = v,
             ),
