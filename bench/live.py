@@ -43,6 +43,7 @@ from pathlib import Path
 import numpy as np
 
 from scattertrack import track
+from scattertrack.track import parameters
 from scattertrack.eval import compare
 from scattertrack.io import read_reads, read_track
 from scattertrack.readers.live import LiveSession
@@ -164,7 +165,7 @@ def main() -> int:
     sent = int(re.search(r"sent (\d+) read", served).group(1))
     journal = read_reads(folder / "reads.csv")
     live = read_track(folder / "track.csv")
-    offline = track.run("glac", sim.scene, journal, covariance=args.outputs)
+    offline = track.run("glac", sim.scene, journal, covariance=args.outputs, **parameters.live("glac", {}))
     difference = float(np.abs(live.position - offline.position).max()) if len(live) == len(offline) else float("nan")
     # The journal's clock is the emulated reader's: Unix epoch + simulated time.
     epoch_s = float(re.search(r"reader clock = simulated time \+ ([0-9.]+) s", served).group(1))

@@ -54,6 +54,15 @@ def offline(method: str, params: dict) -> dict:
     return {**params, "read_budget": OFFLINE_READ_BUDGET}
 
 
+def live(method: str, params: dict) -> dict:
+    """``params`` with ``read_budget`` as a live tracker has it (the table's
+    default unless given): an offline run of a live session's journal with
+    them gives the live track, row for row."""
+    if "read_budget" in params or "read_budget" not in default_params(method):
+        return dict(params)
+    return {**params, "read_budget": default_params(method)["read_budget"]}
+
+
 def default_params(method: str) -> dict:
     """name -> default of every parameter ``method`` accepts (SI units)."""
     return dict(table(method).defaults())

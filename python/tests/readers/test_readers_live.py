@@ -11,6 +11,7 @@ import pytest
 from robots import free_port
 
 from scattertrack import track
+from scattertrack.track import parameters
 from scattertrack.io import read_reads, read_track
 from scattertrack.readers.live import DUPLICATE, LiveSession
 
@@ -42,7 +43,8 @@ def test_the_live_track_is_the_offline_track_of_the_journal(walls_simulation, tm
     with serve_reads(sim.reads, speed=SPEED, drop_after_s=2.0) as emulator:
         _, summary = _live(sim.scene, emulator.port, tmp_path, duration_s=6.0 / SPEED + 1.5)
     live = read_track(tmp_path / "track.csv")
-    offline = track.run("glac", sim.scene, read_reads(tmp_path / "reads.csv"))
+    # With the live tracker's read budget, which offline runs leave unbounded.
+    offline = track.run("glac", sim.scene, read_reads(tmp_path / "reads.csv"), **parameters.live("glac", {}))
     assert summary.estimates == len(live) == len(offline) > 0
     assert np.abs(live.time_s - offline.time_s).max() < 1e-6
     assert np.abs(live.position - offline.position).max() < 2e-6  # 6-decimal cells

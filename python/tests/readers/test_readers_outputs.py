@@ -12,6 +12,7 @@ import pytest
 
 from robots import FoxgloveClient, Subscriber, free_port, mosquitto_broker
 from scattertrack import track
+from scattertrack.track import parameters
 from scattertrack.io import read_reads, read_track, ros2
 from scattertrack.readers.live import LiveSession
 from scattertrack.readers.outputs import LiveOutputs, OutputOptions
@@ -31,7 +32,7 @@ def _live(sim, emulator, tmp_path, options: OutputOptions, before_run=None):
 
 def _offline(sim, tmp_path):
     """The journal tracked offline, with covariances: what every output must say."""
-    return track.run("glac", sim.scene, read_reads(tmp_path / "reads.csv"), covariance=True)
+    return track.run("glac", sim.scene, read_reads(tmp_path / "reads.csv"), covariance=True, **parameters.live("glac", {}))
 
 
 def test_mcap_bag_and_parquet_from_a_live_run_read_back_independently(walls_simulation, tmp_path, serve_reads):
