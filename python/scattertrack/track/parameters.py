@@ -49,18 +49,23 @@ def offline(method: str, params: dict) -> dict:
     seconds), so offline runs do that work at once unless ``read_budget`` is
     given. Methods without the parameter are unchanged.
     """
-    if "read_budget" in params or "read_budget" not in default_params(method):
-        return dict(params)
-    return {**params, "read_budget": OFFLINE_READ_BUDGET}
+    return _read_budget_unless_given(method, params, lambda defaults: OFFLINE_READ_BUDGET)
 
 
 def live(method: str, params: dict) -> dict:
     """``params`` with ``read_budget`` as a live tracker has it (the table's
     default unless given): an offline run of a live session's journal with
     them gives the live track, row for row."""
-    if "read_budget" in params or "read_budget" not in default_params(method):
+    return _read_budget_unless_given(method, params, lambda defaults: defaults["read_budget"])
+
+
+def _read_budget_unless_given(method: str, params: dict, budget) -> dict:
+    """A copy of ``params`` with ``read_budget = budget(defaults)`` when the
+    method has that parameter and ``params`` does not set it."""
+    defaults = default_params(method)
+    if "read_budget" in params or "read_budget" not in defaults:
         return dict(params)
-    return {**params, "read_budget": default_params(method)["read_budget"]}
+    return {**params, "read_budget": budget(defaults)}
 
 
 def default_params(method: str) -> dict:
