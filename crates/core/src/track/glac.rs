@@ -40,7 +40,7 @@ use super::read_budget::Budget;
 use super::line_twins::{line_layout, line_twins, LineLayout};
 use super::{Estimate, Measurement, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
-use crate::filter::{apply_scalar, imm, innovation, log_gaussian, predict, update_position};
+use crate::filter::{apply_scalar, imm, innovation, log_gaussian, pack_pair, predict, unpack_pair, update_position, PackedCovariance};
 use crate::geometry::multilaterate;
 use crate::model::{range, MotionModel, StateMatrix, StateVector, Transition};
 use crate::scene::Scene;
@@ -324,19 +324,21 @@ impl GlacParams {
 /// `i` is `(x[i], p[i], mu[i], log_likelihood[i], outliers[i])`. Each has
 /// two model-conditioned filters for the IMM; single-model trackers use
 /// slot 0 only (μ = [1, 0]).
-#[derive(Debug, Clone, Default)]
+#[derive(Debug, Clone)]
 struct Hypotheses {
     x: Vec<[StateVector; 2]>,
-    p: Vec<[StateMatrix; 2]>,
+    /// Covariances, packed between steps (unpacked around each filter step).
+    p: Vec<[PackedCovariance; 2]>,
     /// Model probabilities μ (IMM).
     mu: Vec<[f64; 2]>,
     log_likelihood: Vec<f64>,
     /// Consecutive gated readings.
     outliers: Vec<u32>,
-    /// Per antenna (the first [`MAX_BIASES`]): the estimated range bias
-    /// (m) and its variance (m²) of the AR(1) phase-bias state.
-    bias: Vec<[f64; MAX_BIASES]>,
-    bias_variance: Vec<[f64; MAX_BIASES]>,
+    /// Per hypothesis and antenna (the first `biases`, at most
+    /// [`MAX_BIASES`]): the estimated range bias (m) and its variance (m²)
+    /// of the AR(1) phase-bias state, at `i * biases + antenna`.
+    bias: Vec<[f64; 2]>,
+    biases: usize,
 }
 
 /// Twins up to this many candidate spacings away count in the covariance.
@@ -360,20 +362,26 @@ const RESEED_SIGMA_M: f64 = 0.04;
 const SHRINK_CAPACITY: usize = 32;
 
 /// Antennas (by index) that get a bias state; further ones count their
-/// bias as white noise. Fixed-size so a hypothesis allocates nothing.
+/// bias as white noise. A hypothesis holds one per antenna up to this.
 pub const MAX_BIASES: usize = 8;
 
 impl Hypotheses {
-    fn with_capacity(n: usize) -> Self {
+    /// Room for `n` hypotheses with bias states for `biases` antennas.
+    fn with_capacity(n: usize, biases: usize) -> Self {
         Self {
             x: Vec::with_capacity(n),
             p: Vec::with_capacity(n),
             mu: Vec::with_capacity(n),
             log_likelihood: Vec::with_capacity(n),
             outliers: Vec::with_capacity(n),
-            bias: Vec::with_capacity(n),
-            bias_variance: Vec::with_capacity(n),
+            bias: Vec::with_capacity(n * biases),
+            biases,
         }
+    }
+
+    /// Hypothesis `i`'s bias states (mean m, variance m²), by antenna.
+    fn biases_of(&self, i: usize) -> &[[f64; 2]] {
+        &self.bias[i * self.biases..(i + 1) * self.biases]
     }
 
     fn len(&self) -> usize {
@@ -387,19 +395,18 @@ impl Hypotheses {
         self.log_likelihood.clear();
         self.outliers.clear();
         self.bias.clear();
-        self.bias_variance.clear();
     }
 
     fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
         self.x.push([x, x]);
-        self.p.push([p, p]);
+        let packed = PackedCovariance::pack(&p);
+        self.p.push([packed, packed]);
         self.mu.push([1.0, 0.0]);
         self.log_likelihood.push(log_likelihood);
         self.outliers.push(0);
         // Unknown until the antenna is first read, when the AR(1)
         // prediction (ρ = 0) sets the stationary variance.
-        self.bias.push([0.0; MAX_BIASES]);
-        self.bias_variance.push([0.0; MAX_BIASES]);
+        self.bias.extend(std::iter::repeat_n([0.0; 2], self.biases));
     }
 
     /// Appends a copy of hypothesis `i` (for ambiguity branching).
@@ -409,8 +416,7 @@ impl Hypotheses {
         self.mu.push(self.mu[i]);
         self.log_likelihood.push(self.log_likelihood[i]);
         self.outliers.push(self.outliers[i]);
-        self.bias.push(self.bias[i]);
-        self.bias_variance.push(self.bias_variance[i]);
+        self.bias.extend_from_within(i * self.biases..(i + 1) * self.biases);
     }
 
     /// Appends hypothesis `i` of `other` with log-likelihood `log_likelihood`.
@@ -420,17 +426,17 @@ impl Hypotheses {
         self.mu.push(other.mu[i]);
         self.log_likelihood.push(log_likelihood);
         self.outliers.push(other.outliers[i]);
-        self.bias.push(other.bias[i]);
-        self.bias_variance.push(other.bias_variance[i]);
+        debug_assert_eq!(self.biases, other.biases);
+        self.bias.extend_from_slice(other.biases_of(i));
     }
 
     /// The reported state of hypothesis `i`: the IMM combination (which
     /// is slot 0 itself for single-model trackers, where μ = [1, 0]).
     fn state(&self, i: usize) -> (StateVector, StateMatrix) {
         if self.mu[i][1] == 0.0 {
-            (self.x[i][0], self.p[i][0])
+            (self.x[i][0], self.p[i][0].unpack())
         } else {
-            imm::combine(&self.x[i], &self.p[i], &self.mu[i])
+            imm::combine(&self.x[i], &unpack_pair(&self.p[i]), &self.mu[i])
         }
     }
 
@@ -447,8 +453,9 @@ impl Hypotheses {
                     self.mu.swap(w, r);
                     self.log_likelihood.swap(w, r);
                     self.outliers.swap(w, r);
-                    self.bias.swap(w, r);
-                    self.bias_variance.swap(w, r);
+                    let b = self.biases;
+                    let (low, high) = self.bias.split_at_mut(r * b);
+                    low[w * b..(w + 1) * b].swap_with_slice(&mut high[..b]);
                 }
                 w += 1;
             }
@@ -458,10 +465,9 @@ impl Hypotheses {
         self.mu.truncate(w);
         self.log_likelihood.truncate(w);
         self.outliers.truncate(w);
-        self.bias.truncate(w);
-        self.bias_variance.truncate(w);
+        self.bias.truncate(w * self.biases);
         // A tag that has narrowed to a few trajectories gives back the room
-        // its search needed (about 0.8 kB a hypothesis; 100+ while it
+        // its search needed (about 0.5 kB a hypothesis; 100+ while it
         // initialises): 10,000 converged tags then hold kilobytes each,
         // not the initial search's peak. Regrowing on a later branching is
         // one allocation per array.
@@ -472,8 +478,7 @@ impl Hypotheses {
             self.mu.shrink_to(room);
             self.log_likelihood.shrink_to(room);
             self.outliers.shrink_to(room);
-            self.bias.shrink_to(room);
-            self.bias_variance.shrink_to(room);
+            self.bias.shrink_to(room * self.biases);
         }
     }
 
@@ -669,14 +674,15 @@ impl Glac {
         let positions: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
         let line_layout = if axes == 3 { line_layout(&positions) } else { None };
         let n_antennas = scene.antennas.len();
+        let biases = n_antennas.min(MAX_BIASES);
         Ok(Self {
             scene,
             params,
             axes,
             phase: Phase::Initialising,
             buffer: Vec::new(),
-            hypotheses: Hypotheses::default(),
-            scratch: Hypotheses::default(),
+            hypotheses: Hypotheses::with_capacity(0, biases),
+            scratch: Hypotheses::with_capacity(0, biases),
             time_s: f64::NEG_INFINITY,
             last_time_s: f64::NEG_INFINITY,
             group: Vec::new(),
@@ -846,7 +852,7 @@ impl Glac {
                 }
                 Some(Some((t_x, initial))) => {
                     let initial = self.reachable(initial, t_x);
-                    let built = Hypotheses::with_capacity(initial.len());
+                    let built = Hypotheses::with_capacity(initial.len(), self.biases());
                     self.advance_job(Job::Commit { t_x, initial, built, last_s, counts, now_s }, budget)
                 }
             },
@@ -877,10 +883,16 @@ impl Glac {
         (self.range_variance(frequency_hz) + bias * bias).sqrt()
     }
 
+    /// Antennas with a bias state in every hypothesis (the first ones, at
+    /// most [`MAX_BIASES`]).
+    fn biases(&self) -> usize {
+        self.scene.antennas.len().min(MAX_BIASES)
+    }
+
     /// Hypotheses (normalised) started from initial candidates, with the
     /// initial covariance; in 2D pinned to the tag's plane.
     fn hypotheses_from(&self, initial: &[super::initial::InitialHypothesis]) -> Hypotheses {
-        let mut hypotheses = Hypotheses::with_capacity(initial.len());
+        let mut hypotheses = Hypotheses::with_capacity(initial.len(), self.biases());
         self.build_hypotheses(&mut hypotheses, initial);
         hypotheses.normalise();
         hypotheses
@@ -1115,7 +1127,7 @@ impl Glac {
             }
             let i = s.next;
             s.next += 1;
-            let (range, variance) = step.predict(h, i);
+            let (range, variance, covariance) = step.predict(h, i);
             let b = predict_bias(bias, h, i);
             // The reading predicts range + bias, with both uncertainties.
             let (predicted, variance) = (range + b.mean, variance + b.variance);
@@ -1126,11 +1138,13 @@ impl Glac {
                     // A branch is an exact copy of the predicted hypothesis: it
                     // keeps that prediction (bias, predicted reading, its variance).
                     h.duplicate(i);
-                    s.branches.push((h.len() - 1, second, b, predicted, variance));
+                    let j = h.len() - 1;
+                    h.p[j] = pack_pair(&covariance);
+                    s.branches.push((j, second, b, predicted, variance));
                     s.origins.push(i);
                 }
             }
-            step.update(h, i, z - b.mean, b.variance);
+            step.update_predicted(h, i, covariance, z - b.mean, b.variance);
             update_bias(bias, h, i, &b, z - predicted, variance);
         }
         true
@@ -1140,7 +1154,7 @@ impl Glac {
     fn finish_fast(&mut self, s: &StepProgress) {
         let h = &mut self.hypotheses;
         for &(j, z, b, predicted, variance) in &s.branches {
-            s.step.update(h, j, z - b.mean, b.variance);
+            s.step.update_predicted(h, j, unpack_pair(&h.p[j]), z - b.mean, b.variance);
             update_bias(&s.bias, h, j, &b, z - predicted, variance);
         }
         let models = if s.step.manoeuvre.is_some() { 2 } else { 1 };
@@ -1189,7 +1203,7 @@ impl Glac {
         self.scratch.clear();
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
-            let (mut x, mut p) = (h.x[i][0], h.p[i][0]);
+            let (mut x, mut p) = (h.x[i][0], h.p[i][0].unpack());
             predict(&mut x, &mut p, &transition);
             let (d, jac) = range(&x, &antenna, self.axes, true);
             let jac = jac.unwrap();
@@ -1270,7 +1284,8 @@ impl Glac {
         let mut distances = vec![0.0; group.len()];
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
-            let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
+            let mut covariance = h.p[i][0].unpack();
+            let (x, p) = (&mut h.x[i][0], &mut covariance);
             predict(x, p, &transition);
             let predicted = Vector3::new(x[0], x[1], x[2]);
             for (k, a) in anchors.iter().enumerate() {
@@ -1306,6 +1321,7 @@ impl Glac {
             } else {
                 h.outliers[i] += 1;
             }
+            h.p[i][0] = PackedCovariance::pack(&covariance);
             h.log_likelihood[i] += log_l;
         }
         self.stats.filter_updates += h.len() as u64;
@@ -1443,7 +1459,7 @@ impl Glac {
     /// The bias states' step for reading `m`, and the antenna's bias clock
     /// moved to its time.
     fn bias_step(&mut self, m: &PhaseRead) -> BiasStep {
-        if !self.params.bias_state || m.antenna >= MAX_BIASES || self.params.bias_sigma_rad == 0.0 {
+        if !self.params.bias_state || m.antenna >= self.biases() || self.params.bias_sigma_rad == 0.0 {
             return BiasStep::NONE;
         }
         let clock = self.bias_clock[m.antenna];
@@ -1546,7 +1562,10 @@ fn read_evidence(h: &Hypotheses, s: &StepProgress) -> f64 {
 /// [`BiasStep`] applied to hypothesis `i`'s state of the step's antenna.
 fn predict_bias(step: &BiasStep, h: &Hypotheses, i: usize) -> BiasPrediction {
     match step.antenna {
-        Some(a) => step.predict(h.bias[i][a], h.bias_variance[i][a]),
+        Some(a) => {
+            let [mean, variance] = h.bias[i * h.biases + a];
+            step.predict(mean, variance)
+        }
         None => BiasPrediction::default(),
     }
 }
@@ -1556,8 +1575,7 @@ fn predict_bias(step: &BiasStep, h: &Hypotheses, i: usize) -> BiasPrediction {
 fn update_bias(step: &BiasStep, h: &mut Hypotheses, i: usize, b: &BiasPrediction, innovation: f64, variance: f64) {
     let Some(a) = step.antenna else { return };
     let (mean, var) = if h.outliers[i] == 0 { b.update(innovation, variance) } else { (b.mean, b.variance) };
-    h.bias[i][a] = mean;
-    h.bias_variance[i][a] = var;
+    h.bias[i * h.biases + a] = [mean, var];
 }
 
 /// Everything one reading means for every hypothesis (fast inference).
@@ -1582,20 +1600,25 @@ impl FastStep {
     /// Predicts hypothesis `i` to the reading's time (IMM: mixing first;
     /// the predicted model probabilities c are kept in μ until the update)
     /// and returns its predicted range (m) and innovation variance S (m²)
-    /// under the combined prediction.
-    fn predict(&self, h: &mut Hypotheses, i: usize) -> (f64, f64) {
+    /// under the combined prediction, and the predicted covariances (slot
+    /// 1 unused by a single model), which [`FastStep::update_predicted`]
+    /// takes: the hypothesis' stored covariances are written once a read,
+    /// by the update.
+    fn predict(&self, h: &mut Hypotheses, i: usize) -> (f64, f64, [StateMatrix; 2]) {
         match self.manoeuvre {
             None => {
-                predict(&mut h.x[i][0], &mut h.p[i][0], &self.transition);
+                let mut p = h.p[i][0].unpack();
+                predict(&mut h.x[i][0], &mut p, &self.transition);
                 let (d, jac) = range(&h.x[i][0], &self.antenna, self.axes, true);
                 let jac = jac.unwrap();
-                (d, jac.dot(&(h.p[i][0] * jac)) + self.r)
+                (d, jac.dot(&(p * jac)) + self.r, [p, StateMatrix::zeros()])
             }
             Some(manoeuvre) => {
-                let c = imm::mix(&mut h.x[i], &mut h.p[i], &h.mu[i], self.switch);
+                let mut p = unpack_pair(&h.p[i]);
+                let c = imm::mix(&mut h.x[i], &mut p, &h.mu[i], self.switch);
                 h.mu[i] = c;
-                predict(&mut h.x[i][0], &mut h.p[i][0], &self.transition);
-                predict(&mut h.x[i][1], &mut h.p[i][1], &manoeuvre);
+                predict(&mut h.x[i][0], &mut p[0], &self.transition);
+                predict(&mut h.x[i][1], &mut p[1], &manoeuvre);
                 // The combined prediction's range variance without forming
                 // the combined P: H P H = Σ c_j (H P_j Hᵀ + (H (x_j − x̂))²).
                 let x = h.x[i][0] * c[0] + h.x[i][1] * c[1];
@@ -1603,9 +1626,9 @@ impl FastStep {
                 let jac = jac.unwrap();
                 let spread = |j: usize| {
                     let offset = jac.dot(&(h.x[i][j] - x));
-                    jac.dot(&(h.p[i][j] * jac)) + offset * offset
+                    jac.dot(&(p[j] * jac)) + offset * offset
                 };
-                (d, c[0] * spread(0) + c[1] * spread(1) + self.r)
+                (d, c[0] * spread(0) + c[1] * spread(1) + self.r, p)
             }
         }
     }
@@ -1615,17 +1638,19 @@ impl FastStep {
     /// gating (3σ recovery) and adding the reading's log-likelihood. A
     /// gated reading is charged the density at the gate, so a hypothesis
     /// cannot gain by rejecting data.
-    fn update(&self, h: &mut Hypotheses, i: usize, z: f64, extra_r: f64) {
+    /// `predicted`: the covariances [`FastStep::predict`] returned.
+    fn update_predicted(&self, h: &mut Hypotheses, i: usize, predicted: [StateMatrix; 2], z: f64, extra_r: f64) {
         let gated = |s: f64| -0.5 * (self.gate2 + (2.0 * std::f64::consts::PI * s).ln());
         let r = self.r + extra_r;
         if self.manoeuvre.is_none() {
-            let (x, p) = (&mut h.x[i][0], &mut h.p[i][0]);
+            let [mut p, _] = predicted;
+            let x = &mut h.x[i][0];
             let x_predicted = *x;
             let (d, jac) = range(x, &self.antenna, self.axes, true);
-            let (u, b) = innovation(p, z, d, &jac.unwrap(), r);
+            let (u, b) = innovation(&p, z, d, &jac.unwrap(), r);
             h.log_likelihood[i] += if u.innovation * u.innovation <= self.gate2 * u.variance {
                 h.outliers[i] = 0;
-                apply_scalar(x, p, &u, &b);
+                apply_scalar(x, &mut p, &u, &b);
                 match self.likelihood {
                     Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
                     Likelihood::Paper => {
@@ -1637,6 +1662,7 @@ impl FastStep {
                 h.outliers[i] += 1;
                 gated(u.variance)
             };
+            h.p[i][0] = PackedCovariance::pack(&p);
             return;
         }
         // IMM: update each model, μ_j ∝ c_j Λ_j, factor Σ c_j Λ_j.
@@ -1646,9 +1672,10 @@ impl FastStep {
         let mut accepted = false;
         // Fixed-size, no allocation: this runs for every hypothesis on
         // every reading.
+        let mut p = predicted;
         let updates: [_; 2] = std::array::from_fn(|j| {
             let (d, jac) = range(&h.x[i][j], &self.antenna, self.axes, true);
-            let (u, b) = innovation(&h.p[i][j], z, d, &jac.unwrap(), r);
+            let (u, b) = innovation(&p[j], z, d, &jac.unwrap(), r);
             accepted |= u.innovation * u.innovation <= self.gate2 * u.variance;
             density[j] = log_gaussian(u.innovation, u.variance);
             variance[j] = u.variance;
@@ -1660,7 +1687,7 @@ impl FastStep {
             let w = [c[0] * (density[0] - max).exp(), c[1] * (density[1] - max).exp()];
             let total = w[0] + w[1];
             for (j, (u, b)) in updates.iter().enumerate() {
-                apply_scalar(&mut h.x[i][j], &mut h.p[i][j], u, b);
+                apply_scalar(&mut h.x[i][j], &mut p[j], u, b);
             }
             h.mu[i] = [w[0] / total, w[1] / total];
             h.log_likelihood[i] += max + total.ln();
@@ -1668,6 +1695,7 @@ impl FastStep {
             h.outliers[i] += 1;
             h.log_likelihood[i] += gated(variance[0].min(variance[1]));
         }
+        h.p[i] = pack_pair(&p);
     }
 }
 
@@ -1978,21 +2006,25 @@ pub(crate) mod tests {
 
     #[test]
     fn pruning_to_a_few_hypotheses_gives_back_their_room() {
-        let mut h = Hypotheses::with_capacity(200);
+        let mut h = Hypotheses::with_capacity(200, 4);
         for k in 0..200 {
             h.push(StateVector::repeat(k as f64), StateMatrix::identity(), -(k as f64));
+            for a in 0..4 {
+                h.bias[k * 4 + a] = [k as f64, a as f64];
+            }
         }
         h.retain(|i| i % 10 == 0); // 20 of 200 left: shrunk to what is live
         assert_eq!(h.len(), 20);
-        assert!(h.x.capacity() < 200 && h.p.capacity() < 200 && h.bias_variance.capacity() < 200);
+        assert!(h.x.capacity() < 200 && h.p.capacity() < 200 && h.bias.capacity() < 4 * 200);
         h.retain(|i| i == 3);
         assert_eq!(h.len(), 1);
         assert_eq!(h.x[0][0][0], 30.0, "retain keeps order and contents");
-        for capacity in [h.x.capacity(), h.p.capacity(), h.mu.capacity(), h.log_likelihood.capacity(), h.outliers.capacity(), h.bias.capacity()] {
+        assert_eq!(h.biases_of(0), &[[30.0, 0.0], [30.0, 1.0], [30.0, 2.0], [30.0, 3.0]], "and the bias states with them");
+        for capacity in [h.x.capacity(), h.p.capacity(), h.mu.capacity(), h.log_likelihood.capacity(), h.outliers.capacity(), h.bias.capacity() / 4] {
             assert!(capacity <= SHRINK_CAPACITY, "capacity {capacity} after converging");
         }
         // Small arrays are left alone (no churn while a few hypotheses live).
-        let mut small = Hypotheses::with_capacity(SHRINK_CAPACITY);
+        let mut small = Hypotheses::with_capacity(SHRINK_CAPACITY, 4);
         for _ in 0..SHRINK_CAPACITY {
             small.push(StateVector::zeros(), StateMatrix::identity(), 0.0);
         }
@@ -2050,7 +2082,7 @@ pub(crate) mod tests {
     /// σx² = P + ½ · 0.2², and the reported one alone gives its own P.
     #[test]
     fn covariance_covers_competing_hypotheses() {
-        let mut h = Hypotheses::default();
+        let mut h = Hypotheses::with_capacity(0, 4);
         let p = StateMatrix::identity() * 1e-6;
         let a = StateVector::from_iterator([0.5, 0.5, 0.5, 0.0, 0.0, 0.0]);
         let b = StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]);
