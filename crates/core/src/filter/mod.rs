@@ -11,5 +11,5 @@ pub mod imm;
 mod packed;
 pub mod particle;
 
-pub use packed::{pack_pair, unpack_pair, PackedCovariance, PACKED};
+pub use packed::{pack_pair, unpack_pair, PackedCovariance};
 pub use ekf::{apply_scalar, innovation, log_gaussian, predict, update_position, update_scalar, ScalarUpdate};

@@ -26,12 +26,6 @@ pub struct PackedCovariance {
     upper: [f64; PACKED],
 }
 
-impl Default for PackedCovariance {
-    fn default() -> Self {
-        Self { upper: [0.0; PACKED] }
-    }
-}
-
 /// For each element of a full matrix (nalgebra's column-major order), its
 /// index in the packed upper triangle: a constant table, so that packing
 /// and unpacking unroll into straight loads and stores (they run several

@@ -884,9 +884,9 @@ impl Glac {
     }
 
     /// Antennas with a bias state in every hypothesis (the first ones, at
-    /// most [`MAX_BIASES`]).
+    /// most [`MAX_BIASES`]; set from the scene in [`Glac::new`]).
     fn biases(&self) -> usize {
-        self.scene.antennas.len().min(MAX_BIASES)
+        self.hypotheses.biases
     }
 
     /// Hypotheses (normalised) started from initial candidates, with the
@@ -1139,6 +1139,8 @@ impl Glac {
                     // keeps that prediction (bias, predicted reading, its variance).
                     h.duplicate(i);
                     let j = h.len() - 1;
+                    // Hypothesis i's stored covariances are written by its
+                    // update below; the copy takes the predicted ones now.
                     h.p[j] = pack_pair(&covariance);
                     s.branches.push((j, second, b, predicted, variance));
                     s.origins.push(i);
