@@ -51,18 +51,41 @@ struct Columns {
     time_s: Vec<f64>,
     position: Vec<f64>,
     velocity: Vec<f64>,
+    /// The full 6×6 covariance, row-major, or (`sigma_only`) the x, y, z
+    /// 1-sigma alone: 36 values against 3 per row, for writers that need
+    /// no more (track.csv).
     covariance: Vec<f64>,
+    sigma_only: bool,
     hypotheses: Vec<i64>,
     weight: Vec<f64>,
 }
 
 impl Columns {
+    /// Room for `rows` estimates (at most one per input row).
+    fn with_capacity(rows: usize, sigma_only: bool) -> Self {
+        Self {
+            row: Vec::with_capacity(rows),
+            time_s: Vec::with_capacity(rows),
+            position: Vec::with_capacity(3 * rows),
+            velocity: Vec::with_capacity(3 * rows),
+            covariance: Vec::with_capacity(if sigma_only { 3 } else { 36 } * rows),
+            sigma_only,
+            hypotheses: Vec::with_capacity(rows),
+            weight: Vec::with_capacity(rows),
+        }
+    }
+
     fn push(&mut self, row: usize, e: &Estimate) {
         self.row.push(row as i64);
         self.time_s.push(e.time_s);
         self.position.extend_from_slice(&e.position);
         self.velocity.extend_from_slice(&e.velocity);
-        self.covariance.extend_from_slice(&e.covariance);
+        if self.sigma_only {
+            // As `track.columns.position_sigma` does: the diagonal, clipped at 0.
+            self.covariance.extend([0, 7, 14].map(|k| e.covariance[k].max(0.0).sqrt()));
+        } else {
+            self.covariance.extend_from_slice(&e.covariance);
+        }
         self.hypotheses.push(e.hypotheses as i64);
         self.weight.push(e.weight);
     }
@@ -77,7 +100,11 @@ impl Columns {
         };
         d.set_item("position", reshape(self.position, 3)?)?;
         d.set_item("velocity", reshape(self.velocity, 3)?)?;
-        d.set_item("covariance", reshape(self.covariance, 36)?)?;
+        if self.sigma_only {
+            d.set_item("sigma", reshape(self.covariance, 3)?)?;
+        } else {
+            d.set_item("covariance", reshape(self.covariance, 36)?)?;
+        }
         d.set_item("hypotheses", self.hypotheses.into_pyarray(py))?;
         d.set_item("weight", self.weight.into_pyarray(py))?;
         Ok(d)
@@ -144,8 +171,13 @@ impl Engine {
         self.inner.step(tag, &m).map(estimate_tuple)
     }
 
-    /// Runs time-ordered columns through `step` (the GIL is released) and
-    /// returns the estimates as columns, with `row` the producing input row.
+    /// Runs time-ordered columns as one batch (`Engine::run_batch`: the
+    /// estimates of `step` over the rows in order, taken tag by tag; the
+    /// GIL is released) and returns the estimates as columns, with `row`
+    /// the producing input row, increasing. `covariance=False`: a `sigma`
+    /// column (n, 3: the x, y, z 1-sigma, m) in place of `covariance`.
+    #[pyo3(signature = (tag, time_s, antenna, frequency_hz, phase_rad, *, covariance=true))]
+    #[allow(clippy::too_many_arguments)]
     fn run<'py>(
         &mut self,
         py: Python<'py>,
@@ -154,6 +186,7 @@ impl Engine {
         antenna: PyReadonlyArray1<i64>,
         frequency_hz: PyReadonlyArray1<f64>,
         phase_rad: PyReadonlyArray1<f64>,
+        covariance: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
         let (tag, t, a, f, ph) =
             (tag.as_array(), time_s.as_array(), antenna.as_array(), frequency_hz.as_array(), phase_rad.as_array());
@@ -170,13 +203,14 @@ impl Engine {
         let (tag, t, a, f, ph) = (tag.to_vec(), t.to_vec(), a.to_vec(), f.to_vec(), ph.to_vec());
         let inner = &mut self.inner;
         let columns = py.detach(move || {
-            let mut c = Columns::default();
-            for i in 0..n {
-                let m = Measurement::Phase(PhaseRead { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] });
-                if let Some(e) = inner.step(tag[i] as usize, &m) {
-                    c.push(i, &e);
-                }
-            }
+            let tags: Vec<usize> = tag.iter().map(|&k| k as usize).collect();
+            let reads: Vec<Measurement> = (0..n)
+                .map(|i| Measurement::Phase(PhaseRead { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] }))
+                .collect();
+            // Nearly every read gives a row once its tag commits; the cap
+            // keeps a whole in-memory recording from reserving it all at once.
+            let mut c = Columns::with_capacity(n.min(1 << 20), !covariance);
+            inner.run_batch(&tags, &reads, |i, e| c.push(i, e));
             c
         });
         columns.into_dict(py)

@@ -63,6 +63,9 @@ pub struct Engine {
     scene: Scene,
     method: String,
     params: Params,
+    /// A tracker in its initial state: new tags' trackers are its
+    /// [`Tracker::fresh`] copies (sharing its scene and parameters).
+    prototype: Box<dyn Tracker>,
     trackers: Vec<Option<Box<dyn Tracker>>>,
     latency: Latency,
 }
@@ -71,8 +74,8 @@ impl Engine {
     /// Fails on an unknown method or invalid parameters (checked by
     /// building one tracker up front).
     pub fn new(scene: Scene, method: &str, params: Params) -> Result<Self> {
-        make(method, &scene, &params)?;
-        Ok(Self { scene, method: method.to_string(), params, trackers: Vec::new(), latency: Latency::default() })
+        let prototype = make(method, &scene, &params)?;
+        Ok(Self { scene, method: method.to_string(), params, prototype, trackers: Vec::new(), latency: Latency::default() })
     }
 
     /// One measurement of tag `tag`.
@@ -82,13 +85,42 @@ impl Engine {
         }
         if self.trackers[tag].is_none() {
             // The method and parameters were validated in `new`.
-            self.trackers[tag] = make(&self.method, &self.scene, &self.params).ok();
+            self.trackers[tag] = self.prototype.fresh().or_else(|| make(&self.method, &self.scene, &self.params).ok());
         }
         let tracker = self.trackers[tag].as_mut()?;
         let start = Instant::now();
         let estimate = tracker.step(measurement);
         self.latency.record(start.elapsed().as_nanos() as u64);
         estimate
+    }
+
+    /// A batch: measurement `measurements[i]` of tag `tags[i]` for every
+    /// `i`, and `emit(i, estimate)` for each estimate, in increasing `i`.
+    ///
+    /// Each tag's measurements go through its tracker in their order, so
+    /// the estimates are exactly those of [`Engine::step`] over the batch
+    /// in input order; but they are taken tag by tag (a stable grouping):
+    /// with thousands of tags a tag's state is out of cache by its next
+    /// read in time order, and grouped it is fetched once per batch
+    /// instead of once per read. Causal per tag, as every tracker is.
+    pub fn run_batch(&mut self, tags: &[usize], measurements: &[Measurement], mut emit: impl FnMut(usize, &Estimate)) {
+        assert_eq!(tags.len(), measurements.len(), "one tag per measurement");
+        let order = grouped_by_tag(tags);
+        // Where each read's estimate lies in `estimates` (u32::MAX: none).
+        let mut slot = vec![u32::MAX; tags.len()];
+        let mut estimates = Vec::new();
+        for &i in &order {
+            let i = i as usize;
+            if let Some(e) = self.step(tags[i], &measurements[i]) {
+                slot[i] = estimates.len() as u32;
+                estimates.push(e);
+            }
+        }
+        for (i, &k) in slot.iter().enumerate() {
+            if k != u32::MAX {
+                emit(i, &estimates[k as usize]);
+            }
+        }
     }
 
     /// Counters of tag `tag` (zero if never seen).
@@ -113,6 +145,33 @@ impl Engine {
     pub fn tags(&self) -> usize {
         self.trackers.len()
     }
+}
+
+/// The indices `0..tags.len()` ordered by tag, each tag's in increasing
+/// order (a stable counting sort when the tag indices are dense enough,
+/// else a stable sort).
+fn grouped_by_tag(tags: &[usize]) -> Vec<u32> {
+    let n = tags.len();
+    assert!(n < u32::MAX as usize, "batches hold fewer than 2³² reads");
+    let top = tags.iter().copied().max().map_or(0, |t| t + 1);
+    if top > 4 * n + 1024 {
+        let mut order: Vec<u32> = (0..n as u32).collect();
+        order.sort_by_key(|&i| tags[i as usize]);
+        return order;
+    }
+    let mut start = vec![0u32; top + 1];
+    for &t in tags {
+        start[t + 1] += 1;
+    }
+    for t in 0..top {
+        start[t + 1] += start[t];
+    }
+    let mut order = vec![0u32; n];
+    for (i, &t) in tags.iter().enumerate() {
+        order[start[t] as usize] = i as u32;
+        start[t] += 1;
+    }
+    order
 }
 
 /// A measurement waiting in the reorder window.
@@ -197,6 +256,56 @@ mod tests {
 
     fn m(t: f64) -> Measurement {
         Measurement::Phase(crate::track::PhaseRead { time_s: t, antenna: 0, frequency_hz: 915e6, phase_rad: 0.0 })
+    }
+
+    #[test]
+    fn grouping_is_stable_within_each_tag() {
+        let tags = [3, 0, 3, 1, 0, 3];
+        assert_eq!(grouped_by_tag(&tags), vec![1, 4, 3, 0, 2, 5]);
+        // Sparse tag indices take the sorting path, with the same order.
+        let sparse: Vec<usize> = tags.iter().map(|t| t * 1_000_000).collect();
+        assert_eq!(grouped_by_tag(&sparse), vec![1, 4, 3, 0, 2, 5]);
+        assert!(grouped_by_tag(&[]).is_empty());
+    }
+
+    #[test]
+    fn a_batch_gives_the_estimates_of_stepping_in_input_order() {
+        use crate::track::{GlacParams, PhaseRead};
+        use crate::scene::{Antenna, Region};
+        use nalgebra::Vector3;
+        // GLAC's 2D layout, the region excluding the mirror.
+        let antennas = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]]
+            .iter()
+            .enumerate()
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0, role: Default::default() })
+            .collect();
+        let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
+        let scene = Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap();
+        let params = crate::track::Params::from(GlacParams::default());
+        // Three tags on circles, read round-robin over the antennas.
+        let mut tags = Vec::new();
+        let mut reads = Vec::new();
+        for k in 0..900 {
+            let tag = k % 3;
+            let t = k as f64 / 90.0;
+            let angle = 0.4 * t + tag as f64;
+            let p = Vector3::new(0.7 + 0.2 * angle.cos(), 0.35 + 0.2 * angle.sin(), 0.0);
+            let a = (k / 3) % scene.antennas.len();
+            let d = (p - scene.antennas[a].position).norm();
+            let phase = scene.ideal_phase(a, 915.25e6, d).rem_euclid(std::f64::consts::TAU);
+            tags.push(tag * 7); // sparse codes, as shards give them
+            reads.push(Measurement::Phase(PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: phase }));
+        }
+        let mut one_by_one = Engine::new(scene.clone(), "glac", params.clone()).unwrap();
+        let expected: Vec<(usize, Estimate)> =
+            tags.iter().zip(&reads).enumerate().filter_map(|(i, (&t, m))| one_by_one.step(t, m).map(|e| (i, e))).collect();
+        let mut batched = Engine::new(scene, "glac", params).unwrap();
+        let mut got = Vec::new();
+        for (lo, hi) in [(0, 250), (250, 251), (251, 900)] {
+            batched.run_batch(&tags[lo..hi], &reads[lo..hi], |i, e| got.push((lo + i, e.clone())));
+        }
+        assert!(expected.len() > 800, "the tags are tracked");
+        assert_eq!(got, expected);
     }
 
     #[test]

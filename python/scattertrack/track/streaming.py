@@ -35,7 +35,7 @@ from scattertrack.io.types import Scene, SkipReport
 from scattertrack.physics import SPEED_OF_LIGHT
 from scattertrack.track import make
 from scattertrack.track import parameters, plausibility
-from scattertrack.track.columns import READS_DECLINED, declined_skips, position_sigma
+from scattertrack.track.columns import READS_DECLINED, declined_skips
 
 __all__ = ["NeedsWholeFile", "StreamedReads", "StreamedTrack", "track_file"]
 
@@ -140,13 +140,14 @@ class Shards:
 
     def run(self, tag: np.ndarray, time_s: np.ndarray, antenna: np.ndarray, frequency_hz: np.ndarray,
             phase_rad: np.ndarray) -> dict:
-        """``Engine.run``'s columns for these reads (``row`` indexes them)."""
+        """``Engine.run``'s columns for these reads (``row`` indexes them), with ``sigma`` (n, 3) for the covariance."""
         count = len(self.engines)
         if count == 1:
-            return self.engines[0].run(tag, time_s, antenna, frequency_hz, phase_rad)
+            return self.engines[0].run(tag, time_s, antenna, frequency_hz, phase_rad, covariance=False)
         shard = tag % count
         picks = [np.flatnonzero(shard == k) for k in range(count)]
-        jobs = [self.pool.submit(engine.run, tag[rows], time_s[rows], antenna[rows], frequency_hz[rows], phase_rad[rows])
+        jobs = [self.pool.submit(engine.run, tag[rows], time_s[rows], antenna[rows], frequency_hz[rows], phase_rad[rows],
+                                 covariance=False)
                 for engine, rows in zip(self.engines, picks)]
         outs = [job.result() for job in jobs]
         rows = np.concatenate([rows[out["row"]] for rows, out in zip(picks, outs)])
@@ -344,7 +345,7 @@ def _track_stream(method: str, scene: Scene, reads_path, out_path, params: dict,
         row = out["row"]
         if not len(row):
             return
-        sigma = position_sigma(out["covariance"])
+        sigma = out["sigma"]
         tag = batch["epc"][row]
         writer.write(out["time_s"], tag, texts, out["position"], out["velocity"], sigma)
         figures.add(written[0], tag, sigma, out["velocity"], unresolved_sigma_m)

@@ -31,6 +31,8 @@
 //! synchronous 4-read handling ([`Inference::Synchronous`]) and naive,
 //! unpruned inference ([`Inference::Naive`]).
 
+use std::sync::Arc;
+
 use nalgebra::{Matrix3, Vector3};
 
 use super::candidates::nearest_candidate;
@@ -320,20 +322,28 @@ impl GlacParams {
     }
 }
 
-/// Candidate trajectories as flat arrays (struct of arrays): hypothesis
-/// `i` is `(x[i], p[i], mu[i], log_likelihood[i], outliers[i])`. Each has
-/// two model-conditioned filters for the IMM; single-model trackers use
-/// slot 0 only (μ = [1, 0]).
+/// One candidate trajectory: two model-conditioned filters for the IMM
+/// (single-model trackers use slot 0 only, μ = [1, 0]), its log-likelihood
+/// and its run of gated readings. A read steps every field of a
+/// hypothesis together, so they are stored together: with thousands of
+/// tags a converged tag's hypothesis is one run of memory that the
+/// prefetcher streams in, not five arrays that each miss.
+#[derive(Debug, Clone, Copy)]
+struct Hypothesis {
+    /// Model probabilities μ (IMM).
+    mu: [f64; 2],
+    x: [StateVector; 2],
+    /// Covariances, packed between steps (unpacked around each filter step).
+    p: [PackedCovariance; 2],
+    log_likelihood: f64,
+    /// Consecutive gated readings.
+    outliers: u32,
+}
+
+/// Candidate trajectories as one flat array, and their bias states.
 #[derive(Debug, Clone)]
 struct Hypotheses {
-    x: Vec<[StateVector; 2]>,
-    /// Covariances, packed between steps (unpacked around each filter step).
-    p: Vec<[PackedCovariance; 2]>,
-    /// Model probabilities μ (IMM).
-    mu: Vec<[f64; 2]>,
-    log_likelihood: Vec<f64>,
-    /// Consecutive gated readings.
-    outliers: Vec<u32>,
+    items: Vec<Hypothesis>,
     /// Per hypothesis and antenna (the first `biases`, at most
     /// [`MAX_BIASES`]): the estimated range bias (m) and its variance (m²)
     /// of the AR(1) phase-bias state, at `i * biases + antenna`.
@@ -368,15 +378,7 @@ pub const MAX_BIASES: usize = 8;
 impl Hypotheses {
     /// Room for `n` hypotheses with bias states for `biases` antennas.
     fn with_capacity(n: usize, biases: usize) -> Self {
-        Self {
-            x: Vec::with_capacity(n),
-            p: Vec::with_capacity(n),
-            mu: Vec::with_capacity(n),
-            log_likelihood: Vec::with_capacity(n),
-            outliers: Vec::with_capacity(n),
-            bias: Vec::with_capacity(n * biases),
-            biases,
-        }
+        Self { items: Vec::with_capacity(n), bias: Vec::with_capacity(n * biases), biases }
     }
 
     /// Hypothesis `i`'s bias states (mean m, variance m²), by antenna.
@@ -385,25 +387,22 @@ impl Hypotheses {
     }
 
     fn len(&self) -> usize {
-        self.x.len()
+        self.items.len()
     }
 
     fn clear(&mut self) {
-        self.x.clear();
-        self.p.clear();
-        self.mu.clear();
-        self.log_likelihood.clear();
-        self.outliers.clear();
+        self.items.clear();
         self.bias.clear();
     }
 
+    /// The log-likelihoods, in order.
+    fn log_likelihoods(&self) -> impl Iterator<Item = f64> + '_ {
+        self.items.iter().map(|h| h.log_likelihood)
+    }
+
     fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
-        self.x.push([x, x]);
         let packed = PackedCovariance::pack(&p);
-        self.p.push([packed, packed]);
-        self.mu.push([1.0, 0.0]);
-        self.log_likelihood.push(log_likelihood);
-        self.outliers.push(0);
+        self.items.push(Hypothesis { mu: [1.0, 0.0], x: [x, x], p: [packed, packed], log_likelihood, outliers: 0 });
         // Unknown until the antenna is first read, when the AR(1)
         // prediction (ρ = 0) sets the stationary variance.
         self.bias.extend(std::iter::repeat_n([0.0; 2], self.biases));
@@ -411,21 +410,13 @@ impl Hypotheses {
 
     /// Appends a copy of hypothesis `i` (for ambiguity branching).
     fn duplicate(&mut self, i: usize) {
-        self.x.push(self.x[i]);
-        self.p.push(self.p[i]);
-        self.mu.push(self.mu[i]);
-        self.log_likelihood.push(self.log_likelihood[i]);
-        self.outliers.push(self.outliers[i]);
+        self.items.push(self.items[i]);
         self.bias.extend_from_within(i * self.biases..(i + 1) * self.biases);
     }
 
     /// Appends hypothesis `i` of `other` with log-likelihood `log_likelihood`.
     fn append_from(&mut self, other: &Hypotheses, i: usize, log_likelihood: f64) {
-        self.x.push(other.x[i]);
-        self.p.push(other.p[i]);
-        self.mu.push(other.mu[i]);
-        self.log_likelihood.push(log_likelihood);
-        self.outliers.push(other.outliers[i]);
+        self.items.push(Hypothesis { log_likelihood, ..other.items[i] });
         debug_assert_eq!(self.biases, other.biases);
         self.bias.extend_from_slice(other.biases_of(i));
     }
@@ -433,10 +424,11 @@ impl Hypotheses {
     /// The reported state of hypothesis `i`: the IMM combination (which
     /// is slot 0 itself for single-model trackers, where μ = [1, 0]).
     fn state(&self, i: usize) -> (StateVector, StateMatrix) {
-        if self.mu[i][1] == 0.0 {
-            (self.x[i][0], self.p[i][0].unpack())
+        let h = &self.items[i];
+        if h.mu[1] == 0.0 {
+            (h.x[0], h.p[0].unpack())
         } else {
-            imm::combine(&self.x[i], &unpack_pair(&self.p[i]), &self.mu[i])
+            imm::combine(&h.x, &unpack_pair(&h.p), &h.mu)
         }
     }
 
@@ -445,14 +437,10 @@ impl Hypotheses {
         let mut w = 0;
         for r in 0..self.len() {
             if keep(r) {
-                // Swapping a hypothesis with itself would copy its
-                // matrices three times for nothing.
+                // Swapping a hypothesis with itself would copy it three
+                // times for nothing.
                 if w != r {
-                    self.x.swap(w, r);
-                    self.p.swap(w, r);
-                    self.mu.swap(w, r);
-                    self.log_likelihood.swap(w, r);
-                    self.outliers.swap(w, r);
+                    self.items.swap(w, r);
                     let b = self.biases;
                     let (low, high) = self.bias.split_at_mut(r * b);
                     low[w * b..(w + 1) * b].swap_with_slice(&mut high[..b]);
@@ -460,40 +448,32 @@ impl Hypotheses {
                 w += 1;
             }
         }
-        self.x.truncate(w);
-        self.p.truncate(w);
-        self.mu.truncate(w);
-        self.log_likelihood.truncate(w);
-        self.outliers.truncate(w);
+        self.items.truncate(w);
         self.bias.truncate(w * self.biases);
         // A tag that has narrowed to a few trajectories gives back the room
         // its search needed (about 0.5 kB a hypothesis; 100+ while it
         // initialises): 10,000 converged tags then hold kilobytes each,
         // not the initial search's peak. Regrowing on a later branching is
         // one allocation per array.
-        if self.x.capacity() > SHRINK_CAPACITY && self.x.capacity() > 4 * w {
+        if self.items.capacity() > SHRINK_CAPACITY && self.items.capacity() > 4 * w {
             let room = w.max(SHRINK_CAPACITY / 2);
-            self.x.shrink_to(room);
-            self.p.shrink_to(room);
-            self.mu.shrink_to(room);
-            self.log_likelihood.shrink_to(room);
-            self.outliers.shrink_to(room);
+            self.items.shrink_to(room);
             self.bias.shrink_to(room * self.biases);
         }
     }
 
     /// Index of the likeliest hypothesis (the one reported), if any.
     fn best(&self) -> Option<usize> {
-        (0..self.len()).max_by(|&a, &b| self.log_likelihood[a].total_cmp(&self.log_likelihood[b]))
+        (0..self.len()).max_by(|&a, &b| self.items[a].log_likelihood.total_cmp(&self.items[b].log_likelihood))
     }
 
     /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp).
     fn normalise(&mut self) {
-        let max = self.log_likelihood.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-        let sum: f64 = self.log_likelihood.iter().map(|l| (l - max).exp()).sum();
+        let max = self.log_likelihoods().fold(f64::NEG_INFINITY, f64::max);
+        let sum: f64 = self.log_likelihoods().map(|l| (l - max).exp()).sum();
         let log_norm = max + sum.ln();
-        for l in &mut self.log_likelihood {
-            *l -= log_norm;
+        for h in &mut self.items {
+            h.log_likelihood -= log_norm;
         }
     }
 }
@@ -508,72 +488,96 @@ enum Phase {
 }
 
 /// The GLAC tracker for one tag.
+///
+/// Laid out in declaration order (`repr(C)`), what a converged tag's read
+/// touches first: with 10,000 tags no tag's state is in cache when its
+/// next read comes (each read misses on every cache line it touches, about
+/// 40 of them before this layout), so the fields every read uses sit
+/// together and the large, rarely used ones (searches under way, buffers)
+/// are boxed or last.
+#[repr(C)]
 pub struct Glac {
-    scene: Scene,
-    params: GlacParams,
-    /// Moving axes: 2 (tag in the plane z = plane_z) or 3.
-    axes: usize,
-    phase: Phase,
-    buffer: Vec<PhaseRead>,
+    /// Shared by every tag's tracker of one engine ([`Tracker::fresh`]):
+    /// read on every step, so one copy stays in cache for all of them.
+    scene: Arc<Scene>,
+    params: Arc<GlacParams>,
     hypotheses: Hypotheses,
-    /// Scratch for naive branching.
-    scratch: Hypotheses,
     /// Time of the hypotheses' states, seconds.
     time_s: f64,
     /// Time of the last accepted measurement, seconds.
     last_time_s: f64,
-    /// Synchronous variant: reads collected towards one group.
-    group: Vec<PhaseRead>,
-    /// Antennas a synchronous group must cover (those that read during init).
-    group_antennas: Vec<bool>,
-    /// Per antenna: time of its latest read and the interval before it,
-    /// seconds (∞ before its second read): how correlated its next error is.
-    antenna_read_s: Vec<f64>,
-    antenna_interval_s: Vec<f64>,
+    /// Time of the latest read accepted (out-of-order check), seconds.
+    arrival_s: f64,
     /// Carrier of the latest read, Hz (NaN before any).
     last_frequency_hz: f64,
     /// Carrier of the first read, Hz, and whether any read was on another
     /// channel since (then twins of one channel no longer fit, provided
     /// the scene's channel offsets are calibrated).
     first_frequency_hz: f64,
-    hopped: bool,
-    /// Three or more antennas on a line and one off it (3D): the free
-    /// antenna's integer cannot be fixed on one channel (`line_twins`).
-    line_layout: Option<LineLayout>,
-    /// Per antenna: time (s) and carrier (Hz) the hypotheses' bias states
-    /// were last propagated to ([`BiasClock::UNSET`]: the next read starts
-    /// them).
-    bias_clock: Vec<BiasClock>,
-    /// Reads of the last `init_max_window_s` while tracking (re-seeding).
-    recent: std::collections::VecDeque<PhaseRead>,
     /// Time of the last (re-)seeding search, seconds.
     seeded_s: f64,
+    /// Moving axes: 2 (tag in the plane z = plane_z) or 3.
+    axes: usize,
     /// Reads the reported hypothesis gated since then.
     gated_since_seed: u32,
     /// Consecutive re-seeding searches started only because the track was
     /// unresolved (the interval doubles with each; see
     /// `reseed_max_interval_s`).
     reseed_streak: u32,
-    /// The latest estimate (time s, position m, its 3×3 covariance m²):
-    /// where re-acquisition starts from.
-    last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
-    stats: TrackerStats,
-    /// Time of the latest read accepted (out-of-order check), seconds.
-    arrival_s: f64,
+    phase: Phase,
+    hopped: bool,
+    /// Per antenna: time of its latest read and the interval before it,
+    /// seconds (∞ before its second read): how correlated its next error is.
+    antenna_clock: Vec<AntennaClock>,
+    /// Per antenna: time (s) and carrier (Hz) the hypotheses' bias states
+    /// were last propagated to ([`BiasClock::UNSET`]: the next read starts
+    /// them).
+    bias_clock: Vec<BiasClock>,
+    /// Reads of the last `init_max_window_s` while tracking (re-seeding).
+    recent: std::collections::VecDeque<PhaseRead>,
     /// Reads accepted but not yet taken through the tracker (the read
     /// budget ran out), oldest first.
     pending: std::collections::VecDeque<Pending>,
     /// The fast step under way, when a read's hypotheses span reads.
-    progress: Option<StepProgress>,
+    progress: Option<Box<StepProgress>>,
     /// The initial search under way, if any (reads wait for it).
-    job: Option<Job>,
+    job: Option<Box<Job>>,
     /// The re-seeding under way, if any (on the budget the reads leave).
-    reseeding: Option<Reseed>,
-    /// The estimate after the latest read taken through the tracker.
-    result: Option<Estimate>,
+    reseeding: Option<Box<Reseed>>,
     /// When recorded (a bank of noise levels, [`super::glac_bank`]): per
     /// read tracked, its time and log p(z_k | z_1:k−1), oldest first.
     evidence: Option<std::collections::VecDeque<(f64, f64)>>,
+    stats: TrackerStats,
+    /// The latest estimate (time s, position m, its 3×3 covariance m²):
+    /// where re-acquisition starts from.
+    last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
+    // Not read by a converged tag's step.
+    /// The estimate after the latest read taken through the tracker, while
+    /// reads wait for a later call ([`Glac::step_read`]).
+    result: Option<Estimate>,
+    /// Three or more antennas on a line and one off it (3D): the free
+    /// antenna's integer cannot be fixed on one channel (`line_twins`).
+    line_layout: Option<LineLayout>,
+    buffer: Vec<PhaseRead>,
+    /// Scratch for naive branching.
+    scratch: Hypotheses,
+    /// Synchronous variant: reads collected towards one group.
+    group: Vec<PhaseRead>,
+    /// Antennas a synchronous group must cover (those that read during init).
+    group_antennas: Vec<bool>,
+}
+
+/// One antenna's read times, seconds.
+#[derive(Debug, Clone, Copy)]
+struct AntennaClock {
+    /// Its latest read (−∞ before any).
+    read_s: f64,
+    /// The interval before that read (∞ before its second read).
+    interval_s: f64,
+}
+
+impl AntennaClock {
+    const UNREAD: AntennaClock = AntennaClock { read_s: f64::NEG_INFINITY, interval_s: f64::INFINITY };
 }
 
 /// A read waiting for the tracker.
@@ -670,12 +674,18 @@ pub fn build(scene: &Scene, params: &super::Params) -> Result<Box<dyn Tracker>> 
 impl Glac {
     pub fn new(scene: Scene, params: GlacParams) -> Result<Self> {
         params.validate()?;
-        let axes = scene.dimensions;
         let positions: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
-        let line_layout = if axes == 3 { line_layout(&positions) } else { None };
+        let line_layout = if scene.dimensions == 3 { line_layout(&positions) } else { None };
+        Ok(Self::with_shared(Arc::new(scene), Arc::new(params), line_layout))
+    }
+
+    /// A tracker in its initial state over `scene` and `params` as they
+    /// are (validated by the caller).
+    fn with_shared(scene: Arc<Scene>, params: Arc<GlacParams>, line_layout: Option<LineLayout>) -> Self {
+        let axes = scene.dimensions;
         let n_antennas = scene.antennas.len();
         let biases = n_antennas.min(MAX_BIASES);
-        Ok(Self {
+        Self {
             scene,
             params,
             axes,
@@ -687,8 +697,7 @@ impl Glac {
             last_time_s: f64::NEG_INFINITY,
             group: Vec::new(),
             group_antennas: Vec::new(),
-            antenna_read_s: vec![f64::NEG_INFINITY; n_antennas],
-            antenna_interval_s: vec![f64::INFINITY; n_antennas],
+            antenna_clock: vec![AntennaClock::UNREAD; n_antennas],
             last_frequency_hz: f64::NAN,
             first_frequency_hz: f64::NAN,
             hopped: false,
@@ -707,7 +716,7 @@ impl Glac {
             reseeding: None,
             result: None,
             evidence: None,
-        })
+        }
     }
 
     pub fn params(&self) -> &GlacParams {
@@ -758,7 +767,7 @@ impl Glac {
     /// initialisation and the variants that fuse several antennas at once.
     fn range_variance(&self, frequency_hz: f64) -> f64 {
         let (sum, count) =
-            self.antenna_interval_s.iter().filter(|t| t.is_finite()).fold((0.0, 0usize), |(s, n), t| (s + t, n + 1));
+            self.antenna_clock.iter().map(|c| c.interval_s).filter(|t| t.is_finite()).fold((0.0, 0usize), |(s, n), t| (s + t, n + 1));
         let typical = if count == 0 { f64::INFINITY } else { sum / count as f64 };
         self.range_variance_after(frequency_hz, typical)
     }
@@ -800,7 +809,7 @@ impl Glac {
         let with_velocity = self.params.motion.has_velocity();
         match InitialSearch::new(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity) {
             Some(search) => {
-                self.job = Some(Job::Initial { search, last_s: last, counts, now_s });
+                self.job = Some(Box::new(Job::Initial { search, last_s: last, counts, now_s }));
                 true
             }
             None => {
@@ -818,7 +827,7 @@ impl Glac {
 
     /// The initial search's hypotheses go live: the buffered reads after
     /// t_x are queued (first) to be replayed through them.
-    fn commit(&mut self, t_x: f64, hypotheses: Hypotheses, last_s: f64, counts: Vec<usize>, now_s: f64) {
+    fn commit(&mut self, t_x: f64, hypotheses: Hypotheses, last_s: f64, counts: Vec<usize>, now_s: f64, out: &mut Option<Estimate>) {
         self.hypotheses = hypotheses;
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
@@ -836,24 +845,24 @@ impl Glac {
             self.pending.push_front(Pending { read: m, replay: Some(now_s) });
         }
         if !self.pending.front().is_some_and(|p| p.replay.is_some()) {
-            self.result = self.remember(self.best_estimate(now_s));
+            *out = self.remember(self.best_estimate(now_s));
         }
     }
 
     /// Runs `job` on within `budget`: `Some` (the job) while work is left.
-    fn advance_job(&mut self, job: Job, budget: &mut Budget) -> Option<Job> {
+    fn advance_job(&mut self, job: Job, budget: &mut Budget, out: &mut Option<Estimate>) -> Option<Job> {
         match job {
             Job::Initial { mut search, last_s, counts, now_s } => match search.advance(&self.scene, budget) {
                 None => Some(Job::Initial { search, last_s, counts, now_s }),
                 Some(None) => {
                     self.slide_window(last_s);
-                    self.result = self.coasting_estimate(now_s);
+                    *out = self.coasting_estimate(now_s);
                     None
                 }
                 Some(Some((t_x, initial))) => {
                     let initial = self.reachable(initial, t_x);
                     let built = Hypotheses::with_capacity(initial.len(), self.biases());
-                    self.advance_job(Job::Commit { t_x, initial, built, last_s, counts, now_s }, budget)
+                    self.advance_job(Job::Commit { t_x, initial, built, last_s, counts, now_s }, budget, out)
                 }
             },
             Job::Commit { t_x, initial, mut built, last_s, counts, now_s } => {
@@ -869,7 +878,7 @@ impl Glac {
                     return Some(Job::Commit { t_x, initial, built, last_s, counts, now_s });
                 }
                 built.normalise();
-                self.commit(t_x, built, last_s, counts, now_s);
+                self.commit(t_x, built, last_s, counts, now_s, out);
                 None
             }
         }
@@ -959,7 +968,8 @@ impl Glac {
                 std::mem::swap(&mut self.bias_clock, &mut bias_clock);
                 let done = loop {
                     if let Some(p) = progress.take() {
-                        progress = self.advance_step(p, budget);
+                        // A replay reports nothing.
+                        progress = self.advance_step(p, budget, &mut None);
                         if progress.is_some() {
                             break false;
                         }
@@ -1001,7 +1011,7 @@ impl Glac {
     fn reseed(&mut self, now_s: f64) {
         self.start_reseed(now_s);
         while let Some(job) = self.reseeding.take() {
-            self.reseeding = self.advance_reseed(job, &mut Budget::unlimited());
+            self.reseeding = self.advance_reseed(*job, &mut Budget::unlimited()).map(Box::new);
         }
     }
 
@@ -1028,7 +1038,7 @@ impl Glac {
             let settings = InitialState { max_hypotheses: self.params.initial.max_hypotheses.min(RESEED_MAX_CANDIDATES), ..self.params.initial.clone() };
             InitialSearch::new(&self.scene, &reads, &settings, range_sigma, with_velocity)
         });
-        self.reseeding = started.map(|search| Reseed::Search { search, reads });
+        self.reseeding = started.map(|search| Box::new(Reseed::Search { search, reads }));
     }
 
     /// The re-seeded candidates (brought to the current time) that no live
@@ -1040,7 +1050,7 @@ impl Glac {
         let cell = |x: &StateVector| [0, 1, 2].map(|k| (x[k] / RESEED_DISTANCE_M).floor() as i64);
         let mut grid: super::key_hash::CellMap<Vec<usize>> = Default::default();
         for j in 0..self.hypotheses.len() {
-            grid.entry(cell(&self.hypotheses.x[j][0])).or_default().push(j);
+            grid.entry(cell(&self.hypotheses.items[j].x[0])).or_default().push(j);
         }
         let live = &self.hypotheses;
         let followed = |x: &StateVector| {
@@ -1049,19 +1059,19 @@ impl Glac {
                 (-1..=1).any(|dy| {
                     (-1..=1).any(|dz| {
                         grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]).is_some_and(|ids| {
-                            ids.iter().any(|&j| (live.x[j][0] - x).fixed_rows::<3>(0).norm() < RESEED_DISTANCE_M)
+                            ids.iter().any(|&j| (live.items[j].x[0] - x).fixed_rows::<3>(0).norm() < RESEED_DISTANCE_M)
                         })
                     })
                 })
             })
         };
-        let joining: Vec<usize> = (0..fresh.len()).filter(|&i| !followed(&fresh.x[i][0])).collect();
+        let joining: Vec<usize> = (0..fresh.len()).filter(|&i| !followed(&fresh.items[i].x[0])).collect();
         if joining.is_empty() {
             return;
         }
         let log_share = RESEED_WEIGHT.ln();
         for &i in &joining {
-            self.hypotheses.append_from(fresh, i, log_share + fresh.log_likelihood[i]);
+            self.hypotheses.append_from(fresh, i, log_share + fresh.items[i].log_likelihood);
         }
         self.prune();
     }
@@ -1106,7 +1116,7 @@ impl Glac {
             antenna: self.scene.antennas[m.antenna].position,
             residue: self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
             spacing: self.scene.candidate_spacing(m.frequency_hz),
-            r: self.range_variance_after(m.frequency_hz, self.antenna_interval_s[m.antenna]),
+            r: self.range_variance_after(m.frequency_hz, self.antenna_clock[m.antenna].interval_s),
             gate2: self.params.gate_sigmas * self.params.gate_sigmas,
             likelihood: self.params.likelihood,
             axes: self.axes,
@@ -1141,7 +1151,7 @@ impl Glac {
                     let j = h.len() - 1;
                     // Hypothesis i's stored covariances are written by its
                     // update below; the copy takes the predicted ones now.
-                    h.p[j] = pack_pair(&covariance);
+                    h.items[j].p = pack_pair(&covariance);
                     s.branches.push((j, second, b, predicted, variance));
                     s.origins.push(i);
                 }
@@ -1156,7 +1166,7 @@ impl Glac {
     fn finish_fast(&mut self, s: &StepProgress) {
         let h = &mut self.hypotheses;
         for &(j, z, b, predicted, variance) in &s.branches {
-            s.step.update_predicted(h, j, unpack_pair(&h.p[j]), z - b.mean, b.variance);
+            s.step.update_predicted(h, j, unpack_pair(&h.items[j].p), z - b.mean, b.variance);
             update_bias(&s.bias, h, j, &b, z - predicted, variance);
         }
         let models = if s.step.manoeuvre.is_some() { 2 } else { 1 };
@@ -1173,7 +1183,7 @@ impl Glac {
     /// Advances a spread fast step: `Some` while hypotheses are left; at
     /// its end (when the budget covers it) the step finishes and a tracked
     /// read gets its per-read handling.
-    fn advance_step(&mut self, mut s: StepProgress, budget: &mut Budget) -> Option<StepProgress> {
+    fn advance_step(&mut self, mut s: StepProgress, budget: &mut Budget, out: &mut Option<Estimate>) -> Option<StepProgress> {
         if !self.run_fast(&mut s, budget) {
             return Some(s);
         }
@@ -1183,7 +1193,7 @@ impl Glac {
         }
         self.finish_fast(&s);
         if let Purpose::Track(p) = s.purpose {
-            self.after_track(p);
+            self.after_track(p, out);
         }
         None
     }
@@ -1199,13 +1209,13 @@ impl Glac {
         let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
         let spacing = self.scene.candidate_spacing(m.frequency_hz);
         let (lo, hi) = self.scene.distance_bounds(m.antenna);
-        let r = self.range_variance_after(m.frequency_hz, self.antenna_interval_s[m.antenna]);
+        let r = self.range_variance_after(m.frequency_hz, self.antenna_clock[m.antenna].interval_s);
         let n_lo = ((lo - residue) / spacing).floor().max(0.0) as i64;
         let n_hi = ((hi - residue) / spacing).ceil() as i64;
         self.scratch.clear();
         let h = &mut self.hypotheses;
         for i in 0..h.len() {
-            let (mut x, mut p) = (h.x[i][0], h.p[i][0].unpack());
+            let (mut x, mut p) = (h.items[i].x[0], h.items[i].p[0].unpack());
             predict(&mut x, &mut p, &transition);
             let (d, jac) = range(&x, &antenna, self.axes, true);
             let jac = jac.unwrap();
@@ -1214,19 +1224,19 @@ impl Glac {
                 let (u, b) = innovation(&p, z, d, &jac, r);
                 let (mut xc, mut pc) = (x, p);
                 apply_scalar(&mut xc, &mut pc, &u, &b);
-                self.scratch.push(xc, pc, h.log_likelihood[i] + log_gaussian(u.innovation, u.variance));
+                self.scratch.push(xc, pc, h.items[i].log_likelihood + log_gaussian(u.innovation, u.variance));
             }
         }
         self.stats.filter_updates += self.scratch.len() as u64;
         std::mem::swap(&mut self.hypotheses, &mut self.scratch);
         let cap = self.params.max_hypotheses;
         if self.hypotheses.len() > cap {
-            let mut order: Vec<f64> = self.hypotheses.log_likelihood.clone();
+            let mut order: Vec<f64> = self.hypotheses.log_likelihoods().collect();
             let k = order.len() - cap;
             order.select_nth_unstable_by(k, |a, b| a.total_cmp(b));
             let threshold = order[k];
             let mut kept = 0usize;
-            let ll = self.hypotheses.log_likelihood.clone();
+            let ll: Vec<f64> = self.hypotheses.log_likelihoods().collect();
             // Keep at most `cap` at or above the threshold (ties broken by order).
             let keep: Vec<bool> = ll
                 .iter()
@@ -1285,9 +1295,10 @@ impl Glac {
         let gate2 = self.params.gate_sigmas * self.params.gate_sigmas * self.axes as f64;
         let mut distances = vec![0.0; group.len()];
         let h = &mut self.hypotheses;
-        for i in 0..h.len() {
-            let mut covariance = h.p[i][0].unpack();
-            let (x, p) = (&mut h.x[i][0], &mut covariance);
+        for hyp in &mut h.items {
+            let mut covariance = hyp.p[0].unpack();
+            let mut state = hyp.x[0];
+            let (x, p) = (&mut state, &mut covariance);
             predict(x, p, &transition);
             let predicted = Vector3::new(x[0], x[1], x[2]);
             for (k, a) in anchors.iter().enumerate() {
@@ -1307,7 +1318,7 @@ impl Glac {
                     if d2 <= gate2 {
                         *x = xc;
                         *p = pc;
-                        h.outliers[i] = 0;
+                        hyp.outliers = 0;
                         let post = Vector3::new(x[0], x[1], x[2]);
                         log_l = anchors
                             .iter()
@@ -1315,16 +1326,17 @@ impl Glac {
                             .map(|(a, &z)| log_gaussian((post - a).norm() - z, r))
                             .sum();
                     } else {
-                        h.outliers[i] += 1;
+                        hyp.outliers += 1;
                     }
                 } else {
-                    h.outliers[i] += 1;
+                    hyp.outliers += 1;
                 }
             } else {
-                h.outliers[i] += 1;
+                hyp.outliers += 1;
             }
-            h.p[i][0] = PackedCovariance::pack(&covariance);
-            h.log_likelihood[i] += log_l;
+            hyp.x[0] = state;
+            hyp.p[0] = PackedCovariance::pack(&covariance);
+            hyp.log_likelihood += log_l;
         }
         self.stats.filter_updates += h.len() as u64;
         self.time_s = m.time_s;
@@ -1346,9 +1358,9 @@ impl Glac {
         let (region, axes) = (self.scene.region.clone(), self.axes);
         let alive: Vec<bool> = (0..h.len())
             .map(|i| {
-                let x = &h.x[i][0];
+                let x = &h.items[i].x[0];
                 let inside = region.as_ref().is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
-                h.log_likelihood[i] >= log_threshold && inside && h.outliers[i] < max_out && x.iter().all(|v| v.is_finite())
+                h.items[i].log_likelihood >= log_threshold && inside && h.items[i].outliers < max_out && x.iter().all(|v| v.is_finite())
             })
             .collect();
         h.retain(|i| alive[i]);
@@ -1366,9 +1378,9 @@ impl Glac {
                 }
                 for j in i + 1..n {
                     if keep[j] {
-                        let dp = (h.x[i][0] - h.x[j][0]).fixed_rows::<3>(0).norm_squared();
+                        let dp = (h.items[i].x[0] - h.items[j].x[0]).fixed_rows::<3>(0).norm_squared();
                         if dp < md2 {
-                            if h.log_likelihood[i] >= h.log_likelihood[j] {
+                            if h.items[i].log_likelihood >= h.items[j].log_likelihood {
                                 keep[j] = false;
                             } else {
                                 keep[i] = false;
@@ -1408,7 +1420,7 @@ impl Glac {
             velocity,
             covariance: Estimate::covariance_from(&p),
             hypotheses: h.len(),
-            weight: h.log_likelihood[best].exp(),
+            weight: h.items[best].log_likelihood.exp(),
         })
     }
 
@@ -1428,7 +1440,7 @@ impl Glac {
         let position = Vector3::new(x[0], x[1], x[2]);
         let mut normal = Matrix3::zeros();
         for (a, antenna) in self.scene.antennas.iter().enumerate() {
-            if !self.antenna_read_s[a].is_finite() {
+            if !self.antenna_clock[a].read_s.is_finite() {
                 continue;
             }
             let mut e = position - antenna.position;
@@ -1510,7 +1522,7 @@ impl Glac {
     /// Whether the reported hypothesis gated the latest reading.
     fn best_gated_last(&self) -> bool {
         let h = &self.hypotheses;
-        h.best().is_some_and(|b| h.outliers[b] > 0)
+        h.best().is_some_and(|b| h.items[b].outliers > 0)
     }
 }
 
@@ -1526,8 +1538,8 @@ impl Glac {
 /// model): T divides the evidence before it sets how much the competitors
 /// count. T = 1 is the plain posterior. Weights below 1e-12 are skipped.
 fn mixture_covariance(h: &Hypotheses, centre: &StateVector, temperature: f64) -> StateMatrix {
-    let max = h.log_likelihood.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let weights: Vec<f64> = h.log_likelihood.iter().map(|l| ((l - max) / temperature).exp()).collect();
+    let max = h.log_likelihoods().fold(f64::NEG_INFINITY, f64::max);
+    let weights: Vec<f64> = h.log_likelihoods().map(|l| ((l - max) / temperature).exp()).collect();
     let total: f64 = weights.iter().sum();
     let mut sum = StateMatrix::zeros();
     for (i, w) in weights.iter().enumerate() {
@@ -1553,10 +1565,10 @@ fn largest_sigma(covariance: &Matrix3<f64>) -> f64 {
 /// subtracts), except that an ambiguity branch and the hypothesis it
 /// copied share that hypothesis' prior weight (each carries it whole).
 fn read_evidence(h: &Hypotheses, s: &StepProgress) -> f64 {
-    let max = h.log_likelihood.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let mut sum: f64 = h.log_likelihood.iter().map(|l| (l - max).exp()).sum();
+    let max = h.log_likelihoods().fold(f64::NEG_INFINITY, f64::max);
+    let mut sum: f64 = h.log_likelihoods().map(|l| (l - max).exp()).sum();
     for (&(j, ..), &i) in s.branches.iter().zip(&s.origins) {
-        sum -= 0.5 * ((h.log_likelihood[i] - max).exp() + (h.log_likelihood[j] - max).exp());
+        sum -= 0.5 * ((h.items[i].log_likelihood - max).exp() + (h.items[j].log_likelihood - max).exp());
     }
     max + sum.max(f64::MIN_POSITIVE).ln()
 }
@@ -1576,7 +1588,7 @@ fn predict_bias(step: &BiasStep, h: &Hypotheses, i: usize) -> BiasPrediction {
 /// reading (its outlier count rose) leaves the bias at its prediction.
 fn update_bias(step: &BiasStep, h: &mut Hypotheses, i: usize, b: &BiasPrediction, innovation: f64, variance: f64) {
     let Some(a) = step.antenna else { return };
-    let (mean, var) = if h.outliers[i] == 0 { b.update(innovation, variance) } else { (b.mean, b.variance) };
+    let (mean, var) = if h.items[i].outliers == 0 { b.update(innovation, variance) } else { (b.mean, b.variance) };
     h.bias[i * h.biases + a] = [mean, var];
 }
 
@@ -1607,27 +1619,29 @@ impl FastStep {
     /// takes: the hypothesis' stored covariances are written once a read,
     /// by the update.
     fn predict(&self, h: &mut Hypotheses, i: usize) -> (f64, f64, [StateMatrix; 2]) {
+        let h = &mut h.items[i];
         match self.manoeuvre {
             None => {
-                let mut p = h.p[i][0].unpack();
-                predict(&mut h.x[i][0], &mut p, &self.transition);
-                let (d, jac) = range(&h.x[i][0], &self.antenna, self.axes, true);
+                let mut p = h.p[0].unpack();
+                predict(&mut h.x[0], &mut p, &self.transition);
+                let (d, jac) = range(&h.x[0], &self.antenna, self.axes, true);
                 let jac = jac.unwrap();
                 (d, jac.dot(&(p * jac)) + self.r, [p, StateMatrix::zeros()])
             }
             Some(manoeuvre) => {
-                let mut p = unpack_pair(&h.p[i]);
-                let c = imm::mix(&mut h.x[i], &mut p, &h.mu[i], self.switch);
-                h.mu[i] = c;
-                predict(&mut h.x[i][0], &mut p[0], &self.transition);
-                predict(&mut h.x[i][1], &mut p[1], &manoeuvre);
+                let mut p = unpack_pair(&h.p);
+                let mu = h.mu;
+                let c = imm::mix(&mut h.x, &mut p, &mu, self.switch);
+                h.mu = c;
+                predict(&mut h.x[0], &mut p[0], &self.transition);
+                predict(&mut h.x[1], &mut p[1], &manoeuvre);
                 // The combined prediction's range variance without forming
                 // the combined P: H P H = Σ c_j (H P_j Hᵀ + (H (x_j − x̂))²).
-                let x = h.x[i][0] * c[0] + h.x[i][1] * c[1];
+                let x = h.x[0] * c[0] + h.x[1] * c[1];
                 let (d, jac) = range(&x, &self.antenna, self.axes, true);
                 let jac = jac.unwrap();
                 let spread = |j: usize| {
-                    let offset = jac.dot(&(h.x[i][j] - x));
+                    let offset = jac.dot(&(h.x[j] - x));
                     jac.dot(&(p[j] * jac)) + offset * offset
                 };
                 (d, c[0] * spread(0) + c[1] * spread(1) + self.r, p)
@@ -1644,14 +1658,15 @@ impl FastStep {
     fn update_predicted(&self, h: &mut Hypotheses, i: usize, predicted: [StateMatrix; 2], z: f64, extra_r: f64) {
         let gated = |s: f64| -0.5 * (self.gate2 + (2.0 * std::f64::consts::PI * s).ln());
         let r = self.r + extra_r;
+        let h = &mut h.items[i];
         if self.manoeuvre.is_none() {
             let [mut p, _] = predicted;
-            let x = &mut h.x[i][0];
-            let x_predicted = *x;
-            let (d, jac) = range(x, &self.antenna, self.axes, true);
+            let x_predicted = h.x[0];
+            let (d, jac) = range(&h.x[0], &self.antenna, self.axes, true);
             let (u, b) = innovation(&p, z, d, &jac.unwrap(), r);
-            h.log_likelihood[i] += if u.innovation * u.innovation <= self.gate2 * u.variance {
-                h.outliers[i] = 0;
+            h.log_likelihood += if u.innovation * u.innovation <= self.gate2 * u.variance {
+                h.outliers = 0;
+                let x = &mut h.x[0];
                 apply_scalar(x, &mut p, &u, &b);
                 match self.likelihood {
                     Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
@@ -1661,14 +1676,14 @@ impl FastStep {
                     }
                 }
             } else {
-                h.outliers[i] += 1;
+                h.outliers += 1;
                 gated(u.variance)
             };
-            h.p[i][0] = PackedCovariance::pack(&p);
+            h.p[0] = PackedCovariance::pack(&p);
             return;
         }
         // IMM: update each model, μ_j ∝ c_j Λ_j, factor Σ c_j Λ_j.
-        let c = h.mu[i];
+        let c = h.mu;
         let mut density = [0.0; 2];
         let mut variance = [0.0; 2];
         let mut accepted = false;
@@ -1676,7 +1691,7 @@ impl FastStep {
         // every reading.
         let mut p = predicted;
         let updates: [_; 2] = std::array::from_fn(|j| {
-            let (d, jac) = range(&h.x[i][j], &self.antenna, self.axes, true);
+            let (d, jac) = range(&h.x[j], &self.antenna, self.axes, true);
             let (u, b) = innovation(&p[j], z, d, &jac.unwrap(), r);
             accepted |= u.innovation * u.innovation <= self.gate2 * u.variance;
             density[j] = log_gaussian(u.innovation, u.variance);
@@ -1684,20 +1699,20 @@ impl FastStep {
             (u, b)
         });
         if accepted {
-            h.outliers[i] = 0;
+            h.outliers = 0;
             let max = density[0].max(density[1]);
             let w = [c[0] * (density[0] - max).exp(), c[1] * (density[1] - max).exp()];
             let total = w[0] + w[1];
             for (j, (u, b)) in updates.iter().enumerate() {
-                apply_scalar(&mut h.x[i][j], &mut p[j], u, b);
+                apply_scalar(&mut h.x[j], &mut p[j], u, b);
             }
-            h.mu[i] = [w[0] / total, w[1] / total];
-            h.log_likelihood[i] += max + total.ln();
+            h.mu = [w[0] / total, w[1] / total];
+            h.log_likelihood += max + total.ln();
         } else {
-            h.outliers[i] += 1;
-            h.log_likelihood[i] += gated(variance[0].min(variance[1]));
+            h.outliers += 1;
+            h.log_likelihood += gated(variance[0].min(variance[1]));
         }
-        h.p[i] = pack_pair(&p);
+        h.p = pack_pair(&p);
     }
 }
 
@@ -1750,39 +1765,49 @@ impl Glac {
         // times every candidate), so they run unbudgeted, as before.
         let limit = if self.params.inference == Inference::Fast { self.params.read_budget as u64 } else { u64::MAX };
         let mut budget = Budget::new(limit);
+        // The estimate after the latest read taken through: on the stack
+        // while this call works, kept in the tracker only while reads are
+        // left for later calls (the tag-state line holding it stays cold
+        // on a converged tag's read; `take` would copy all of it).
+        let mut latest = if self.result.is_some() { self.result.take() } else { None };
         if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
             // Nothing queued (a converged tag): straight in, without
             // touching the queue's memory.
-            self.work(&mut budget, Some(read));
+            self.work(&mut budget, Some(read), &mut latest);
         } else {
             self.pending.push_back(read);
-            self.work(&mut budget, None);
+            self.work(&mut budget, None, &mut latest);
         }
         self.stats.max_expanded_per_read = self.stats.max_expanded_per_read.max(budget.expanded());
         if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
-            self.result.take()
-        } else if self.phase == Phase::Initialising {
-            self.coasting_estimate(m.time_s)
+            latest
         } else {
-            None
+            self.result = latest;
+            if self.phase == Phase::Initialising {
+                self.coasting_estimate(m.time_s)
+            } else {
+                None
+            }
         }
     }
 
     /// Works off the job, the step under way and the queued reads, in that
     /// order, while `budget` lasts; `first`, a read that would be queued
     /// last on an empty queue, goes first.
-    fn work(&mut self, budget: &mut Budget, mut first: Option<Pending>) {
+    fn work(&mut self, budget: &mut Budget, mut first: Option<Pending>, out: &mut Option<Estimate>) {
         loop {
-            if let Some(job) = self.job.take() {
-                self.job = self.advance_job(job, budget);
-                if self.job.is_some() {
+            if let Some(mut job) = self.job.take() {
+                if let Some(left) = self.advance_job(*job, budget, out) {
+                    *job = left; // the box is reused while the job spans reads
+                    self.job = Some(job);
                     return;
                 }
                 continue;
             }
-            if let Some(progress) = self.progress.take() {
-                self.progress = self.advance_step(progress, budget);
-                if self.progress.is_some() {
+            if let Some(mut progress) = self.progress.take() {
+                if let Some(left) = self.advance_step(*progress, budget, out) {
+                    *progress = left;
+                    self.progress = Some(progress);
                     return;
                 }
                 continue;
@@ -1792,8 +1817,11 @@ impl Glac {
                 None => match self.pending.pop_front() {
                     Some(read) => read,
                     None => {
-                        if let Some(job) = self.reseeding.take() {
-                            self.reseeding = self.advance_reseed(job, budget);
+                        if let Some(mut job) = self.reseeding.take() {
+                            if let Some(left) = self.advance_reseed(*job, budget) {
+                                *job = left;
+                                self.reseeding = Some(job);
+                            }
                         }
                         return;
                     }
@@ -1803,13 +1831,21 @@ impl Glac {
                 self.pending.push_front(next);
                 return;
             }
-            self.begin_read(next, budget);
+            // The step stays on the stack unless the budget runs out: a
+            // converged tag's read then writes none of it to the tag's
+            // (cold) memory.
+            if let Some(started) = self.begin_read(next, budget, out) {
+                if let Some(left) = self.advance_step(started, budget, out) {
+                    self.progress = Some(Box::new(left));
+                    return;
+                }
+            }
         }
     }
 
     /// Takes queued read `p` in: its bookkeeping (a fresh read), then the
-    /// initial buffer or the hypotheses.
-    fn begin_read(&mut self, p: Pending, budget: &mut Budget) {
+    /// initial buffer or the hypotheses; the fast step it starts, if any.
+    fn begin_read(&mut self, p: Pending, budget: &mut Budget, out: &mut Option<Estimate>) -> Option<StepProgress> {
         let m = &p.read;
         if p.replay.is_none() {
             if self.phase == Phase::Tracking && m.time_s - self.last_time_s > self.params.reinit_gap_s {
@@ -1822,33 +1858,34 @@ impl Glac {
             } else if (m.frequency_hz - self.first_frequency_hz).abs() > 1e3 {
                 self.hopped = true;
             }
-            self.antenna_interval_s[m.antenna] = m.time_s - self.antenna_read_s[m.antenna];
-            self.antenna_read_s[m.antenna] = m.time_s;
+            let clock = &mut self.antenna_clock[m.antenna];
+            *clock = AntennaClock { read_s: m.time_s, interval_s: m.time_s - clock.read_s };
         }
         if self.phase == Phase::Initialising {
             self.stats.initialising += 1;
             self.buffer.push(*m);
-            self.result = None;
+            *out = None;
             if !self.try_initialise(m.time_s) {
-                self.result = self.coasting_estimate(m.time_s);
+                *out = self.coasting_estimate(m.time_s);
             }
-            return;
+            return None;
         }
         match self.params.inference {
-            Inference::Fast => self.progress = Some(self.begin_fast(m, Purpose::Track(p))),
+            Inference::Fast => Some(self.begin_fast(m, Purpose::Track(p))),
             // The variants' steps run whole (their cost: every hypothesis,
             // times every candidate for the naive one).
             Inference::Naive | Inference::Synchronous => {
                 let before = self.stats.filter_updates;
                 self.track(m);
                 budget.spend(self.stats.filter_updates - before);
-                self.after_track(p);
+                self.after_track(p, out);
+                None
             }
         }
     }
 
     /// The per-read handling after read `p` went through the hypotheses.
-    fn after_track(&mut self, p: Pending) {
+    fn after_track(&mut self, p: Pending, out: &mut Option<Estimate>) {
         let m = &p.read;
         if let Some(report_s) = p.replay {
             if self.hypotheses.len() == 0 {
@@ -1857,9 +1894,9 @@ impl Glac {
                     self.pending.pop_front();
                 }
                 self.restart();
-                self.result = self.coasting_estimate(report_s);
+                *out = self.coasting_estimate(report_s);
             } else if !self.pending.front().is_some_and(|q| q.replay.is_some()) {
-                self.result = self.remember(self.best_estimate(report_s));
+                *out = self.remember(self.best_estimate(report_s));
             }
             return;
         }
@@ -1868,7 +1905,7 @@ impl Glac {
             self.restart();
             self.buffer.push(*m);
             self.stats.initialising += 1;
-            self.result = self.coasting_estimate(m.time_s);
+            *out = self.coasting_estimate(m.time_s);
             return;
         }
         if self.params.inference != Inference::Naive && self.best_gated_last() {
@@ -1896,10 +1933,10 @@ impl Glac {
             }
         }
         if self.params.inference == Inference::Synchronous && !self.group.is_empty() {
-            self.result = None; // no new estimate until the group completes
+            *out = None; // no new estimate until the group completes
             return;
         }
-        self.result = self.remember(self.best_estimate(m.time_s));
+        *out = self.remember(self.best_estimate(m.time_s));
     }
 
     /// Keeps `estimate` as the last good state (for re-acquisition).
@@ -1957,9 +1994,13 @@ impl Tracker for Glac {
         (0..self.hypotheses.len())
             .map(|i| {
                 let (x, _) = self.hypotheses.state(i);
-                ([x[0], x[1], x[2]], self.hypotheses.log_likelihood[i])
+                ([x[0], x[1], x[2]], self.hypotheses.items[i].log_likelihood)
             })
             .collect()
+    }
+
+    fn fresh(&self) -> Option<Box<dyn Tracker>> {
+        Some(Box::new(Self::with_shared(self.scene.clone(), self.params.clone(), self.line_layout.clone())))
     }
 
     fn reset(&mut self) {
@@ -1975,8 +2016,7 @@ impl Tracker for Glac {
         self.group.clear();
         self.time_s = f64::NEG_INFINITY;
         self.last_time_s = f64::NEG_INFINITY;
-        self.antenna_read_s.fill(f64::NEG_INFINITY);
-        self.antenna_interval_s.fill(f64::INFINITY);
+        self.antenna_clock.fill(AntennaClock::UNREAD);
         self.last_good = None;
         self.first_frequency_hz = f64::NAN;
         self.hopped = false;
@@ -2017,12 +2057,12 @@ pub(crate) mod tests {
         }
         h.retain(|i| i % 10 == 0); // 20 of 200 left: shrunk to what is live
         assert_eq!(h.len(), 20);
-        assert!(h.x.capacity() < 200 && h.p.capacity() < 200 && h.bias.capacity() < 4 * 200);
+        assert!(h.items.capacity() < 200 && h.bias.capacity() < 4 * 200);
         h.retain(|i| i == 3);
         assert_eq!(h.len(), 1);
-        assert_eq!(h.x[0][0][0], 30.0, "retain keeps order and contents");
+        assert_eq!(h.items[0].x[0][0], 30.0, "retain keeps order and contents");
         assert_eq!(h.biases_of(0), &[[30.0, 0.0], [30.0, 1.0], [30.0, 2.0], [30.0, 3.0]], "and the bias states with them");
-        for capacity in [h.x.capacity(), h.p.capacity(), h.mu.capacity(), h.log_likelihood.capacity(), h.outliers.capacity(), h.bias.capacity() / 4] {
+        for capacity in [h.items.capacity(), h.bias.capacity() / 4] {
             assert!(capacity <= SHRINK_CAPACITY, "capacity {capacity} after converging");
         }
         // Small arrays are left alone (no churn while a few hypotheses live).
@@ -2031,7 +2071,7 @@ pub(crate) mod tests {
             small.push(StateVector::zeros(), StateMatrix::identity(), 0.0);
         }
         small.retain(|i| i == 0);
-        assert_eq!(small.x.capacity(), SHRINK_CAPACITY);
+        assert_eq!(small.items.capacity(), SHRINK_CAPACITY);
     }
 
     fn scene() -> Scene {
@@ -2072,7 +2112,7 @@ pub(crate) mod tests {
         for m in reads(&scene, 120) {
             if tracker.step(&Measurement::Phase(m)).is_some() {
                 seen_estimate = true;
-                let total: f64 = tracker.hypotheses.log_likelihood.iter().map(|l| l.exp()).sum();
+                let total: f64 = tracker.hypotheses.log_likelihoods().map(|l| l.exp()).sum();
                 assert!((total - 1.0).abs() < 1e-9, "weights sum to {total}");
             }
         }
@@ -2096,10 +2136,10 @@ pub(crate) mod tests {
         // The truth at either hypothesis lies within 3 sigma of the report.
         assert!(0.2 < 3.0 * sigma[(0, 0)].sqrt());
         // One hypothesis with all the weight: its own covariance.
-        h.log_likelihood = vec![0.0, -1e3];
+        (h.items[0].log_likelihood, h.items[1].log_likelihood) = (0.0, -1e3);
         assert!((mixture_covariance(&h, &a, 1.0) - p).norm() < 1e-15);
         // Tempered: a hypothesis 6 nats behind counts as one 2 nats behind.
-        h.log_likelihood = vec![0.0, -6.0];
+        (h.items[0].log_likelihood, h.items[1].log_likelihood) = (0.0, -6.0);
         let tempered = mixture_covariance(&h, &a, 3.0);
         let w = (-2.0f64).exp() / (1.0 + (-2.0f64).exp());
         assert!((tempered[(0, 0)] - (1e-6 + w * 0.04)).abs() < 1e-12);
@@ -2124,7 +2164,7 @@ pub(crate) mod tests {
         tracker.add_bias_covariance(&mut p, &x);
         assert_eq!(p, StateMatrix::zeros(), "no read yet: nothing known of the carrier");
         tracker.last_frequency_hz = 915e6;
-        tracker.antenna_read_s = vec![0.0; 3];
+        tracker.antenna_clock = vec![AntennaClock { read_s: 0.0, interval_s: f64::INFINITY }; 3];
         tracker.add_bias_covariance(&mut p, &x);
         let to_range = Scene::range_per_radian(915e6);
         let expected = (0.1 * to_range).powi(2);
@@ -2135,7 +2175,7 @@ pub(crate) mod tests {
         // Two antennas cannot fix a 3D position: nothing is added (the
         // geometry check reports such layouts).
         let mut q = StateMatrix::zeros();
-        tracker.antenna_read_s[2] = f64::NEG_INFINITY;
+        tracker.antenna_clock[2].read_s = f64::NEG_INFINITY;
         tracker.add_bias_covariance(&mut q, &x);
         assert_eq!(q, StateMatrix::zeros());
     }
@@ -2313,17 +2353,17 @@ pub(crate) mod tests {
         // Keep one hypothesis and move it off the truth.
         let keep = tracker.hypotheses.best().unwrap();
         tracker.hypotheses.retain(|i| i == keep);
-        tracker.hypotheses.x[0][0][0] += 0.08;
-        tracker.hypotheses.x[0][1][0] += 0.08;
-        tracker.hypotheses.log_likelihood[0] = 0.0;
+        tracker.hypotheses.items[0].x[0][0] += 0.08;
+        tracker.hypotheses.items[0].x[1][0] += 0.08;
+        tracker.hypotheses.items[0].log_likelihood = 0.0;
         let now = all[split - 1].time_s;
         let before = tracker.stats().reseeds;
         tracker.reseed(now);
         assert_eq!(tracker.stats().reseeds, before + 1);
-        let t = |i: usize| Vector3::new(tracker.hypotheses.x[i][0][0], tracker.hypotheses.x[i][0][1], 0.0);
+        let t = |i: usize| Vector3::new(tracker.hypotheses.items[i].x[0][0], tracker.hypotheses.items[i].x[0][1], 0.0);
         let near: Vec<usize> = (0..tracker.hypotheses.len()).filter(|&i| (t(i) - truth(now)).norm() < 0.01).collect();
         assert!(!near.is_empty(), "the search over the recent reads finds the truth again");
-        let weight: f64 = near.iter().map(|&i| tracker.hypotheses.log_likelihood[i].exp()).sum();
+        let weight: f64 = near.iter().map(|&i| tracker.hypotheses.items[i].log_likelihood.exp()).sum();
         assert!(weight < 10.0 * RESEED_WEIGHT, "a newcomer joins at a small weight, got {weight}");
         let mut last = None;
         for m in &all[split..] {

@@ -216,6 +216,13 @@ pub trait Tracker: Send + Sync {
     fn stats(&self) -> TrackerStats;
     /// Forgets everything (as if newly created), keeping the counters.
     fn reset(&mut self);
+    /// A new tracker of the same method, scene and parameters, in its
+    /// initial state, for another tag: it may share with this one what
+    /// never changes (GLAC shares the scene and the parameters, so that
+    /// thousands of tags read one copy). `None`: build one with [`make`].
+    fn fresh(&self) -> Option<Box<dyn Tracker>> {
+        None
+    }
     /// Live hypotheses: position (m) and normalised log-likelihood each,
     /// for plots like GLAC's Fig. 5. Single-hypothesis methods return one.
     fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
