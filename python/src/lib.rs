@@ -2,6 +2,7 @@
 //! nothing else. Type stubs: `python/scattertrack/_core.pyi`.
 
 mod dsp;
+mod fixed;
 mod geometry;
 mod locate;
 mod lora;
@@ -425,22 +426,14 @@ impl Engine {
         }
         let (t, e, v) = (t.to_vec(), e.to_vec(), v.to_owned());
         let text = py.detach(move || {
-            use std::fmt::Write;
             let mut out = String::with_capacity(n * (16 + 12 * v.ncols()));
-            let fixed = |out: &mut String, x: f64| {
-                if x.is_nan() {
-                    out.push_str("nan");
-                } else {
-                    let _ = write!(out, "{x:.6}");
-                }
-            };
             for i in 0..n {
-                fixed(&mut out, t[i]);
+                fixed::push(&mut out, t[i]);
                 out.push(',');
                 out.push_str(&epc_cells[e[i] as usize]);
                 for x in v.row(i).iter() {
                     out.push(',');
-                    fixed(&mut out, *x);
+                    fixed::push(&mut out, *x);
                 }
                 out.push('\n');
             }

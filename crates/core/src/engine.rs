@@ -106,14 +106,29 @@ impl Engine {
     pub fn run_batch(&mut self, tags: &[usize], measurements: &[Measurement], mut emit: impl FnMut(usize, &Estimate)) {
         assert_eq!(tags.len(), measurements.len(), "one tag per measurement");
         let order = grouped_by_tag(tags);
+        let tag_at = |j: usize| tags[order[j] as usize];
+        // Where each tag's reads start in `order`.
+        let starts: Vec<usize> = (0..order.len()).filter(|&j| j == 0 || tag_at(j) != tag_at(j - 1)).collect();
         // Where each read's estimate lies in `estimates` (u32::MAX: none).
         let mut slot = vec![u32::MAX; tags.len()];
         let mut estimates = Vec::new();
-        for &i in &order {
-            let i = i as usize;
-            if let Some(e) = self.step(tags[i], &measurements[i]) {
-                slot[i] = estimates.len() as u32;
-                estimates.push(e);
+        for (g, &start) in starts.iter().enumerate() {
+            // While this tag is stepped, the next two load: the tracker
+            // after next its own lines (no read of it needed), the next
+            // one what they point to (they arrived during the last tag).
+            if let Some(Some(later)) = starts.get(g + 2).and_then(|&j| self.trackers.get(tag_at(j))) {
+                crate::prefetch::bytes((&**later as *const dyn Tracker).cast(), 4 * crate::prefetch::LINE_BYTES);
+            }
+            if let Some(Some(next)) = starts.get(g + 1).and_then(|&j| self.trackers.get(tag_at(j))) {
+                next.prefetch();
+            }
+            let end = starts.get(g + 1).copied().unwrap_or(order.len());
+            for &i in &order[start..end] {
+                let i = i as usize;
+                if let Some(e) = self.step(tags[i], &measurements[i]) {
+                    slot[i] = estimates.len() as u32;
+                    estimates.push(e);
+                }
             }
         }
         for (i, &k) in slot.iter().enumerate() {

@@ -12,6 +12,7 @@
 //! - [`params`]: typed parameter tables (name, type, range, unit, default)
 //!   read by the bindings, the CLI and the docs.
 //! - [`engine`]: many tags, reorder window, latency statistics.
+//! - [`prefetch`]: cache hints for the next tag's state (the one `unsafe`).
 //!
 //! Units are SI everywhere (m, s, rad, Hz); numbers are `f64`.
 
@@ -23,6 +24,7 @@ pub mod geometry;
 pub mod locate;
 pub mod model;
 pub mod params;
+pub mod prefetch;
 pub mod scene;
 pub mod track;
 

@@ -388,11 +388,15 @@ def _track_stream(method: str, scene: Scene, reads_path, out_path, params: dict,
 
 
 def _count_channels(channels: dict, batch: dict) -> None:
-    pairs, counts = np.unique(np.column_stack([batch["frequency_hz"], batch["antenna"].astype(np.float64)]),
-                              axis=0, return_counts=True)
-    for (frequency, antenna), n in zip(pairs.tolist(), counts.tolist()):
-        key = (frequency, int(antenna))
-        channels[key] = channels.get(key, 0) + n
+    """Adds the batch's reads per (frequency Hz, antenna id), new pairs in (frequency, antenna) order."""
+    # Two 1-D uniques and a bincount: np.unique(axis=0) over the pairs sorts
+    # rows as opaque bytes and took as long as parsing the batch.
+    frequencies, f = np.unique(batch["frequency_hz"], return_inverse=True)
+    antennas, a = np.unique(batch["antenna"], return_inverse=True)
+    counts = np.bincount(f * len(antennas) + a, minlength=len(frequencies) * len(antennas))
+    for code in np.flatnonzero(counts).tolist():
+        key = (float(frequencies[code // len(antennas)]), int(antennas[code % len(antennas)]))
+        channels[key] = channels.get(key, 0) + int(counts[code])
 
 
 def _unresolved_lines(figures: TagFigures, texts: list[str], sigma_m: float) -> list[str]:

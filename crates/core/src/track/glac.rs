@@ -2003,6 +2003,23 @@ impl Tracker for Glac {
         Some(Box::new(Self::with_shared(self.scene.clone(), self.params.clone(), self.line_layout.clone())))
     }
 
+    fn prefetch(&self) {
+        use crate::prefetch;
+        // The fields a converged read touches come before `result`.
+        prefetch::bytes((self as *const Self).cast(), std::mem::offset_of!(Glac, result));
+        // The first hypotheses: a converged tag has one; more are worth
+        // asking for only while they are few.
+        let items = &self.hypotheses.items;
+        prefetch::value(&items[..items.len().min(2)]);
+        let bias = &self.hypotheses.bias;
+        prefetch::value(&bias[..bias.len().min(2 * self.hypotheses.biases)]);
+        prefetch::value(self.antenna_clock.as_slice());
+        prefetch::value(self.bias_clock.as_slice());
+        if let Some(last) = self.recent.back() {
+            prefetch::value(last); // the next read goes after it
+        }
+    }
+
     fn reset(&mut self) {
         self.phase = Phase::Initialising;
         self.pending.clear();

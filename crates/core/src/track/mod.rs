@@ -223,6 +223,9 @@ pub trait Tracker: Send + Sync {
     fn fresh(&self) -> Option<Box<dyn Tracker>> {
         None
     }
+    /// Starts loading into cache what this tracker's next step reads
+    /// ([`crate::prefetch`]); only a hint, so the default does nothing.
+    fn prefetch(&self) {}
     /// Live hypotheses: position (m) and normalised log-likelihood each,
     /// for plots like GLAC's Fig. 5. Single-hypothesis methods return one.
     fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
