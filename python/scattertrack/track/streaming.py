@@ -111,7 +111,7 @@ class Samples:
             rank_kept = np.arange(len(kept_slots)) - np.repeat(starts_kept, runs)
             self.values[kept_slots, self.count[kept_slots] + rank_kept] = values[keep]
         self.count += kept
-        np.add.at(self.seen, slots, 1)
+        self.seen += np.bincount(slots, minlength=len(self.seen))
 
     def median(self, group: int) -> float:
         """The median of the group's sample (nan for a group without values)."""
@@ -238,8 +238,9 @@ class TurnEvidence:
             columns = {n: np.concatenate([self.tail[n], values]) for n, values in columns.items()}
         t, f, phase = columns["time_s"], columns["frequency_hz"], columns["phase_rad"]
         new = np.arange(len(t)) >= len(t) - fresh
-        order = np.lexsort((t, np.round(f), columns["antenna"], columns["tag"]))
-        tag, antenna = columns["tag"][order], columns["antenna"][order]
+        channel = np.round(f)
+        order = np.lexsort((t, channel, columns["antenna"], columns["tag"]))
+        tag, antenna, channel = columns["tag"][order], columns["antenna"][order], channel[order]
         t, f, phase, new = t[order], f[order], phase[order], new[order]
         dt = np.diff(t)
         same = ((tag[1:] == tag[:-1]) & (antenna[1:] == antenna[:-1]) & (np.abs(np.diff(f)) < 1e3)
@@ -260,9 +261,16 @@ class TurnEvidence:
                 self.pairs = np.concatenate([self.pairs, np.zeros(top - len(self.pairs), dtype=np.int64)])
             self.pairs += np.bincount(group, minlength=len(self.pairs))
             self.samples.add(group, speed)
+        # What a later read can pair with: the latest read of each tag,
+        # antenna and channel, if recent enough (a read's predecessor in this
+        # order is a new read or the last old read of some such group). Not
+        # every read of the last 0.5 s: that tail was twice the batch.
         latest = float(batch["time_s"].max())
-        keep = columns["time_s"] > latest - plausibility.PAIR_GAP_S
-        self.tail = {n: values[keep] for n, values in columns.items()}
+        last = np.ones(len(t), dtype=bool)
+        last[:-1] = (tag[1:] != tag[:-1]) | (antenna[1:] != antenna[:-1]) | (channel[1:] != channel[:-1])
+        keep = last & (t > latest - plausibility.PAIR_GAP_S)
+        self.tail = {"tag": tag[keep], "antenna": antenna[keep], "time_s": t[keep], "frequency_hz": f[keep],
+                     "phase_rad": phase[keep]}
 
     def bound(self, tag: int) -> float:
         """The largest per-antenna median radial speed (m/s); nan without enough pairs."""
