@@ -45,8 +45,14 @@ class Engine:
         antenna: npt.NDArray[np.int64],
         frequency_hz: npt.NDArray[np.float64],
         phase_rad: npt.NDArray[np.float64],
+        *,
+        covariance: bool = True,
     ) -> dict[str, np.ndarray]:
-        """Columns row, time_s, position (n,3), velocity (n,3), covariance (n,36), hypotheses, weight."""
+        """Columns row (increasing), time_s, position (n,3), velocity (n,3), covariance (n,36), hypotheses, weight.
+
+        The reads are taken tag by tag (each tag's in order: the estimates of ``step`` in input order).
+        ``covariance=False``: a ``sigma`` column (n,3: the x, y, z 1-sigma, m) in place of ``covariance``.
+        """
     @staticmethod
     def format_track_rows(
         time_s: npt.NDArray[np.float64],
