@@ -116,6 +116,11 @@ def error_message(error: BaseException) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line ``argv`` (default ``sys.argv[1:]``); returns the exit code."""
+    if argv is None:
+        # Run as the command (not called in-process): the process is ours to set up.
+        from scattertrack.process import prefer_small_pages
+
+        prefer_small_pages()
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

@@ -143,6 +143,10 @@ fn estimate_tuple(e: Estimate) -> (f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64
 struct Engine {
     inner: CoreEngine,
     antennas: usize,
+    /// `run`'s batch as the core takes it, kept between calls (filled
+    /// afresh each time): allocated per batch it was faulted in anew.
+    batch_tags: Vec<usize>,
+    batch_reads: Vec<Measurement>,
 }
 
 #[pymethods]
@@ -155,7 +159,7 @@ impl Engine {
         let scene = scene.inner.clone();
         let antennas = scene.antennas.len();
         let inner = CoreEngine::new(scene, method, params::make_params(method, params)?).map_err(value_error)?;
-        Ok(Self { inner, antennas })
+        Ok(Self { inner, antennas, batch_tags: Vec::new(), batch_reads: Vec::new() })
     }
 
     /// One measurement of tag `tag` → `None` or
@@ -201,17 +205,24 @@ impl Engine {
         if tag.iter().any(|&x| x < 0) {
             return Err(value_error("tag indices must be non-negative"));
         }
-        let (tag, t, a, f, ph) = (tag.to_vec(), t.to_vec(), a.to_vec(), f.to_vec(), ph.to_vec());
-        let inner = &mut self.inner;
+        let (inner, tags, reads) = (&mut self.inner, &mut self.batch_tags, &mut self.batch_reads);
+        // The views borrow the arrays, which the caller holds (and does not
+        // change) for the call.
         let columns = py.detach(move || {
-            let tags: Vec<usize> = tag.iter().map(|&k| k as usize).collect();
-            let reads: Vec<Measurement> = (0..n)
-                .map(|i| Measurement::Phase(PhaseRead { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] }))
-                .collect();
+            tags.clear();
+            tags.extend(tag.iter().map(|&k| k as usize));
+            reads.clear();
+            reads.extend((0..n).map(|i| {
+                Measurement::Phase(PhaseRead { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] })
+            }));
             // Nearly every read gives a row once its tag commits; the cap
             // keeps a whole in-memory recording from reserving it all at once.
             let mut c = Columns::with_capacity(n.min(1 << 20), !covariance);
-            inner.run_batch(&tags, &reads, |i, e| c.push(i, e));
+            inner.run_batch(tags, reads, |i, e| c.push(i, e));
+            if reads.capacity() > 1 << 18 {
+                // A whole recording at once: not kept.
+                (*tags, *reads) = (Vec::new(), Vec::new());
+            }
             c
         });
         columns.into_dict(py)

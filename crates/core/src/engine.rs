@@ -68,6 +68,38 @@ pub struct Engine {
     prototype: Box<dyn Tracker>,
     trackers: Vec<Option<Box<dyn Tracker>>>,
     latency: Latency,
+    /// [`Engine::run_batch`]'s working arrays, kept between batches: a
+    /// batch's estimates are ~12 MB at 35,000 reads, and allocated afresh
+    /// they were grown by doubling and faulted in page by page every batch
+    /// (docs/notes/glac-many-tags-cost.md, "Page faults").
+    batch: BatchScratch,
+}
+
+/// Batches up to this many reads keep their working arrays for the next
+/// one (≈ 0.1 GB of estimates at most); a larger batch (a whole recording
+/// run at once) frees them.
+const KEPT_BATCH_READS: usize = 1 << 18;
+
+/// Working arrays of one batch (emptied, not freed, between batches).
+#[derive(Default)]
+struct BatchScratch {
+    /// Read indices grouped by tag (see [`grouped_by_tag`]).
+    order: Vec<u32>,
+    /// Per tag, where its reads start in `order` (counting sort).
+    counts: Vec<u32>,
+    /// Where each tag's reads start in `order`.
+    starts: Vec<usize>,
+    /// Where each read's estimate lies in `estimates` (u32::MAX: none).
+    slot: Vec<u32>,
+    estimates: Vec<Estimate>,
+}
+
+impl BatchScratch {
+    fn release_if_larger_than(&mut self, reads: usize) {
+        if self.slot.capacity() > reads {
+            *self = Self::default();
+        }
+    }
 }
 
 impl Engine {
@@ -75,7 +107,15 @@ impl Engine {
     /// building one tracker up front).
     pub fn new(scene: Scene, method: &str, params: Params) -> Result<Self> {
         let prototype = make(method, &scene, &params)?;
-        Ok(Self { scene, method: method.to_string(), params, prototype, trackers: Vec::new(), latency: Latency::default() })
+        Ok(Self {
+            scene,
+            method: method.to_string(),
+            params,
+            prototype,
+            trackers: Vec::new(),
+            latency: Latency::default(),
+            batch: BatchScratch::default(),
+        })
     }
 
     /// One measurement of tag `tag`.
@@ -105,37 +145,41 @@ impl Engine {
     /// instead of once per read. Causal per tag, as every tracker is.
     pub fn run_batch(&mut self, tags: &[usize], measurements: &[Measurement], mut emit: impl FnMut(usize, &Estimate)) {
         assert_eq!(tags.len(), measurements.len(), "one tag per measurement");
-        let order = grouped_by_tag(tags);
+        let mut b = std::mem::take(&mut self.batch);
+        grouped_by_tag(tags, &mut b.order, &mut b.counts);
+        let order = &b.order;
         let tag_at = |j: usize| tags[order[j] as usize];
-        // Where each tag's reads start in `order`.
-        let starts: Vec<usize> = (0..order.len()).filter(|&j| j == 0 || tag_at(j) != tag_at(j - 1)).collect();
-        // Where each read's estimate lies in `estimates` (u32::MAX: none).
-        let mut slot = vec![u32::MAX; tags.len()];
-        let mut estimates = Vec::new();
-        for (g, &start) in starts.iter().enumerate() {
+        b.starts.clear();
+        b.starts.extend((0..order.len()).filter(|&j| j == 0 || tag_at(j) != tag_at(j - 1)));
+        b.slot.clear();
+        b.slot.resize(tags.len(), u32::MAX);
+        b.estimates.clear();
+        for (g, &start) in b.starts.iter().enumerate() {
             // While this tag is stepped, the next two load: the tracker
             // after next its own lines (no read of it needed), the next
             // one what they point to (they arrived during the last tag).
-            if let Some(Some(later)) = starts.get(g + 2).and_then(|&j| self.trackers.get(tag_at(j))) {
+            if let Some(Some(later)) = b.starts.get(g + 2).and_then(|&j| self.trackers.get(tag_at(j))) {
                 crate::prefetch::bytes((&**later as *const dyn Tracker).cast(), 4 * crate::prefetch::LINE_BYTES);
             }
-            if let Some(Some(next)) = starts.get(g + 1).and_then(|&j| self.trackers.get(tag_at(j))) {
+            if let Some(Some(next)) = b.starts.get(g + 1).and_then(|&j| self.trackers.get(tag_at(j))) {
                 next.prefetch();
             }
-            let end = starts.get(g + 1).copied().unwrap_or(order.len());
+            let end = b.starts.get(g + 1).copied().unwrap_or(order.len());
             for &i in &order[start..end] {
                 let i = i as usize;
                 if let Some(e) = self.step(tags[i], &measurements[i]) {
-                    slot[i] = estimates.len() as u32;
-                    estimates.push(e);
+                    b.slot[i] = b.estimates.len() as u32;
+                    b.estimates.push(e);
                 }
             }
         }
-        for (i, &k) in slot.iter().enumerate() {
+        for (i, &k) in b.slot.iter().enumerate() {
             if k != u32::MAX {
-                emit(i, &estimates[k as usize]);
+                emit(i, &b.estimates[k as usize]);
             }
         }
+        b.release_if_larger_than(KEPT_BATCH_READS);
+        self.batch = b;
     }
 
     /// Counters of tag `tag` (zero if never seen).
@@ -162,31 +206,32 @@ impl Engine {
     }
 }
 
-/// The indices `0..tags.len()` ordered by tag, each tag's in increasing
-/// order (a stable counting sort when the tag indices are dense enough,
-/// else a stable sort).
-fn grouped_by_tag(tags: &[usize]) -> Vec<u32> {
+/// Fills `order` with the indices `0..tags.len()` ordered by tag, each
+/// tag's in increasing order (a stable counting sort when the tag indices
+/// are dense enough, `start` its per-tag counters; else a stable sort).
+fn grouped_by_tag(tags: &[usize], order: &mut Vec<u32>, start: &mut Vec<u32>) {
     let n = tags.len();
     assert!(n < u32::MAX as usize, "batches hold fewer than 2³² reads");
     let top = tags.iter().copied().max().map_or(0, |t| t + 1);
+    order.clear();
     if top > 4 * n + 1024 {
-        let mut order: Vec<u32> = (0..n as u32).collect();
+        order.extend(0..n as u32);
         order.sort_by_key(|&i| tags[i as usize]);
-        return order;
+        return;
     }
-    let mut start = vec![0u32; top + 1];
+    start.clear();
+    start.resize(top + 1, 0);
     for &t in tags {
         start[t + 1] += 1;
     }
     for t in 0..top {
         start[t + 1] += start[t];
     }
-    let mut order = vec![0u32; n];
+    order.resize(n, 0);
     for (i, &t) in tags.iter().enumerate() {
         order[start[t] as usize] = i as u32;
         start[t] += 1;
     }
-    order
 }
 
 /// A measurement waiting in the reorder window.
@@ -273,14 +318,20 @@ mod tests {
         Measurement::Phase(crate::track::PhaseRead { time_s: t, antenna: 0, frequency_hz: 915e6, phase_rad: 0.0 })
     }
 
+    fn grouped(tags: &[usize]) -> Vec<u32> {
+        let (mut order, mut start) = (vec![7; 9], vec![5; 2]); // stale contents are overwritten
+        grouped_by_tag(tags, &mut order, &mut start);
+        order
+    }
+
     #[test]
     fn grouping_is_stable_within_each_tag() {
         let tags = [3, 0, 3, 1, 0, 3];
-        assert_eq!(grouped_by_tag(&tags), vec![1, 4, 3, 0, 2, 5]);
+        assert_eq!(grouped(&tags), vec![1, 4, 3, 0, 2, 5]);
         // Sparse tag indices take the sorting path, with the same order.
         let sparse: Vec<usize> = tags.iter().map(|t| t * 1_000_000).collect();
-        assert_eq!(grouped_by_tag(&sparse), vec![1, 4, 3, 0, 2, 5]);
-        assert!(grouped_by_tag(&[]).is_empty());
+        assert_eq!(grouped(&sparse), vec![1, 4, 3, 0, 2, 5]);
+        assert!(grouped(&[]).is_empty());
     }
 
     #[test]

@@ -2018,6 +2018,9 @@ impl Tracker for Glac {
         if let Some(last) = self.recent.back() {
             prefetch::value(last); // the next read goes after it
         }
+        if let Some(oldest) = self.recent.front() {
+            prefetch::value(oldest); // each read checks whether it has aged out
+        }
     }
 
     fn reset(&mut self) {
