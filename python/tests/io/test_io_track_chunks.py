@@ -1,8 +1,10 @@
 """The incremental track.csv writer (io.track_chunks) writes io.write_track's bytes."""
 
 import numpy as np
+import pytest
 
 from scattertrack import io
+from scattertrack.io import track_chunks
 from scattertrack.io.track_chunks import TrackWriter
 from scattertrack.io.types import Track
 
@@ -16,7 +18,11 @@ def awkward_values(n: int, rng) -> np.ndarray:
     return values
 
 
-def test_rows_written_in_chunks_are_write_track_bytes(tmp_path):
+@pytest.mark.parametrize("parallel_rows", [None, 8], ids=["one-thread", "halves-on-two-threads"])
+def test_rows_written_in_chunks_are_write_track_bytes(tmp_path, monkeypatch, parallel_rows):
+    if parallel_rows is not None:
+        # Chunks of 37 rows are then formatted in two halves (18 + 19) at once.
+        monkeypatch.setattr(track_chunks, "PARALLEL_ROWS", parallel_rows)
     rng = np.random.default_rng(3)
     n = 500
     epcs = np.array(["E200", "a,b", 'say "hi"', "E201"], dtype=object)
