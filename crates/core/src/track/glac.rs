@@ -469,6 +469,14 @@ impl Hypotheses {
 
     /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp).
     fn normalise(&mut self) {
+        // A lone finite hypothesis normalises to exactly 0 (l − (l + ln e⁰)):
+        // the converged tag's every read, without an exp and a log.
+        if let [only] = self.items.as_mut_slice() {
+            if only.log_likelihood.is_finite() {
+                only.log_likelihood = 0.0;
+                return;
+            }
+        }
         let max = self.log_likelihoods().fold(f64::NEG_INFINITY, f64::max);
         let sum: f64 = self.log_likelihoods().map(|l| (l - max).exp()).sum();
         let log_norm = max + sum.ln();
@@ -1356,13 +1364,19 @@ impl Glac {
         let margin = self.params.region_margin_m;
         let max_out = self.params.max_consecutive_outliers;
         let (region, axes) = (self.scene.region.clone(), self.axes);
-        let alive: Vec<bool> = (0..h.len())
-            .map(|i| {
-                let x = &h.items[i].x[0];
-                let inside = region.as_ref().is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
-                h.items[i].log_likelihood >= log_threshold && inside && h.items[i].outliers < max_out && x.iter().all(|v| v.is_finite())
-            })
-            .collect();
+        // On the stack while few (a converged tag's every read allocated here).
+        let (mut few, mut many) = ([false; 16], Vec::new());
+        let alive: &mut [bool] = if h.len() <= few.len() {
+            &mut few[..h.len()]
+        } else {
+            many.resize(h.len(), false);
+            &mut many
+        };
+        for (i, keep) in alive.iter_mut().enumerate() {
+            let x = &h.items[i].x[0];
+            let inside = region.as_ref().is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
+            *keep = h.items[i].log_likelihood >= log_threshold && inside && h.items[i].outliers < max_out && x.iter().all(|v| v.is_finite());
+        }
         h.retain(|i| alive[i]);
         if h.len() > 1 && h.len() <= 64 && self.params.merge_distance_m > 0.0 {
             // Nearest-neighbour pruning makes neighbouring hypotheses pick
