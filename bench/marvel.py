@@ -20,7 +20,9 @@ Blocks:
 2. starts: the same estimator, every parameter at its default, on flights
    that do not begin at rest: ``marvel-liftoff-circle`` (the log begins in
    the climb), ``marvel-liftoff-circle-imu-late`` (its first 3 s of IMU
-   missing; error after 10 s against the full log's), ``marvel-liftoff-square``
+   missing; error after 10 s against the full log's),
+   ``marvel-liftoff-circle-noisy-imu`` (an IMU noisier than the stated
+   densities, measured from its samples), ``marvel-liftoff-square``
    (noisy features, the paper's Fig. 13 level: 0.53 m, 6.6 deg), beside the
    rest start of ``marvel-circle-20m``; and the outside case
    ``/work/shared/outside/drone-liftoff-circle`` (written by an independent
@@ -64,6 +66,7 @@ STARTS = (
     ("marvel-circle-20m", "rest 2 s", None),
     ("marvel-liftoff-circle", "lift-off, no rest", None),
     ("marvel-liftoff-circle-imu-late", "lift-off, first 3 s of IMU missing", None),
+    ("marvel-liftoff-circle-noisy-imu", "lift-off, IMU noisier than stated", None),
     ("marvel-liftoff-square", "lift-off, noisy features", (0.5256, 6.64)),
 )
 OUTSIDE = Path("/work/shared/outside/drone-liftoff-circle")

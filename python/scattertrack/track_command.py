@@ -1,7 +1,7 @@
 """``scattertrack track`` and ``scattertrack check-scene``: a recording tracked offline, a layout checked.
 
     scattertrack track --scene S --reads R|--frames F|--features F|--sigmf R [--imu I] [--calibration C]
-                       [--method glac] --out T [--param name=value ...]
+                       [--method M] --out T [--param name=value ...]
     scattertrack check-scene SCENE [--reads R]
 
 ``track`` dispatches on the method's input: phase reads (glac...),
@@ -62,7 +62,11 @@ def add_parser(commands) -> None:
         "--calibration",
         help="with --sigmf: the calibration recording (default: calibration.sigmf-meta beside the recording)",
     )
-    track.add_argument("--method", default="glac", help="tracking method (see 'scattertrack methods'; default glac)")
+    track.add_argument(
+        "--method",
+        help="tracking method (see 'scattertrack methods'); default: the main method of the input given, "
+        "glac for --reads, turbotrack for --frames or --sigmf, marvel for --features or --sigmf with --imu",
+    )
     track.add_argument("--out", required=True, help="track.csv to write")
     track.add_argument(
         "--revised-out",
@@ -100,6 +104,7 @@ def command_track(args) -> int:
     from scattertrack import io
     from scattertrack.track import marvel, methods
 
+    args.method = args.method or default_method(args)
     # Before reading anything: an unknown method or a bad value fails at once.
     params = tracker_parameters(args.method, args.param)
     scene = io.read_scene(args.scene)
@@ -117,6 +122,48 @@ def command_track(args) -> int:
     if kind == "reads" and not args.reads:
         raise UsageError(f"method '{args.method}' tracks phase reads: give --reads")
     return track_frames(args, scene, params) if kind == "frames" else track_reads(args, scene, params)
+
+
+def default_method(args) -> str:
+    """The method a user means when none is named: each pipeline's main method, chosen by the input.
+
+    An IMU makes a SigMF recording a drone's LoRa capture (marvel); without
+    one it is a localization helper's (turbotrack).
+    """
+    if args.features or (args.sigmf and args.imu):
+        return "marvel"
+    if args.frames or args.sigmf:
+        return "turbotrack"
+    return "glac"
+
+
+def say_imu_noise(noise: dict | None, imu_path, stated_by_user=()) -> None:
+    """The IMU's white noise as measured from its samples (and which density was used);
+    a ``warning:`` line naming the IMU file where the user stated a density
+    (``--param``) that the samples show too small. A default density is ours,
+    not the user's claim: a noisier IMU is then only reported."""
+    if not noise or noise.get("measured") is None:
+        return
+    from scattertrack.io.errors import warn_input
+
+    names = (("accelerometer", "accel_noise_density", "m/s^2/sqrt(Hz)"), ("gyroscope", "gyro_noise_density", "rad/s/sqrt(Hz)"))
+    rows = list(zip(names, noise["measured"], noise["used"], noise["stated"]))
+    parts = [
+        f"{name} {measured:.2e} {unit} ({'used instead of' if used != stated else 'agrees with'} {parameter} = {stated:.2e})"
+        for (name, parameter, unit), measured, used, stated in rows
+    ]
+    say("  IMU white noise measured from its samples: " + "; ".join(parts))
+    contradicted = [
+        f"{parameter} = {stated:.2e} {unit} but the {name}'s samples show {measured:.2e} ({measured / stated:.1f}x)"
+        for (name, parameter, unit), measured, used, stated in rows
+        if used != stated and parameter in stated_by_user
+    ]
+    if contradicted and imu_path is not None:
+        warn_input(
+            imu_path, None, None,
+            "the IMU is noisier than stated: " + "; ".join(contradicted)
+            + "; tracked with the measured density (--param imu_noise_from_data=false keeps the stated one)",
+        )
 
 
 def track_reads(args, scene, params: dict) -> int:
@@ -254,7 +301,7 @@ def track_marvel(args, scene, params: dict) -> int:
             f"  revised (fixed-lag smoothed) track: {plural(len(result.revised), 'row')} to {revised_out}"
             + (f", {fallbacks} of them causal (the smoother restarted while they were in its window)" if fallbacks else "")
         )
-    print_drone_summary(result, epochs, wall_s)
+    print_drone_summary(result, epochs, wall_s, args.imu, stated_by_user=set(params))
     return 0
 
 
@@ -288,8 +335,9 @@ def _drone_from_features(args, scene, imu, params: dict):
     return result, len(features)
 
 
-def print_drone_summary(result, epochs: int, wall_s: float) -> None:
-    """What ``track`` reports after tracking a drone: declined rows, the controller, the start, divergences, speed."""
+def print_drone_summary(result, epochs: int, wall_s: float, imu_path=None, stated_by_user=()) -> None:
+    """What ``track`` reports after tracking a drone: declined rows, the controller, the start,
+    the IMU's noise, divergences, speed."""
     say(f"  {result.skipped.summary() if result.skipped.total else 'nothing declined'}")
     stats = result.stats.get("drone", {})
     controller = stats.get("controller")
@@ -302,6 +350,7 @@ def print_drone_summary(result, epochs: int, wall_s: float) -> None:
         start = "at rest (ground factors)" if rest["state"] == "rest" else f"not at rest (failed check: {rest['failed_check']}; wide velocity prior)"
         dropped = f", {plural(rest['ground_factors_dropped'], 'ground factor')} dropped" if rest.get("ground_factors_dropped") else ""
         say(f"  start: {start}{dropped}")
+    say_imu_noise(stats.get("imu_noise"), imu_path, stated_by_user)
     if "divergences" in stats:
         unrecovered = stats["divergences"] - stats.get("divergences_recovered", 0)
         say(

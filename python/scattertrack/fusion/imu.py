@@ -19,6 +19,7 @@ import numpy as np
 from gtsam.symbol_shorthand import B, V, X
 
 from scattertrack.fusion.declines import IMU_DECLINE_REASONS
+from scattertrack.fusion.imu_noise import ImuNoiseMeter, density_in_use
 
 
 def tilt_from_specific_force(specific_force) -> tuple[float, float]:
@@ -31,14 +32,19 @@ def tilt_from_specific_force(specific_force) -> tuple[float, float]:
     return math.atan2(f[1], f[2]), math.atan2(-f[0], math.hypot(f[1], f[2]))
 
 
-def preintegration_params(p) -> gtsam.PreintegrationCombinedParams:
+def preintegration_params(p, accel_density: float | None = None, gyro_density: float | None = None) -> gtsam.PreintegrationCombinedParams:
     """GTSAM's preintegration parameters from :class:`MarvelParams` ``p``:
     continuous-time densities squared (GTSAM divides by dt when it
-    discretises); gravity along -z (MakeSharedU)."""
+    discretises); gravity along -z (MakeSharedU). ``accel_density`` and
+    ``gyro_density`` replace the stated white-noise densities (the measured
+    ones, :mod:`scattertrack.fusion.imu_noise`); ``imu_noise_scale`` multiplies
+    either."""
     params = gtsam.PreintegrationCombinedParams.MakeSharedU(p.gravity_m_s2)
     eye = np.eye(3)
-    params.setAccelerometerCovariance(eye * (p.accel_noise_density * p.imu_noise_scale) ** 2)
-    params.setGyroscopeCovariance(eye * (p.gyro_noise_density * p.imu_noise_scale) ** 2)
+    accel = p.accel_noise_density if accel_density is None else accel_density
+    gyro = p.gyro_noise_density if gyro_density is None else gyro_density
+    params.setAccelerometerCovariance(eye * (accel * p.imu_noise_scale) ** 2)
+    params.setGyroscopeCovariance(eye * (gyro * p.imu_noise_scale) ** 2)
     params.setBiasAccCovariance(eye * p.accel_bias_random_walk**2)
     params.setBiasOmegaCovariance(eye * p.gyro_bias_random_walk**2)
     params.setIntegrationCovariance(eye * p.integration_sigma**2)
@@ -55,6 +61,12 @@ class ImuStream:
         self.imu_declined: dict[str, int] = {key: 0 for key in IMU_DECLINE_REASONS}
         self._imu_params = preintegration_params(self.params)
         self._preintegrated = gtsam.PreintegratedCombinedMeasurements(self._imu_params)
+        self._noise_meter = ImuNoiseMeter()
+        self.imu_noise_measured: tuple[float, float] | None = None
+        """The newest (accelerometer m/s^2/√Hz, gyroscope rad/s/√Hz) white-noise
+        densities measured from the samples; None before enough samples."""
+        self.imu_noise_used = (self.params.accel_noise_density, self.params.gyro_noise_density)
+        """The densities the preintegration uses now (before ``imu_noise_scale``)."""
         # The newest sample (time s, specific force m/s^2, rate rad/s) and
         # the time the preintegration has reached.
         self._first_imu_time: float | None = None
@@ -88,6 +100,8 @@ class ImuStream:
             self.imu_declined["not_after_previous"] += 1
             return
         self.imu_samples += 1
+        if self.params.imu_noise_from_data:
+            self._noise_meter.add(time_s, accel, gyro)
         if self._rest_state == "pending":
             self._collect_rest(time_s, accel, gyro, baro_z)
         elif self._rest_state == "rest" and not self._left_ground:
@@ -169,8 +183,34 @@ class ImuStream:
         self._nav = predicted
 
     def _restart_integration(self) -> None:
-        """The next interval integrates from now against the newest bias estimate."""
-        self._preintegrated.resetIntegrationAndSetBias(self._bias)
+        """The next interval integrates from now against the newest bias
+        estimate, with the white-noise densities the samples have shown."""
+        if self._refresh_imu_noise():
+            self._preintegrated = gtsam.PreintegratedCombinedMeasurements(self._imu_params, self._bias)
+        else:
+            self._preintegrated.resetIntegrationAndSetBias(self._bias)
+
+    def _refresh_imu_noise(self) -> bool:
+        """Whether the densities in use changed (then ``_imu_params`` is rebuilt):
+        each sensor's is the stated one unless the measured one is more than
+        ``imu_noise_agreement`` times larger; a change under 10 % is not made
+        (the measurement wanders by a few per cent between epochs)."""
+        p = self.params
+        if not p.imu_noise_from_data:
+            return False
+        measured = self._noise_meter.densities()
+        if measured is None:
+            return False
+        self.imu_noise_measured = measured
+        wanted = (
+            density_in_use(p.accel_noise_density, measured[0], p.imu_noise_agreement),
+            density_in_use(p.gyro_noise_density, measured[1], p.imu_noise_agreement),
+        )
+        if all(abs(w - u) <= 0.1 * u for w, u in zip(wanted, self.imu_noise_used)):
+            return False
+        self.imu_noise_used = wanted
+        self._imu_params = preintegration_params(p, *wanted)
+        return True
 
 
 __all__ = ["ImuStream", "preintegration_params", "tilt_from_specific_force"]

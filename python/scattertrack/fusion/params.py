@@ -68,6 +68,19 @@ class MarvelParams:
     the sample-and-hold error of integrating discrete samples."""
     imu_noise_scale: float = parameter(1.0, "> 0", "", "multiplies the two white-noise densities (a margin for unmodelled vibration)")
     """Multiplies the two white-noise densities (a margin for unmodelled vibration)."""
+    imu_noise_from_data: bool = parameter(True, "any", "", "measure the IMU's white noise from its samples and use it where it exceeds the stated densities")
+    """Measure the accelerometer's and gyroscope's white-noise densities from
+    the IMU's own samples (second differences, :mod:`scattertrack.fusion.imu_noise`)
+    and preintegrate with the measured density wherever it exceeds the stated
+    one by more than ``imu_noise_agreement``; the stated densities stay the
+    floor. Why: a stated density below the real one makes the dead reckoning
+    overconfident, the features are bent to it and the sigmas shrink
+    (measurements: docs/marvel.md section 8)."""
+    imu_noise_agreement: float = parameter(1.2, ">= 1", "", "a measured density up to this factor above the stated one counts as agreeing (the stated one is used)")
+    """A measured density up to this factor above the stated one counts as
+    agreeing and the stated one is used: the measurement's own spread over
+    0.5 s of samples is about 6 % (1 sigma), and a well-stated IMU keeps the
+    figures it was characterised with."""
 
     range_sigma_m: float = parameter(0.5, "> 0", "m", "1-sigma of a range when the features give none")
     """1-sigma of a range when the features give none, m."""

@@ -167,7 +167,9 @@ def finish_run(
     not finite or farther than ``max_controller_range_m`` from the last row
     (:data:`IMPLAUSIBLE_CONTROLLER`: ``stats["controller"]`` is then None and
     ``controller_refused`` says why). ``stats["drone"]``: the estimator's
-    counters, the rest test, divergences (and how many recovered), the typed
+    counters, the rest test, the IMU's white-noise densities (``imu_noise``:
+    measured, used and stated pairs, accelerometer then gyroscope:
+    :mod:`scattertrack.fusion.imu_noise`), divergences (and how many recovered), the typed
     latency records ``latency`` (wall) and ``cpu_latency`` (thread CPU, both
     :class:`~scattertrack.fusion.latency.Latency`), their quantiles in ns
     (``time_ns_p50``, ``time_ns_p99``, ``time_ns_max``, ``cpu_time_ns_*``),
@@ -228,6 +230,11 @@ def finish_run(
                 "failed_check": rest_test.reason if rest_test is not None else "pending",
                 "ground_end": estimator.ground_end_reason,
                 "ground_factors_dropped": estimator.ground_factors_dropped,
+            },
+            "imu_noise": {
+                "measured": estimator.imu_noise_measured,
+                "used": estimator.imu_noise_used,
+                "stated": (estimator.params.accel_noise_density, estimator.params.gyro_noise_density),
             },
             "divergences": estimator.divergences,
             "divergences_recovered": estimator.divergences_recovered,

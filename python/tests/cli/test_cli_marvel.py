@@ -135,3 +135,51 @@ def test_marvel_parameters_reach_the_fusion_typed(capsys, flight, tmp_path, monk
     )
     assert code == 2 and "stop here" in err
     assert seen == {"use_baro": False, "smoother_lag_s": 3.0}
+
+
+def test_the_method_follows_the_input_when_none_is_named(capsys, flight, tmp_path):
+    out = tmp_path / "track.csv"
+    code, stdout, err = run(
+        capsys, "track", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--imu", flight / "imu.csv", "--out", out,
+    )
+    assert code == 0, err
+    assert "tracked with marvel" in stdout
+
+
+def test_an_imu_noisier_than_stated_is_measured_and_warned_about(capsys, flight, tmp_path):
+    """imu.csv with four times the default accelerometer noise: the summary says the
+    measured density was used; a density the user stated gets one 'warning:' line
+    naming the file and the parameter."""
+    lines = (flight / "imu.csv").read_text().splitlines()
+    header = lines[0].split(",")
+    column = header.index("ax")
+    rng = np.random.default_rng(4)
+    rows = []
+    for line in lines[1:]:
+        cells = line.split(",")
+        cells[column] = f"{float(cells[column]) + 0.04 * rng.standard_normal():.6f}"  # 4e-3 m/s^2/sqrt(Hz) at 100 Hz
+        rows.append(",".join(cells))
+    noisy = tmp_path / "imu.csv"
+    noisy.write_text("\n".join([lines[0], *rows]) + "\n")
+    code, stdout, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml",
+        "--features", flight / "features.csv", "--imu", noisy, "--out", tmp_path / "track.csv",
+    )
+    assert code == 0, err
+    assert "IMU white noise measured from its samples: accelerometer" in stdout
+    assert "used instead of accel_noise_density" in stdout and "agrees with gyro_noise_density" in stdout
+    assert "warning:" not in err  # the default density is not the user's claim
+    code, stdout, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml", "--features", flight / "features.csv",
+        "--imu", noisy, "--out", tmp_path / "stated.csv", "--param", "accel_noise_density=1e-3",
+    )
+    assert code == 0, err
+    warnings = [line for line in err.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == 1 and str(noisy) in warnings[0] and "accel_noise_density" in warnings[0], err
+    assert "gyro_noise_density" not in warnings[0]
+    code, stdout, err = run(
+        capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml", "--features", flight / "features.csv",
+        "--imu", noisy, "--out", tmp_path / "kept.csv", "--param", "imu_noise_from_data=false",
+    )
+    assert code == 0 and "warning:" not in err and "IMU white noise" not in stdout

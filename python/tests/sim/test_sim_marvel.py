@@ -29,6 +29,7 @@ MARVEL = [
     "marvel-hover",
     "marvel-liftoff-circle",
     "marvel-liftoff-circle-imu-late",
+    "marvel-liftoff-circle-noisy-imu",
     "marvel-liftoff-square",
     "marvel-rail",
     "marvel-square-room",
