@@ -351,6 +351,13 @@ def print_drone_summary(result, epochs: int, wall_s: float, imu_path=None, state
         dropped = f", {plural(rest['ground_factors_dropped'], 'ground factor')} dropped" if rest.get("ground_factors_dropped") else ""
         say(f"  start: {start}{dropped}")
     say_imu_noise(stats.get("imu_noise"), imu_path, stated_by_user)
+    white = stats.get("feature_white_fraction")
+    if white and white.get("measured_shares") is not None:
+        range_f, direction_f = white["used"]
+        say(
+            f"  features' errors: white share f = {range_f:.2f} (range), {direction_f:.2f} (direction), measured over "
+            f"{plural(white['measured_shares'][2], 'epoch pair')} (multipath_white_fraction = {white['stated']:g} until then)"
+        )
     if "divergences" in stats:
         unrecovered = stats["divergences"] - stats.get("divergences_recovered", 0)
         say(

@@ -169,6 +169,7 @@ class MarvelEstimator(
                 graph, initial, stamps, row.time_s, np.concatenate([[sigmas.range_m], sigmas.direction_rad]),
                 previous_position, predicted,
             )
+            self._observe_features(row, previous_position, predicted)
         if not gated:
             self._declined_run = 0
         elif self._gate_row(row, predicted, sigmas, multipath_predicted, used):

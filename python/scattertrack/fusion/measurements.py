@@ -75,9 +75,9 @@ class FeatureFactors:
         """The same with the multipath state ``M(k)``: each factor keeps the
         white (thermal) share of its sigma, the rest is in ``M(k)``."""
         p = self.params
-        white = p.multipath_white_fraction
-        range_white = max(white * sigmas.range_m, p.white_floor_range_m)
-        direction_white = np.maximum(white * sigmas.direction_rad, p.white_floor_angle_rad)
+        white = self._white_fraction  # (range, direction tangents): stated, or measured
+        range_white = max(white[0] * sigmas.range_m, p.white_floor_range_m)
+        direction_white = np.maximum(white[1:] * sigmas.direction_rad, p.white_floor_angle_rad)
         if used["range"]:
             graph.add(
                 factors.range_factor_multipath(

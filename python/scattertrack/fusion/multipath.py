@@ -19,7 +19,16 @@ import numpy as np
 from gtsam.symbol_shorthand import M
 
 from scattertrack.fusion import factors
+from scattertrack.fusion.feature_correlation import FeatureCorrelationMeter
 from scattertrack.fusion.keys import RANGE_BIAS
+
+WHITE_FRACTION_BOUNDS = (0.2, 0.95)
+"""The white share ``f`` of a feature's sigma as measured is kept within these:
+below 0.2 the white variance is under 4 %, which a few hundred rows cannot
+tell from none; above 0.95 the correlated states keep 10 % of the variance
+(their factors stay finite, and a room that changes is not ruled out)."""
+MEASURE_EVERY_EPOCHS = 10
+"""The features' correlation is measured again after this many epochs (1 s at 10 Hz)."""
 
 
 class Multipath:
@@ -31,6 +40,16 @@ class Multipath:
         self._multipath_key = -1  # index k of the newest M(k)
         self._multipath = np.zeros(3)  # its estimate: range m, direction tangent rad
         self._multipath_sigma = np.ones(3)  # its stationary 1-sigma
+        # The white share f of (range, direction tangent 1, tangent 2) in use:
+        # the stated one until the features show theirs (feature_correlation.py).
+        self._white_fraction = np.full(3, self.params.multipath_white_fraction)
+        """(range, direction tangent 1, tangent 2) white share ``f`` in use."""
+        self._feature_meter = FeatureCorrelationMeter()
+        self._last_phi = math.nan  # the Gauss-Markov correlation of the newest link
+        self._epochs_observed = 0
+        self.multipath_measured: tuple[float, float, int] | None = None
+        """The newest measured correlated shares of the variance (range, direction)
+        and the long differences they rest on; None before enough epochs."""
 
     def _has_range_bias(self) -> bool:
         """Whether the graph has the constant range bias ``W(0)``."""
@@ -63,7 +82,8 @@ class Multipath:
         """
         p = self.params
         k = self._key
-        correlated = np.asarray(sigma, dtype=float) * math.sqrt(1.0 - p.multipath_white_fraction**2)
+        correlated = np.asarray(sigma, dtype=float) * np.sqrt(1.0 - self._white_fraction**2)
+        self._last_phi = math.nan
         predicted_error = np.zeros(3)
         if self._multipath_chain and self._last_epoch_time is not None and previous_position is not None:
             moved = float(np.linalg.norm(np.asarray(predicted.position(), dtype=float) - previous_position))
@@ -73,6 +93,7 @@ class Multipath:
             else:
                 phi = 0.0
             decay = np.full(3, phi)
+            self._last_phi = phi
             # Var M(k) = phi^2 Var M(k-1) + Var w = correlated^2 when the
             # row's sigma grows; when it shrinks (phi sigma_(k-1) > sigma_k)
             # the walk keeps its stationary share (1 - phi^2) sigma_k^2 and
@@ -98,6 +119,30 @@ class Multipath:
         self._multipath_key = k
         self._multipath_sigma = correlated
         return predicted_error
+
+    def _observe_features(self, row, previous_position, predicted) -> None:
+        """The row's features join the correlation measurement (with the IMU's
+        displacement since the previous posterior and the link's ``phi``); once
+        every :data:`MEASURE_EVERY_EPOCHS` the white shares in use are set from
+        it (``multipath_from_data``; docs/marvel.md section 8)."""
+        p = self.params
+        if not (p.multipath_from_data and p.multipath == "states"):
+            return
+        if previous_position is None or not math.isfinite(self._last_phi):
+            self._feature_meter.break_chain()
+            return
+        step = np.asarray(predicted.position(), dtype=float) - previous_position
+        self._feature_meter.add((row.range_m, row.azimuth_rad, row.elevation_rad), previous_position, step, self._last_phi)
+        self._epochs_observed += 1
+        if self._epochs_observed % MEASURE_EVERY_EPOCHS:
+            return
+        measured = self._feature_meter.correlated_shares(self._controller)
+        if measured is None or not all(math.isfinite(v) for v in measured[:2]):
+            return
+        self.multipath_measured = measured
+        low, high = WHITE_FRACTION_BOUNDS
+        range_f, direction_f = (min(max(math.sqrt(1.0 - share), low), high) for share in measured[:2])
+        self._white_fraction = np.array([range_f, direction_f, direction_f])
 
     def _read_multipath(self, smoother) -> None:
         """After an update: the newest multipath state's and the range bias's estimates."""

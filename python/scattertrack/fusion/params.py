@@ -130,7 +130,16 @@ class MarvelParams:
     white (thermal) noise; the rest, ``sqrt(1 - f^2)``, is the correlated
     multipath error's 1-sigma (docs/marvel.md section 9: thermal errors are
     millimetres to centimetres, multipath decimetres)."""
-
+    multipath_from_data: bool = parameter(True, "any", "", "with multipath=states, measure the features' white share from the features (IMU-corrected differences) instead of keeping multipath_white_fraction")
+    """With ``multipath = "states"``: measure how much of the features' error
+    is white from the features themselves, once 8 s of epochs are in
+    (:mod:`scattertrack.fusion.feature_correlation`: the variance of 2 s
+    differences over that of one-epoch differences, the drone's motion taken
+    out with the IMU), separately for the range and the direction, and use
+    it instead of ``multipath_white_fraction`` (kept within 0.2-0.95, erring
+    on the correlated side). Why: white errors modelled as correlated leave
+    a metre-scale error unaveraged; correlated errors modelled as white make
+    the sigmas too small (measurements: docs/marvel.md section 8)."""
     use_ground: bool = parameter(True, "any", "", "zero-velocity and zero-rotation factors at the origin until the IMU first shows motion")
     """Before take-off the drone sits at rest at the origin: every epoch until
     the IMU first shows motion gets "still at the origin, not moving, not

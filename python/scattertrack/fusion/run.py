@@ -169,7 +169,10 @@ def finish_run(
     ``controller_refused`` says why). ``stats["drone"]``: the estimator's
     counters, the rest test, the IMU's white-noise densities (``imu_noise``:
     measured, used and stated pairs, accelerometer then gyroscope:
-    :mod:`scattertrack.fusion.imu_noise`), divergences (and how many recovered), the typed
+    :mod:`scattertrack.fusion.imu_noise`), the features' white share
+    (``feature_white_fraction``: the measured correlated shares of the
+    variance with their epoch count, the range's and direction's ``f`` in use,
+    the stated one: :mod:`scattertrack.fusion.feature_correlation`), divergences (and how many recovered), the typed
     latency records ``latency`` (wall) and ``cpu_latency`` (thread CPU, both
     :class:`~scattertrack.fusion.latency.Latency`), their quantiles in ns
     (``time_ns_p50``, ``time_ns_p99``, ``time_ns_max``, ``cpu_time_ns_*``),
@@ -235,6 +238,11 @@ def finish_run(
                 "measured": estimator.imu_noise_measured,
                 "used": estimator.imu_noise_used,
                 "stated": (estimator.params.accel_noise_density, estimator.params.gyro_noise_density),
+            },
+            "feature_white_fraction": {
+                "measured_shares": estimator.multipath_measured,
+                "used": (float(estimator._white_fraction[0]), float(estimator._white_fraction[1])),
+                "stated": estimator.params.multipath_white_fraction,
             },
             "divergences": estimator.divergences,
             "divergences_recovered": estimator.divergences_recovered,
