@@ -65,7 +65,8 @@ def add_parser(commands) -> None:
     track.add_argument(
         "--method",
         help="tracking method (see 'scattertrack methods'); default: the main method of the input given, "
-        "glac for --reads, turbotrack for --frames or --sigmf, marvel for --features or --sigmf with --imu",
+        "glac for --reads, turbotrack for --frames, marvel for --features; for --sigmf, marvel when the scene's "
+        "reader is lora-backscatter, else turbotrack",
     )
     track.add_argument("--out", required=True, help="track.csv to write")
     track.add_argument(
@@ -104,10 +105,14 @@ def command_track(args) -> int:
     from scattertrack import io
     from scattertrack.track import marvel, methods
 
-    args.method = args.method or default_method(args)
-    # Before reading anything: an unknown method or a bad value fails at once.
-    params = tracker_parameters(args.method, args.param)
-    scene = io.read_scene(args.scene)
+    if args.method:
+        # Before reading anything: an unknown method or a bad value fails at once.
+        params = tracker_parameters(args.method, args.param)
+        scene = io.read_scene(args.scene)
+    else:
+        scene = io.read_scene(args.scene)
+        args.method = default_method(args, scene.reader.kind)
+        params = tracker_parameters(args.method, args.param)
     kind = methods.method(args.method).input
     if kind in ("features+imu", "sigmf+imu"):
         return track_marvel(args, scene, params)
@@ -124,15 +129,15 @@ def command_track(args) -> int:
     return track_frames(args, scene, params) if kind == "frames" else track_reads(args, scene, params)
 
 
-def default_method(args) -> str:
-    """The method a user means when none is named: each pipeline's main method, chosen by the input.
-
-    An IMU makes a SigMF recording a drone's LoRa capture (marvel); without
-    one it is a localization helper's (turbotrack).
-    """
-    if args.features or (args.sigmf and args.imu):
+def default_method(args, reader_kind: str) -> str:
+    """The method a user means when none is named: each pipeline's main method,
+    chosen by the input file; a SigMF recording by the scene's reader (a LoRa
+    controller's capture for marvel, a localization helper's for turbotrack)."""
+    if args.features:
         return "marvel"
-    if args.frames or args.sigmf:
+    if args.sigmf:
+        return "marvel" if reader_kind == "lora-backscatter" else "turbotrack"
+    if args.frames:
         return "turbotrack"
     return "glac"
 

@@ -399,6 +399,16 @@ def test_track_sigmf_finds_the_calibration_beside_it(capsys, iq_session, tmp_pat
     assert len(read_track(tmp_path / "track.csv")) > 20
 
 
+def test_track_picks_the_helper_method_for_a_helper_recording(capsys, iq_session, tmp_path):
+    """No --method: a SigMF recording of an sdr-helper scene is tracked by turbotrack."""
+    code, out, err = run(
+        capsys, "track", "--scene", iq_session / "scene.toml", "--sigmf", iq_session / "recording.sigmf-meta",
+        "--out", tmp_path / "track.csv", "--no-progress",
+    )
+    assert code == 0, err
+    assert "tracked with turbotrack" in out
+
+
 def test_stream_prints_throughput_and_latency(capsys, iq_session, tmp_path):
     code, out, err = run(
         capsys, "stream", "--scene", iq_session / "scene.toml", "--sigmf", iq_session / "recording.sigmf-meta",
