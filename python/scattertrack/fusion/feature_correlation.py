@@ -40,6 +40,8 @@ import math
 
 import numpy as np
 
+from scattertrack.fusion.imu_noise import MAD_TO_SIGMA
+
 LAG_EPOCHS = 10
 """L: epochs over which the long differences are taken (1 s at 10 Hz: the default model has nearly
 decorrelated at 1 m/s, Φ_L ≈ 0.1, and the IMU path over it is good to a few cm)."""
@@ -68,7 +70,7 @@ def _trimmed_variance(x: np.ndarray) -> float:
     x = x[np.isfinite(x)]
     if x.size == 0:
         return math.nan
-    scale = 1.4826 * float(np.median(np.abs(x)))
+    scale = MAD_TO_SIGMA * float(np.median(np.abs(x)))
     kept = x[np.abs(x) <= TRIM_SIGMAS * scale] if scale > 0.0 else x
     return float(np.mean(kept**2)) if kept.size else math.nan
 
@@ -120,6 +122,19 @@ class FeatureCorrelationMeter:
         index = np.arange(start, self._count) % self._window
         return self._features[index], self._anchor[index], self._step[index], self._log_phi[index]
 
+    @staticmethod
+    def _variances(z, anchor, path, controller, span: int) -> tuple[float, float]:
+        """Trimmed variances of the range's and of the direction's ``δ_span``."""
+        k = np.arange(span, len(z))
+        j = k - span
+        start = anchor[j + 1]  # the posterior at epoch j
+        end = start + path[k] - path[j]
+        delta = z[k] - z[j] - (measurement_function(end, controller) - measurement_function(start, controller))
+        delta[:, 1:] = np.angle(np.exp(1j * delta[:, 1:]))
+        # Azimuth as the tangent component, so both angles weigh alike.
+        tangent = delta[:, 1] * np.cos(z[k, 2])
+        return _trimmed_variance(delta[:, 0]), _trimmed_variance(np.concatenate([tangent, delta[:, 2]]))
+
     def correlated_shares(self, controller: np.ndarray) -> tuple[float, float, int] | None:
         """(range s, direction s, pairs) at their conservative bound, or None before
         :data:`MIN_PAIRS` long differences (or without a controller estimate)."""
@@ -132,30 +147,16 @@ class FeatureCorrelationMeter:
             return None
         path = np.cumsum(step, axis=0)  # path[k] - path[j] = displacement from epoch j to epoch k
         cumulative_log_phi = np.cumsum(log_phi)
-        shares = []
-        for kind in ("range", "direction"):
-            ratio_parts = []
-            for span in (1, lag):
-                k = np.arange(span, n)
-                j = k - span
-                start = anchor[j + 1]  # the posterior at epoch j
-                end = start + path[k] - path[j]
-                predicted = measurement_function(end, controller) - measurement_function(start, controller)
-                change = z[k] - z[j]
-                delta = change - predicted
-                delta[:, 1:] = np.angle(np.exp(1j * delta[:, 1:]))
-                if kind == "range":
-                    ratio_parts.append(_trimmed_variance(delta[:, 0]))
-                else:
-                    # Azimuth as the tangent component, so both angles weigh alike.
-                    tangent = delta[:, 1] * np.cos(z[k, 2])
-                    ratio_parts.append(_trimmed_variance(np.concatenate([tangent, delta[:, 2]])))
-            ratio = ratio_parts[1] / ratio_parts[0] if ratio_parts[0] > 0.0 else math.nan
-            ratio *= 1.0 + 2.0 * math.sqrt(RATIO_VARIANCE / pairs)
-            k = np.arange(lag, n)
-            phi_1 = float(np.exp(np.median(log_phi[1:])))
-            phi_l = float(np.exp(np.median(cumulative_log_phi[k] - cumulative_log_phi[k - lag])))
-            shares.append(correlated_share(ratio, phi_1, phi_l))
+        # (range, direction) variances of the short and the long differences.
+        short, long = (self._variances(z, anchor, path, controller, span) for span in (1, lag))
+        k = np.arange(lag, n)
+        phi_1 = float(np.exp(np.median(log_phi[1:])))
+        phi_l = float(np.exp(np.median(cumulative_log_phi[k] - cumulative_log_phi[k - lag])))
+        bound = 1.0 + 2.0 * math.sqrt(RATIO_VARIANCE / pairs)
+        shares = [
+            correlated_share(long[kind] / short[kind] * bound if short[kind] > 0.0 else math.nan, phi_1, phi_l)
+            for kind in (0, 1)
+        ]
         return shares[0], shares[1], pairs
 
 

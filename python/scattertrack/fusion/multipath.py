@@ -40,10 +40,9 @@ class Multipath:
         self._multipath_key = -1  # index k of the newest M(k)
         self._multipath = np.zeros(3)  # its estimate: range m, direction tangent rad
         self._multipath_sigma = np.ones(3)  # its stationary 1-sigma
-        # The white share f of (range, direction tangent 1, tangent 2) in use:
-        # the stated one until the features show theirs (feature_correlation.py).
         self._white_fraction = np.full(3, self.params.multipath_white_fraction)
-        """(range, direction tangent 1, tangent 2) white share ``f`` in use."""
+        """(range, direction tangent 1, tangent 2) white share ``f`` in use: the
+        stated one until the features show theirs (feature_correlation.py)."""
         self._feature_meter = FeatureCorrelationMeter()
         self._last_phi = math.nan  # the Gauss-Markov correlation of the newest link
         self._epochs_observed = 0

@@ -133,7 +133,7 @@ class MarvelParams:
     multipath_from_data: bool = parameter(True, "any", "", "with multipath=states, measure the features' white share from the features (IMU-corrected differences) instead of keeping multipath_white_fraction")
     """With ``multipath = "states"``: measure how much of the features' error
     is white from the features themselves, once 8 s of epochs are in
-    (:mod:`scattertrack.fusion.feature_correlation`: the variance of 2 s
+    (:mod:`scattertrack.fusion.feature_correlation`: the variance of 1 s
     differences over that of one-epoch differences, the drone's motion taken
     out with the IMU), separately for the range and the direction, and use
     it instead of ``multipath_white_fraction`` (kept within 0.2-0.95, erring
