@@ -17,7 +17,7 @@ PREVIOUS_DEFAULTS = {
     "glac": {
         "q": 0.02, "motion": "constant-velocity", "inference": "fast", "likelihood": "innovation",
         "phase_wander_rad": 0.0, "phase_wander_s": 0.5, "init_window_s": 0.3, "init_max_window_s": 1.0,
-        "init_position_sigma_m": 0.01, "init_velocity_sigma_m_s": 0.1, "quick_stop": 1e-06, "gate_sigmas": 3.0,
+        "init_position_sigma_m": 0.01, "init_velocity_sigma_m_s": 0.1, "quick_stop": 1e-06, "gate_sigmas": 2.5,
         "max_consecutive_outliers": 8, "reinit_gap_s": 1.0, "region_margin_m": 0.05, "merge_distance_m": 0.002,
         "max_hypotheses": 200000, "manoeuvre_q": 1.0, "model_switch_probability": 0.05, "max_branching_hypotheses": 16,
         "perimeter_threshold_m": 0.06, "residual_threshold_m": 0.015, "interpolation_sigma_m": 0.004,

@@ -143,7 +143,7 @@ def test_unknown_method_and_parameter_are_errors():
 def test_methods_and_defaults_are_listed():
     assert "glac" in METHODS and "glac-naive" in METHODS
     params = default_params()
-    assert params["gate_sigmas"] == 3.0 and params["q"] > 0
+    assert params["gate_sigmas"] == 2.5 and params["q"] > 0
 
 
 def test_paper_likelihood_needs_the_single_model():

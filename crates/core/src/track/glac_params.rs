@@ -205,7 +205,7 @@ pub fn glac_table() -> Table<GlacParams> {
                 "gate_sigmas",
                 Range::POSITIVE,
                 "sigma",
-                "recovery gate (the paper's 3 sigma_v): a read whose innovation exceeds it is replaced by the prediction",
+                "recovery gate (the paper's 3 sigma_v; 2.5 by default, which lets fewer outliers through): a read whose innovation exceeds it is replaced by the prediction",
                 |p| p.gate_sigmas,
                 |p, v| p.gate_sigmas = v,
             ),
