@@ -40,6 +40,7 @@ BENCHMARKS: list[tuple[str, list[str]]] = [
     ("glac-ambiguity", [PY, "bench/glac_ambiguity.py", "--seeds", "100"]),
     ("glac-ambiguity-modpi", [PY, "bench/glac_ambiguity.py", "--scenario", "glac-2d-40cms-modpi", "--seeds", "100", "--q", "2"]),
     ("glac-robustness", [PY, "bench/glac_robustness.py", "--seeds", "100", "--json", "out/bench/glac_robustness.json"]),
+    ("glac-impairments", [PY, "bench/glac_impairments.py", "--seeds", "100"]),
     ("turbotrack", [PY, "bench/turbotrack.py"]),
     ("marvel", [PY, "bench/marvel.py"]),
     ("live", [PY, "bench/live.py"]),

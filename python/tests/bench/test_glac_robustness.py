@@ -125,3 +125,16 @@ def test_the_block_runs_into_a_table_and_json(robustness, tmp_path, capsys):
 def test_unknown_names_are_refused(robustness):
     with pytest.raises(SystemExit, match="unknown condition"):
         robustness.main(["--seeds", "1", "--conditions", "earthquake"])
+
+
+def test_wide_sigma_counts_right_rows_whose_sigma_is_decimetres(robustness):
+    times = np.arange(0.0, 4.0, 0.5)  # 8 rows, 4 of them from 2 s on
+    truth = Truth(times, np.full(8, "E1"), np.zeros((8, 3)), np.zeros((8, 3)))
+    position = np.zeros((8, 3))
+    position[4, 0] = 0.5  # row at 2.0 s: wrong by 50 cm (not a right row)
+    sigma = np.full((8, 3), 0.005)
+    sigma[4] = 0.3
+    sigma[5] = 0.1  # row at 2.5 s: right, 17 cm of 3D sigma
+    sigma[0] = 0.2  # before 2 s: not counted
+    track = Track(times, np.full(8, "E1"), position, np.zeros((8, 3)), sigma=sigma)
+    assert robustness.wide_sigma(truth, track) == (3, 1)
