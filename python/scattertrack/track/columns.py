@@ -14,7 +14,7 @@ from scattertrack.io.types import SkipReport, Track
 READS_DECLINED = {
     "out_of_order": "read out of time order (declined by tracker)",
     "invalid": "invalid read (declined by tracker)",
-    "outliers": "outlier read (3-sigma gate: replaced by prediction)",
+    "outliers": "outlier read (beyond the gate_sigmas innovation gate: replaced by prediction)",
 }
 """A reads tracker's counters reported as skipped reads: counter -> reason."""
 
