@@ -150,7 +150,8 @@ pub struct GlacParams {
     /// Start over when a tag has not been read for this long, seconds.
     pub reinit_gap_s: f64,
     /// Re-seeding, seconds between searches (0 disables): while the track
-    /// is unresolved (competing hypotheses leave a sigma above 4 cm) or the
+    /// is unresolved (competing hypotheses leave a sigma above 4 cm, see
+    /// [`Glac::unresolved`]) or the
     /// reported hypothesis gated reads since the last search, the initial
     /// search runs again on the last `init_max_window_s` of reads and its
     /// candidates that no hypothesis already follows join at a small
