@@ -2224,17 +2224,23 @@ pub(crate) mod tests {
         assert!(seen_estimate);
     }
 
+    /// Two hypotheses 0.2 m apart in x, the first (returned with their
+    /// common covariance) at plain weight `w`, the second at 1 − `w`.
+    fn two_hypotheses(w: f64) -> (Hypotheses, StateVector, StateMatrix) {
+        let mut h = Hypotheses::with_capacity(0, 4);
+        let p = StateMatrix::identity() * 1e-6;
+        let a = StateVector::from_iterator([0.5, 0.5, 0.5, 0.0, 0.0, 0.0]);
+        h.push(a, p, w.ln());
+        h.push(StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]), p, (1.0 - w).ln());
+        (h, a, p)
+    }
+
     /// The reported covariance is the mixture's second moment about the
     /// reported state: two equally likely hypotheses 0.2 m apart in x give
     /// σx² = P + ½ · 0.2², and the reported one alone gives its own P.
     #[test]
     fn covariance_covers_competing_hypotheses() {
-        let mut h = Hypotheses::with_capacity(0, 4);
-        let p = StateMatrix::identity() * 1e-6;
-        let a = StateVector::from_iterator([0.5, 0.5, 0.5, 0.0, 0.0, 0.0]);
-        let b = StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]);
-        h.push(a, p, 0.5f64.ln());
-        h.push(b, p, 0.5f64.ln());
+        let (mut h, a, p) = two_hypotheses(0.5);
         let sigma = mixture_covariance(&h, &a, 1.0);
         assert!((sigma[(0, 0)] - (1e-6 + 0.5 * 0.04)).abs() < 1e-12);
         assert!((sigma[(1, 1)] - 1e-6).abs() < 1e-15);
@@ -2445,12 +2451,7 @@ pub(crate) mod tests {
     /// about the likeliest hypothesis.
     #[test]
     fn plain_spread_weighs_the_competitors_untempered() {
-        let mut h = Hypotheses::with_capacity(0, 4);
-        let p = StateMatrix::identity() * 1e-6;
-        let a = StateVector::from_iterator([0.5, 0.5, 0.5, 0.0, 0.0, 0.0]);
-        let b = StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]);
-        h.push(a, p, 0.9f64.ln());
-        h.push(b, p, 0.1f64.ln());
+        let (h, _, _) = two_hypotheses(0.9);
         assert!((plain_spread(&h) - (0.1f64 * 0.04).sqrt()).abs() < 1e-12);
         assert_eq!(plain_spread(&Hypotheses::with_capacity(0, 4)), 0.0);
     }
