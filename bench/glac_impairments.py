@@ -61,10 +61,15 @@ IMPAIRMENTS = {
 def rows() -> list[tuple[str, dict]]:
     """(label, reader_model overrides): the whole stack, each impairment out, each alone, none."""
     clean = {key: value for change in IMPAIRMENTS.values() for key, value in change.items()}
+
+    def alone(change: dict) -> dict:
+        """Every impairment taken out but the one ``change`` takes out."""
+        return {k: v for k, v in clean.items() if k not in change}
+
     table = [("all impairments", {})]
     table += [(f"all but {name}", change) for name, change in IMPAIRMENTS.items()]
-    table += [(f"{name} alone", {k: v for k, v in clean.items() if k not in change}) for name, change in IMPAIRMENTS.items()]
-    table += [("all but hopping", {"hopping": False}), ("wall alone, one channel", {**{k: v for k, v in clean.items() if k != "reflectors"}, "hopping": False})]
+    table += [(f"{name} alone", alone(change)) for name, change in IMPAIRMENTS.items()]
+    table += [("all but hopping", {"hopping": False}), ("wall alone, one channel", {**alone(IMPAIRMENTS["wall"]), "hopping": False})]
     table.append(("none (0.015 rad white, hopping)", clean))
     return table
 
@@ -96,11 +101,11 @@ def summary(runs: list[dict]) -> dict:
     rows_ = sum(r["sigma_rows"] for r in runs)
     right = sum(r["right_rows"] for r in runs)
     return {
-        "wide": sum(r["wide_rows"] for r in runs) / right if right else float("nan"),
         "median_mm": float(np.median(errors) * 1e3) if errors.size else float("nan"),
         "late_wrong": float(np.mean(late > WRONG_M)) if late.size else float("nan"),
         "wrong_runs": wrong,
         "beyond": sum(r["beyond_rows"] for r in runs) / rows_ if rows_ else float("nan"),
+        "wide": sum(r["wide_rows"] for r in runs) / right if right else float("nan"),
     }
 
 

@@ -163,19 +163,27 @@ def truth_at(truth, epc: str, times: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(times, truth.time_s[rows], truth.position[rows, j]) for j in range(3)])
 
 
-def beyond_three_sigma(truth, track, from_s: float = SIGMA_FROM_S) -> tuple[int, int]:
-    """(rows from ``from_s`` on, of which |error| > 3 sigma on some axis). A track
-    without sigma columns counts every row as beyond (it claims nothing)."""
-    rows = beyond = 0
+def scored_rows(truth, track, from_s: float = SIGMA_FROM_S):
+    """Per tag with a truth, its rows from ``from_s`` on with a finite
+    position: (error (n, 3) m, sigma (n, 3) m with NaN as 0, or None for a
+    track without sigma columns)."""
     for epc in np.unique(track.epc):
         mine = (track.epc == epc) & (track.time_s >= from_s) & np.all(np.isfinite(track.position), axis=1)
         if not mine.any() or not np.any(truth.epc == epc):
             continue
-        error = np.abs(track.position[mine] - truth_at(truth, epc, track.time_s[mine]))
-        sigma = track.sigma[mine] if track.sigma is not None else np.zeros_like(error)
-        rows += int(mine.sum())
+        error = track.position[mine] - truth_at(truth, epc, track.time_s[mine])
+        yield error, None if track.sigma is None else np.nan_to_num(track.sigma[mine], nan=0.0)
+
+
+def beyond_three_sigma(truth, track, from_s: float = SIGMA_FROM_S) -> tuple[int, int]:
+    """(rows from ``from_s`` on, of which |error| > 3 sigma on some axis). A track
+    without sigma columns counts every row as beyond (it claims nothing)."""
+    rows = beyond = 0
+    for error, sigma in scored_rows(truth, track, from_s):
+        sigma = np.zeros_like(error) if sigma is None else sigma
+        rows += len(error)
         # A planar track's sz = 0 with z error 0 is not "beyond".
-        beyond += int(np.count_nonzero(np.any(error > 3.0 * np.nan_to_num(sigma, nan=0.0), axis=1)))
+        beyond += int(np.count_nonzero(np.any(np.abs(error) > 3.0 * sigma, axis=1)))
     return rows, beyond
 
 
@@ -185,15 +193,12 @@ def wide_sigma(truth, track, from_s: float = SIGMA_FROM_S) -> tuple[int, int]:
     may be decimetres off. Honest, but no use to a robot; the figure that
     shows a sigma covering by being wide (docs/notes/glac-outliers.md)."""
     rows = wide = 0
-    for epc in np.unique(track.epc):
-        mine = (track.epc == epc) & (track.time_s >= from_s) & np.all(np.isfinite(track.position), axis=1)
-        if not mine.any() or not np.any(truth.epc == epc) or track.sigma is None:
+    for error, sigma in scored_rows(truth, track, from_s):
+        if sigma is None:
             continue
-        error = np.linalg.norm(track.position[mine] - truth_at(truth, epc, track.time_s[mine]), axis=1)
-        sigma = np.linalg.norm(np.nan_to_num(track.sigma[mine], nan=0.0), axis=1)
-        right = error < RIGHT_M
+        right = np.linalg.norm(error, axis=1) < RIGHT_M
         rows += int(right.sum())
-        wide += int(np.count_nonzero(sigma[right] > WIDE_M))
+        wide += int(np.count_nonzero(np.linalg.norm(sigma[right], axis=1) > WIDE_M))
     return rows, wide
 
 
