@@ -36,24 +36,35 @@ def test_marvel_tracks_features_and_imu(capsys, flight, tmp_path):
     assert "rot mean" in stdout  # orientation columns appear when both sides have them
 
 
-def test_marvel_writes_the_revised_track_on_request(capsys, flight, tmp_path):
-    out, revised = tmp_path / "track.csv", tmp_path / "sub" / "revised.csv"
+def test_marvel_writes_the_revised_track_and_the_causal_one_on_request(capsys, flight, tmp_path):
+    from scattertrack.track import marvel
+    from scattertrack import io
+
+    out, causal_out = tmp_path / "track.csv", tmp_path / "sub" / "causal.csv"
     code, stdout, err = run(
         capsys, "track", "--method", "marvel", "--scene", flight / "scene.toml",
-        "--features", flight / "features.csv", "--imu", flight / "imu.csv", "--out", out, "--revised-out", revised,
+        "--features", flight / "features.csv", "--imu", flight / "imu.csv", "--out", out, "--causal-out", causal_out,
     )
     assert code == 0, err
-    assert "revised (fixed-lag smoothed) track" in stdout
-    causal, smoothed = read_track(out), read_track(revised)
-    assert np.array_equal(causal.time_s, smoothed.time_s)
-    assert smoothed.orientation is not None and smoothed.sigma is not None
-    assert not np.allclose(causal.position, smoothed.position)
+    assert "as the fixed-lag smoother last revised it" in stdout and "causal track" in stdout
+    revised, causal = read_track(out), read_track(causal_out)
+    assert np.array_equal(causal.time_s, revised.time_s)
+    assert revised.orientation is not None and revised.sigma is not None
+    assert not np.allclose(causal.position, revised.position)
+    # --out is the run's revised track, --causal-out its rows as they came
+    # (what the Python API returns, and what live publishes).
+    result = marvel.run_features(
+        "marvel", io.read_scene(flight / "scene.toml"), io.read_imu(flight / "imu.csv"),
+        io.read_features(flight / "features.csv"),
+    )
+    np.testing.assert_allclose(revised.position, result.revised.position, atol=1e-5)
+    np.testing.assert_allclose(causal.position, result.position, atol=1e-5)
     # Only the drone pipeline revises its past.
     code, _, err = run(
         capsys, "track", "--method", "glac", "--scene", flight / "scene.toml", "--reads", flight / "features.csv",
-        "--out", tmp_path / "g.csv", "--revised-out", tmp_path / "r.csv",
+        "--out", tmp_path / "g.csv", "--causal-out", tmp_path / "r.csv",
     )
-    assert code == 2 and "--revised-out is an output of marvel" in err
+    assert code == 2 and "--causal-out is an output of marvel" in err
 
 
 def test_marvel_method_is_listed(capsys):
