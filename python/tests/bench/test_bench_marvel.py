@@ -83,11 +83,24 @@ def test_a_start_is_scored_on_the_rows_track_writes_and_the_causal_ones(marvel_b
     from scattertrack.sim import load_scenario, simulate
 
     sim = simulate(load_scenario("marvel-liftoff-circle") | {"duration_s": 12.0}, seed=1000)
-    run = marvel_bench.score_start(sim.truth, sim.scene, sim.imu, sim.features, after_s=8.0)
+    run = marvel_bench.score_start(sim.truth, sim.scene, sim.imu, sim.features, after_s=8.0,
+                                   controller=sim.details["controller_position_m"])
     for key in ("mean_3d_m", "mean_3d_after_m", "revised_mean_3d_m", "revised_mean_3d_after_m",
-                "revised_mean_orientation_deg", "beyond_3_sigma", "revised_beyond_3_sigma"):
+                "revised_mean_orientation_deg", "beyond_3_sigma", "revised_beyond_3_sigma",
+                "revised_offset_after_m", "first_row_m"):
         assert math.isfinite(run[key]) and run[key] >= 0.0, key
     # Two readings of one run: the revised rows are not the causal ones.
     assert run["revised_mean_3d_m"] != run["mean_3d_m"]
     pooled = marvel_bench._pool([run, run])
     assert pooled["revised_worst_seed_mean_3d_m"] == run["revised_mean_3d_m"]
+
+
+def test_the_first_rows_error_is_where_it_puts_the_drone(marvel_bench):
+    """A row that sees the drone 0.3 m east of where it was (range along x) is 0.3 m off."""
+    from types import SimpleNamespace
+
+    truth = SimpleNamespace(time_s=np.array([0.0, 1.0]), position=np.array([[0.0, 0.0, 0.0], [0.0, 0.0, 1.0]]))
+    features = SimpleNamespace(time_s=np.array([0.5]), range_m=np.array([10.3]), azimuth_rad=np.array([0.0]),
+                               elevation_rad=np.array([0.0]))
+    controller = [-10.0, 0.0, 0.5]
+    assert marvel_bench.first_row_error(truth, features, controller) == pytest.approx(0.3)
