@@ -18,6 +18,7 @@ pub mod bistatic;
 mod bias;
 mod candidates;
 mod ellipse_intersection;
+pub mod far_lobes;
 mod glac;
 mod glac_bank;
 pub mod glac_params;

@@ -56,6 +56,7 @@ use super::bistatic::{
     MixtureLogs, PositionGaussian, Receiver,
 };
 use super::key_hash::KeyMap;
+use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
 use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
@@ -186,6 +187,10 @@ pub struct TurboTrackParams {
     /// a switch needs at least switch / cap = 5 agreeing frames from an
     /// even start, so no single corrupt frame can cause one).
     pub lobe_frame_cap_nats: f64,
+    /// Far lobes (`far_lobes.rs`): the initial tuple search is repeated on
+    /// the current frame this often, its fits tested as alternatives, s.
+    /// Infinite: only the first frame's fits.
+    pub far_lobe_search_s: f64,
 }
 
 impl Default for TurboTrackParams {
@@ -221,6 +226,7 @@ impl Default for TurboTrackParams {
             lobe_switch_nats: 10.0,
             lobe_floor_nats: 200.0,
             lobe_frame_cap_nats: 2.0,
+            far_lobe_search_s: 0.5,
         }
     }
 }
@@ -307,6 +313,10 @@ pub struct TurboTrack {
     stats: TrackerStats,
     /// Accumulated evidence of the neighbouring lobes (`lobes.rs`).
     lobes: LobeEvidence,
+    /// Far alternatives from the global tuple search (`far_lobes.rs`), and
+    /// when that search last ran, s.
+    far: FarLobes,
+    last_far_search_s: f64,
     // Scratch buffers reused every frame.
     scratch_positions: Vec<Vector3<f64>>,
     scratch_keys: Vec<u64>,
@@ -361,6 +371,8 @@ impl TurboTrack {
             initialised: false,
             stats: TrackerStats::default(),
             lobes: LobeEvidence::default(),
+            far: FarLobes::default(),
+            last_far_search_s: f64::NEG_INFINITY,
             scratch_positions: Vec::new(),
             scratch_keys: Vec::new(),
             scratch_ancestors: Vec::new(),
@@ -486,6 +498,12 @@ impl TurboTrack {
             let components = self.initial_components(receivers);
             if components.is_empty() {
                 return false;
+            }
+            self.far.reset();
+            self.last_far_search_s = time_s;
+            if self.lobe_test() {
+                // The filter's own lobe is among them: the first update merges it.
+                self.far.offer(components.iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean), 0.0, None);
             }
             // q₀ = Σ w̄_s N(μ_s, Σ_s); precompute inverses for q₀(x).
             let total: f64 = components.iter().map(|c| c.1).sum();
@@ -832,24 +850,65 @@ impl TurboTrack {
         }
     }
 
+    fn lobe_levels(&self) -> LobeLevels {
+        LobeLevels {
+            switch_nats: self.params.lobe_switch_nats,
+            floor_nats: self.params.lobe_floor_nats,
+            frame_cap_nats: self.params.lobe_frame_cap_nats,
+        }
+    }
+
+    /// The far-lobe test (`far_lobes.rs`) on any frame with receivers,
+    /// outliers included (a filter on a wrong lobe sees mostly outliers):
+    /// first the periodic global search, then the alternatives' evidence.
+    /// The displacement to an alternative that won.
+    fn test_far_lobes(&mut self, time_s: f64, receivers: &[Receiver], mean: &Vector3<f64>) -> Option<Vector3<f64>> {
+        let levels = self.lobe_levels();
+        if time_s - self.last_far_search_s >= self.params.far_lobe_search_s {
+            self.last_far_search_s = time_s;
+            let all = self.initial_components(receivers);
+            let found: Vec<Vector3<f64>> = all.iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean).collect();
+            self.far.offer(found, levels.frame_cap_nats - levels.floor_nats, Some(mean));
+        }
+        let (region, margin) = (self.scene.region.clone(), self.params.region_margin_m);
+        let into_region = |p: &Vector3<f64>| match &region {
+            Some(r) => Vector3::from_fn(|i, _| p[i].clamp(r.min[i] - margin, r.max[i] + margin)),
+            None => *p,
+        };
+        match self.far.update(&self.geometry, receivers, mean, self.params.weight_floor, &levels, into_region) {
+            LobeDecision::Stay => None,
+            LobeDecision::Switch(d) => Some(d),
+        }
+    }
+
+    /// Moves the whole cloud by `d`, m (its shape kept; the next frames'
+    /// cluster proposals reshape it), and the ancestry's newest entry with it.
+    fn move_cloud(&mut self, d: &Vector3<f64>) {
+        self.positions.iter_mut().for_each(|p| *p += d);
+        if let Some(last) = self.history.back_mut() {
+            last.1.clone_from(&self.positions);
+        }
+        self.recent.clear();
+        self.stats.lobe_switches += 1;
+    }
+
     fn estimate(&mut self, time_s: f64, receivers: Option<&[Receiver]>) -> Option<Estimate> {
         let best = self.best_particle()?;
         let (mut mean, mut covariance, mut weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
         if let Some(receivers) = receivers.filter(|_| self.lobe_test()) {
+            // Another lobe won: the whole cloud moves there.
             if let Some(d) = self.test_lobes(receivers, &mean) {
-                // Another lobe won: the whole cloud moves there (its shape
-                // kept; the next frames' cluster proposals reshape it), and
-                // the ancestry's newest entry with it.
-                self.positions.iter_mut().for_each(|p| *p += d);
-                if let Some(last) = self.history.back_mut() {
-                    last.1.clone_from(&self.positions);
-                }
-                self.recent.clear();
-                self.stats.lobe_switches += 1;
+                self.move_cloud(&d);
                 (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
             }
+            if let Some(d) = self.test_far_lobes(time_s, receivers, &mean) {
+                self.move_cloud(&d);
+                (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+            }
+        }
+        if self.lobe_test() {
             // Unresolved lobes widen the reported covariance (a mixture about the reported mean).
-            covariance += self.lobes.spread(&mean);
+            covariance += self.lobes.spread(&mean) + self.far.spread(&mean);
         }
         if self.params.calibration_sigma_m > 0.0 {
             if let Some(c) = calibration_covariance(&self.geometry, &self.receive_positions, &mean, self.params.calibration_sigma_m) {
@@ -880,7 +939,19 @@ impl TurboTrack {
         Some(e)
     }
 
-    fn restart(&mut self) {
+    /// The state before a restart, kept as a far-lobe alternative at even
+    /// odds: a run of outliers (a reflection, a burst, the weak direction
+    /// drifting) can restart the filter on a wrong lobe, and the evidence
+    /// then brings it back (`far_lobes.rs`).
+    fn keep_as_alternative(&mut self, before: Option<Vector3<f64>>) {
+        if let Some(position) = before.filter(|_| self.lobe_test()) {
+            self.far.prefer(position, 0.0);
+        }
+    }
+
+    /// Forgets the particles and lobes; returns the last estimate's position, m.
+    fn restart(&mut self) -> Option<Vector3<f64>> {
+        let before = self.last_estimate.as_ref().map(|e| Vector3::from(e.position));
         self.initialised = false;
         self.positions.clear();
         self.log_weights.clear();
@@ -890,7 +961,9 @@ impl TurboTrack {
         self.last_estimate = None;
         self.consecutive_outliers = 0;
         self.lobes.reset();
+        self.far.reset();
         self.stats.reinitialisations += 1;
+        before
     }
 
     fn step_frame(&mut self, frame: &WidebandFrame) -> Option<Estimate> {
@@ -910,8 +983,9 @@ impl TurboTrack {
                 return None;
             }
         };
+        let mut before = None;
         if self.initialised && frame.time_s - self.last_time_s > self.params.reinit_gap_s {
-            self.restart();
+            before = self.restart();
         }
         if !self.initialised {
             self.stats.initialising += 1;
@@ -919,6 +993,7 @@ impl TurboTrack {
             if !self.initialise(frame.time_s, &receivers) {
                 return None;
             }
+            self.keep_as_alternative(before);
             self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.positions.len() as u64);
             return self.estimate(frame.time_s, Some(&receivers));
         }
@@ -930,11 +1005,23 @@ impl TurboTrack {
             return self.estimate(frame.time_s, Some(&receivers));
         }
         self.stats.outliers += 1;
+        if self.lobe_test() {
+            // A filter on a wrong far lobe sees mostly outliers: the far
+            // alternatives are tested on them too.
+            if let Some(position) = self.last_estimate.as_ref().map(|e| Vector3::from(e.position)) {
+                if let Some(d) = self.test_far_lobes(frame.time_s, &receivers, &position) {
+                    self.move_cloud(&d);
+                    self.consecutive_outliers = 0;
+                    return self.estimate(frame.time_s, None);
+                }
+            }
+        }
         self.consecutive_outliers += 1;
         if self.consecutive_outliers > self.params.max_consecutive_outliers {
-            self.restart();
+            let before = self.restart();
             self.stats.initialising += 1;
             if self.initialise(frame.time_s, &receivers) {
+                self.keep_as_alternative(before);
                 return self.estimate(frame.time_s, Some(&receivers));
             }
             return None;

@@ -188,6 +188,14 @@ pub fn turbotrack_table() -> Table<TurboTrackParams> {
                 |p, v| p.lobe_floor_nats = v,
             ),
             float(
+                "far_lobe_search_s",
+                POSITIVE_OR_OFF,
+                "s",
+                "far lobes: repeat the initial tuple search this often and test its fits as alternatives (inf: only the first frame's)",
+                |p| p.far_lobe_search_s,
+                |p, v| p.far_lobe_search_s = v,
+            ),
+            float(
                 "lobe_frame_cap_nats",
                 Range::POSITIVE,
                 "nats",
