@@ -35,10 +35,11 @@ use nalgebra::{Matrix3, Vector3};
 use crate::geometry::bistatic_distance;
 
 use super::bistatic::{mixture_log_likelihood, HelperGeometry, Receiver};
-use super::lobes::{LobeDecision, LobeLevels};
+use super::lobes::{LobeDecision, LobeLevels, NORMAL_DAMPING};
 
 /// Alternatives kept at once (the best of the search's fits).
 pub const SLOTS: usize = 4;
+
 
 /// Two fits closer than this, m, are one lobe (neighbouring lobes are
 /// 10-60 cm apart; as `JUMP_M` in `lobes.rs`).
@@ -92,6 +93,7 @@ fn nearest_teeth_step(geometry: &HelperGeometry, receivers: &[Receiver], x: &Vec
     if planar {
         normal[(2, 2)] = 1.0;
     }
+    normal += Matrix3::identity() * NORMAL_DAMPING;
     let step = normal.try_inverse()? * rhs;
     step.iter().all(|s| s.is_finite()).then_some(step)
 }
@@ -361,6 +363,23 @@ mod tests {
         assert!(far.alternatives().iter().all(|a| a.position.y == 0.0), "a weaker newcomer replaces nothing");
         far.offer([Vector3::new(0.0, 9.0, 0.0)], -10.0, None);
         assert_eq!(far.alternatives()[2].position, Vector3::new(0.0, 9.0, 0.0));
+    }
+
+    #[test]
+    fn a_fit_on_the_antennas_plane_survives() {
+        // Every antenna at z = 0: on that plane the height is unobserved
+        // (the path lengths' z-gradient vanishes) and undamped normal
+        // equations are singular; the truth's lobe was lost that way.
+        let (truth, wrong) = pair();
+        let rx = receivers(&truth, 1.0);
+        let on_plane = Vector3::new(truth.x, truth.y, 0.0);
+        let floor = |p: &Vector3<f64>| Vector3::new(p.x, p.y, p.z.max(0.0));
+        let fit = fit_nearest_lobe(&geometry(), &rx, &on_plane, STEPS, floor).expect("a fit");
+        assert!((fit - truth).norm() < 0.2, "{fit}");
+        let mut far = FarLobes::default();
+        far.offer([on_plane], 0.0, Some(&wrong));
+        far.update(&geometry(), &rx, &wrong, 1e-6, &LEVELS, floor);
+        assert_eq!(far.alternatives().len(), 1);
     }
 
     #[test]

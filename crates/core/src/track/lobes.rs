@@ -108,6 +108,13 @@ pub fn shift_lattice(receivers: usize) -> Vec<i8> {
     out
 }
 
+/// Damping added to the normal equations of the lobe fits, m⁻²: a prior
+/// of 1 m on each step. It keeps them invertible where the height is
+/// unobserved (every antenna at one height and the fit on that plane, as
+/// at the region's floor); next to a receiver's 1/σ² ≈ 10⁵ m⁻² it changes
+/// nothing else.
+pub const NORMAL_DAMPING: f64 = 1.0;
+
 /// Weighted least-squares fit of the teeth `teeth` (one index per
 /// receiver): Gauss–Newton on `Σ_j ((d_j(x) − D_j(n_j)) / σ_j)²` from
 /// `start`, at most `iterations` steps (planar scenes: x and y only).
@@ -141,6 +148,7 @@ pub fn refine_on_teeth(
         if planar {
             normal[(2, 2)] = 1.0;
         }
+        normal += Matrix3::identity() * NORMAL_DAMPING;
         let step = normal.try_inverse()? * rhs;
         if !(step.norm() < 5.0) {
             return None;
@@ -160,6 +168,67 @@ pub fn refine_on_teeth(
     }
     Some((x, chi2))
 }
+
+/// Lobe `teeth + shift` reached from the fit `x0` of `teeth` by following
+/// the lobe continuously: the target path lengths move from `D_j(n_j)` to
+/// `D_j(n_j + k_j)` in `FOLLOW_SUBSTEPS` equal parts, each with two
+/// Gauss–Newton steps of at most `FOLLOW_STEP_M`, then `refine_on_teeth`
+/// on the shifted teeth. Why not one jump from the linear prediction: where
+/// a direction is poorly observed (a rotation about an in-line row of
+/// receivers, the height of a tag low over the antennas' plane) a shift of
+/// one tooth moves the lobe along an arc, up to metres; the straight
+/// prediction leaves the arc and Gauss–Newton from there fails or lands on
+/// other teeth, so the lobe was never evaluated (dev seeds 1005 and 1124 of
+/// docs/notes/turbotrack-experiments.md: shifts (0, 0, 0, −1) and
+/// (+1, 0, −1, 0), 1.4 m away). None as for `refine_on_teeth`.
+pub fn follow_to_teeth(
+    geometry: &HelperGeometry,
+    receivers: &[Receiver],
+    teeth: &[i64],
+    shift: &[i8],
+    x0: &Vector3<f64>,
+) -> Option<(Vector3<f64>, f64)> {
+    let planar = geometry.dimensions == 2;
+    let mut x = *x0;
+    for part in 1..=FOLLOW_SUBSTEPS {
+        let alpha = part as f64 / FOLLOW_SUBSTEPS as f64;
+        for _ in 0..2 {
+            let mut normal = Matrix3::zeros();
+            let mut rhs = Vector3::zeros();
+            for ((rx, &n), &k) in receivers.iter().zip(teeth).zip(shift) {
+                let (d, mut g) = bistatic_distance(&x, &geometry.tx_position, &rx.position);
+                if planar {
+                    g.z = 0.0;
+                }
+                let c = &rx.candidates;
+                let target = c.distance(n) + alpha * k as f64 * c.spacing_m;
+                let w = 1.0 / (c.sigma_m * c.sigma_m);
+                normal += g * g.transpose() * w;
+                rhs += g * ((target - d) * w);
+            }
+            if planar {
+                normal[(2, 2)] = 1.0;
+            }
+            normal += Matrix3::identity() * NORMAL_DAMPING;
+            let mut step = normal.try_inverse()? * rhs;
+            if !step.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            if step.norm() > FOLLOW_STEP_M {
+                step *= FOLLOW_STEP_M / step.norm();
+            }
+            x += step;
+        }
+    }
+    let shifted: Vec<i64> = teeth.iter().zip(shift).map(|(&n, &k)| n + k as i64).collect();
+    refine_on_teeth(geometry, receivers, &shifted, &x, 3)
+}
+
+/// Parts of a shift followed by `follow_to_teeth` (a tooth in 8 parts: 4 cm of path each).
+const FOLLOW_SUBSTEPS: usize = 8;
+
+/// Longest step of `follow_to_teeth`, m.
+const FOLLOW_STEP_M: f64 = 0.15;
 
 /// The linear-order evidence of every shift of `lattice` (flat, `R` per
 /// shift) against the teeth `teeth` fitted at `x0`: `Σ_j Δ log w_j −
@@ -356,11 +425,12 @@ impl LobeEvidence {
                 shifted[j] = teeth[j] + shift[j] as i64;
             }
             // Warm start where this lobe was fitted last frame (moved with the filter's lobe).
-            let (start, steps) = match self.previous.iter().find(|p| p.0 == i) {
-                Some(&(_, x)) => (x + moved, 2),
-                None => (x0 + approx[i].1, 4),
+            let fit = match self.previous.iter().find(|p| p.0 == i) {
+                Some(&(_, x)) => refine_on_teeth(geometry, receivers, &shifted, &(x + moved), 2),
+                None => refine_on_teeth(geometry, receivers, &shifted, &(x0 + approx[i].1), 4)
+                    .or_else(|| follow_to_teeth(geometry, receivers, &teeth, &self.lattice[i * r..(i + 1) * r], &x0)),
             };
-            let exact = refine_on_teeth(geometry, receivers, &shifted, &start, steps)
+            let exact = fit
                 .filter(|(x, _)| in_region(x))
                 .map(|(x, _)| (mixture_log_likelihood(geometry, receivers, &x, weight_floor).0 - l0, x));
             match exact {
@@ -488,6 +558,26 @@ mod tests {
         let (x, chi2) = refine_on_teeth(&geometry(), &rx, &teeth, &(tag + Vector3::new(0.02, -0.03, 0.01)), 6).unwrap();
         assert!((x - tag).norm() < 1e-6, "{x}");
         assert!(chi2 < 1e-6);
+    }
+
+    #[test]
+    fn a_far_lobe_on_an_arc_is_reached_by_following_it() {
+        // Dev seed 1005: the tag low beside the in-line row; its lobe one
+        // tooth over on the fourth receiver is a rotation of 1.4 m about the
+        // row. A straight jump to the linear prediction does not reach it;
+        // following the lobe does, and lands on its teeth.
+        let tag = Vector3::new(-0.268, 1.696, 0.416);
+        let rx = receivers(&tag, 0.003, [0; 4], 1.0);
+        let g = geometry();
+        let truth_teeth = vec![5i64; 4];
+        let far_teeth = vec![5i64, 5, 5, 6];
+        let (far, chi2) = refine_on_teeth(&g, &rx, &far_teeth, &Vector3::new(-0.32, 0.342, 1.70), 8).expect("the far lobe exists");
+        assert!(chi2 < 1.0 && (far - tag).norm() > 1.0, "{far} {chi2}");
+        let (back, _) = follow_to_teeth(&g, &rx, &far_teeth, &[0, 0, 0, -1], &far).expect("followed");
+        assert!((back - tag).norm() < 1e-3, "{back}");
+        // And from the truth out to the far lobe.
+        let (out, _) = follow_to_teeth(&g, &rx, &truth_teeth, &[0, 0, 0, 1], &tag).expect("followed");
+        assert!((out - far).norm() < 1e-3, "{out}");
     }
 
     #[test]

@@ -26,6 +26,7 @@ mod initial;
 mod key_hash;
 mod line_twins;
 mod read_budget;
+pub mod resting_average;
 pub mod lobes;
 pub mod registry;
 mod rfind;

@@ -57,6 +57,7 @@ use super::bistatic::{
 };
 use super::key_hash::KeyMap;
 use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
+use super::resting_average::{averaged_receivers, frame_covariance, ChannelAverage};
 use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
@@ -191,6 +192,10 @@ pub struct TurboTrackParams {
     /// the current frame this often, its fits tested as alternatives, s.
     /// Infinite: only the first frame's fits.
     pub far_lobe_search_s: f64,
+    /// Resting average (`resting_average.rs`): while the static particles
+    /// carry the weight, the estimate is the fit of the frames' coherent
+    /// average, forgotten with this time constant, s. 0: the particles' mode.
+    pub static_average_s: f64,
 }
 
 impl Default for TurboTrackParams {
@@ -227,6 +232,7 @@ impl Default for TurboTrackParams {
             lobe_floor_nats: 200.0,
             lobe_frame_cap_nats: 2.0,
             far_lobe_search_s: 0.5,
+            static_average_s: 1.0,
         }
     }
 }
@@ -317,6 +323,10 @@ pub struct TurboTrack {
     /// when that search last ran, s.
     far: FarLobes,
     last_far_search_s: f64,
+    /// The resting tag's coherent average and, on the frames it decides,
+    /// its fit: position m and covariance m² (`resting_average.rs`).
+    average: ChannelAverage,
+    resting: Option<(Vector3<f64>, Matrix3<f64>)>,
     // Scratch buffers reused every frame.
     scratch_positions: Vec<Vector3<f64>>,
     scratch_keys: Vec<u64>,
@@ -373,6 +383,8 @@ impl TurboTrack {
             lobes: LobeEvidence::default(),
             far: FarLobes::default(),
             last_far_search_s: f64::NEG_INFINITY,
+            average: ChannelAverage::new(params.static_average_s),
+            resting: None,
             scratch_positions: Vec::new(),
             scratch_keys: Vec::new(),
             scratch_ancestors: Vec::new(),
@@ -822,6 +834,54 @@ impl TurboTrack {
         true
     }
 
+    /// The resting average (`resting_average.rs`) on a frame: the frame
+    /// joins the average; while the static particles carry
+    /// `RESTING_STATIC_WEIGHT` of the weight
+    /// and `RESTING_MIN_FRAMES` frames are averaged, the averaged frame is
+    /// fitted on the static mean's teeth. The average starts over when its
+    /// fit leaves the particles' mode (`estimate`), not when the static
+    /// weight dips: in a weakly observed direction the moving particles
+    /// follow each frame's noise and win many frames of a resting tag.
+    fn update_resting(&mut self, frame: &WidebandFrame) {
+        self.resting = None;
+        if !(self.params.static_average_s > 0.0) {
+            return;
+        }
+        let (mut static_weight, mut mean) = (0.0, Vector3::zeros());
+        for ((p, lw), &resting) in self.positions.iter().zip(&self.log_weights).zip(&self.modes) {
+            if resting {
+                let w = lw.exp();
+                static_weight += w;
+                mean += p * w;
+            }
+        }
+        self.average.add(frame);
+        if static_weight < RESTING_STATIC_WEIGHT || self.average.frames() < RESTING_MIN_FRAMES {
+            return;
+        }
+        mean /= static_weight;
+        let receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &self.params.candidates, self.params.distance_sigma_m, &mean);
+        if receivers.len() < self.geometry.needed() {
+            return;
+        }
+        let teeth: Vec<i64> = receivers
+            .iter()
+            .map(|rx| rx.candidates.nearest_index(crate::geometry::bistatic_distance(&mean, &self.geometry.tx_position, &rx.position).0))
+            .collect();
+        let Some((fit, _)) = refine_on_teeth(&self.geometry, &receivers, &teeth, &mean, 3) else { return };
+        if (fit - mean).norm() > self.mode_radius() || !self.in_region(&fit) {
+            return;
+        }
+        let Some(covariance) = frame_covariance(&self.geometry, &receivers, &fit) else { return };
+        self.resting = Some((fit, covariance));
+    }
+
+    /// Forgets the resting average (the tag moved, a lobe switch, a restart).
+    fn clear_resting(&mut self) {
+        self.average.clear();
+        self.resting = None;
+    }
+
     /// Particles within this distance of the best one form its mode
     /// (half the smallest candidate spacing: another comb tooth is another mode), m.
     fn mode_radius(&self) -> f64 {
@@ -866,8 +926,7 @@ impl TurboTrack {
         let levels = self.lobe_levels();
         if time_s - self.last_far_search_s >= self.params.far_lobe_search_s {
             self.last_far_search_s = time_s;
-            let all = self.initial_components(receivers);
-            let found: Vec<Vector3<f64>> = all.iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean).collect();
+            let found: Vec<Vector3<f64>> = self.initial_components(receivers).iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean).collect();
             self.far.offer(found, levels.frame_cap_nats - levels.floor_nats, Some(mean));
         }
         let (region, margin) = (self.scene.region.clone(), self.params.region_margin_m);
@@ -889,6 +948,7 @@ impl TurboTrack {
             last.1.clone_from(&self.positions);
         }
         self.recent.clear();
+        self.clear_resting();
         self.stats.lobe_switches += 1;
     }
 
@@ -904,6 +964,22 @@ impl TurboTrack {
             if let Some(d) = self.test_far_lobes(time_s, receivers, &mean) {
                 self.move_cloud(&d);
                 (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+            }
+        }
+        if let Some((fit, fit_covariance)) = self.resting.take() {
+            // The average assumes rest. A fit that the particles' mode does
+            // not contain (squared Mahalanobis distance beyond
+            // `RESTING_CONSISTENCY_CHI2`) means the tag has been moving, slowly
+            // enough for the static mode to keep the weight: the average
+            // lags it and starts over.
+            let d = fit - mean;
+            let consistent = (covariance + fit_covariance).try_inverse().is_some_and(|inverse| d.dot(&(inverse * d)) <= RESTING_CONSISTENCY_CHI2);
+            if consistent {
+                // The tag rests: every frame since, through their average.
+                mean = fit;
+                covariance = fit_covariance;
+            } else {
+                self.clear_resting();
             }
         }
         if self.lobe_test() {
@@ -962,6 +1038,7 @@ impl TurboTrack {
         self.consecutive_outliers = 0;
         self.lobes.reset();
         self.far.reset();
+        self.clear_resting();
         self.stats.reinitialisations += 1;
         before
     }
@@ -1002,6 +1079,7 @@ impl TurboTrack {
         self.last_time_s = frame.time_s;
         if accepted {
             self.consecutive_outliers = 0;
+            self.update_resting(frame);
             return self.estimate(frame.time_s, Some(&receivers));
         }
         self.stats.outliers += 1;
@@ -1026,9 +1104,29 @@ impl TurboTrack {
             }
             return None;
         }
+        // At rest the frame still counts: in the weakly observed directions
+        // most frames of a distant tag fail the jump test (their fix moves
+        // centimetres along the weak direction), and the average is what
+        // the rest of them are for.
+        self.update_resting(frame);
+        if self.resting.is_some() {
+            return self.estimate(frame.time_s, None);
+        }
         self.extrapolate(frame.time_s)
     }
 }
+
+/// The static particles' share of the weight from which the resting fit is
+/// computed (and, if the particles' mode contains it, reported).
+const RESTING_STATIC_WEIGHT: f64 = 0.2;
+
+/// The resting fit's largest squared Mahalanobis distance from the
+/// particles' mode (χ² with 3 degrees of freedom, p = 0.001).
+const RESTING_CONSISTENCY_CHI2: f64 = 16.3;
+
+/// Frames (effective, after forgetting) the resting average needs before
+/// its fit is the estimate: 10 frames lift a frame's SNR by 10 dB.
+const RESTING_MIN_FRAMES: f64 = 10.0;
 
 /// Weighted mean and covariance (m, m²) of the particles within `radius`
 /// of particle `best`, and their total weight.

@@ -196,6 +196,14 @@ pub fn turbotrack_table() -> Table<TurboTrackParams> {
                 |p, v| p.far_lobe_search_s = v,
             ),
             float(
+                "static_average_s",
+                Range::NON_NEGATIVE,
+                "s",
+                "resting average: while the tag rests the estimate is the fit of the frames' coherent average, forgotten with this time constant (0: the particles' mode)",
+                |p| p.static_average_s,
+                |p, v| p.static_average_s = v,
+            ),
+            float(
                 "lobe_frame_cap_nats",
                 Range::POSITIVE,
                 "nats",
