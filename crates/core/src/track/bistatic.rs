@@ -245,6 +245,13 @@ pub fn calibration_covariance(geometry: &HelperGeometry, receivers: &[Vector3<f6
         }
         information += gradient * gradient.transpose();
     }
+    Some(information_covariance(&information, planar)? * (sigma_m * sigma_m))
+}
+
+/// The covariance of an information matrix, m² per unit of information:
+/// its inverse, or in planar scenes the inverse of the x–y block with z
+/// left at 0. None when singular or not finite.
+pub fn information_covariance(information: &Matrix3<f64>, planar: bool) -> Option<Matrix3<f64>> {
     let c = if planar {
         let block = information.fixed_view::<2, 2>(0, 0).into_owned().try_inverse()?;
         let mut c = Matrix3::zeros();
@@ -252,7 +259,7 @@ pub fn calibration_covariance(geometry: &HelperGeometry, receivers: &[Vector3<f6
         c
     } else {
         information.try_inverse()?
-    } * (sigma_m * sigma_m);
+    };
     c.iter().all(|v| v.is_finite()).then_some(c)
 }
 

@@ -183,10 +183,10 @@ impl FarLobes {
     }
 
     /// One frame (module doc, steps 1–3) against the filter's estimate
-    /// `estimate`, m. `into_region` projects a point onto the region. Returns the displacement
-    /// to the winning alternative when one passed the switch level; the
-    /// lobe left becomes an alternative, every evidence re-based on the new
-    /// lobe (`L'_m = L_m − L_won`).
+    /// `estimate`, m; `into_region` projects a point onto the region.
+    /// Returns the displacement to the winning alternative when one passed
+    /// the switch level; the lobe left becomes an alternative, every
+    /// evidence re-based on the new lobe (`L'_m = L_m − L_won`).
     pub fn update(
         &mut self,
         geometry: &HelperGeometry,
@@ -252,32 +252,14 @@ impl FarLobes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::wideband::Candidates;
 
-    const SPACING: f64 = 0.3276;
-
-    fn geometry() -> HelperGeometry {
-        HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 }
-    }
+    use crate::track::lobes::tests::geometry;
 
     /// The in-line layout (all antennas at z = 0): combs with a tooth on
-    /// the path lengths of `tag`, the envelope peaked on the true tooth
-    /// with log-weight drop `sharpness` per tooth.
+    /// the path lengths of `tag`, 3 mm each, the envelope peaked on the
+    /// true tooth with log-weight drop `sharpness` per tooth.
     fn receivers(tag: &Vector3<f64>, sharpness: f64) -> Vec<Receiver> {
-        let g = geometry();
-        [[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.8, 0.0, 0.0], [0.6, 0.4, 0.0]]
-            .iter()
-            .enumerate()
-            .map(|(j, p)| {
-                let position = Vector3::new(p[0], p[1], p[2]);
-                let d = bistatic_distance(tag, &g.tx_position, &position).0;
-                let distances_m: Vec<f64> = (-5..=5).map(|n| d + n as f64 * SPACING).collect();
-                let mut weights: Vec<f64> = (-5..=5).map(|n: i32| (-sharpness * (n * n) as f64).exp()).collect();
-                let total: f64 = weights.iter().sum();
-                weights.iter_mut().for_each(|w| *w /= total);
-                Receiver { antenna: j + 1, position, candidates: Candidates { distances_m, weights, spacing_m: SPACING, sigma_m: 0.003, best: 5 } }
-            })
-            .collect()
+        crate::track::lobes::tests::receivers(tag, 0.003, [0; 4], sharpness)
     }
 
     const LEVELS: LobeLevels = LobeLevels { switch_nats: 10.0, floor_nats: 200.0, frame_cap_nats: 2.0 };

@@ -504,11 +504,11 @@ impl LobeEvidence {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::model::wideband::Candidates;
 
-    fn geometry() -> HelperGeometry {
+    pub(crate) fn geometry() -> HelperGeometry {
         HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 }
     }
 
@@ -517,7 +517,7 @@ mod tests {
     /// Receivers of the outside layout (three in line with tx) whose combs
     /// put a tooth exactly on the path lengths of `tag`, with the envelope's
     /// best tooth `favour[j]` teeth off the truth on receiver j.
-    fn receivers(tag: &Vector3<f64>, sigma: f64, favour: [i64; 4], sharpness: f64) -> Vec<Receiver> {
+    pub(crate) fn receivers(tag: &Vector3<f64>, sigma: f64, favour: [i64; 4], sharpness: f64) -> Vec<Receiver> {
         let g = geometry();
         [[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.8, 0.0, 0.0], [0.6, 0.4, 0.0]]
             .iter()

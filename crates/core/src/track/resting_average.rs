@@ -31,7 +31,7 @@
 
 use nalgebra::{Complex, Matrix3, Vector3};
 
-use super::bistatic::{HelperGeometry, Receiver};
+use super::bistatic::{information_covariance, HelperGeometry, Receiver};
 use super::WidebandFrame;
 use crate::geometry::bistatic_distance;
 use crate::model::wideband::{distance_candidates, CandidateParams};
@@ -164,15 +164,7 @@ pub fn frame_covariance(geometry: &HelperGeometry, receivers: &[Receiver], p: &V
         }
         information += g * g.transpose() / (rx.candidates.sigma_m * rx.candidates.sigma_m);
     }
-    let c = if planar {
-        let block = information.fixed_view::<2, 2>(0, 0).into_owned().try_inverse()?;
-        let mut c = Matrix3::zeros();
-        c.fixed_view_mut::<2, 2>(0, 0).copy_from(&block);
-        c
-    } else {
-        information.try_inverse()?
-    };
-    c.iter().all(|v| v.is_finite()).then_some(c)
+    information_covariance(&information, planar)
 }
 
 #[cfg(test)]
