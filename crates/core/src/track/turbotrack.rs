@@ -33,6 +33,12 @@
 //!   teeth) by their profile likelihood, accumulated over frames; the
 //!   particles move to a lobe whose evidence passes `lobe_switch_nats`, and
 //!   unresolved lobes widen the reported covariance.
+//! - **Far lobes** (`far_lobes.rs`): the initial search's fits, repeated
+//!   every `far_lobe_search_s`, are kept as alternatives with the same
+//!   accumulated evidence, for lobes beyond the lattice's reach.
+//! - **Rest** (`resting_average.rs`): while the static particles hold the
+//!   weight, the estimate is the fit of the frames' coherent average, and
+//!   the lobe is decided on that averaged frame (`search_resting_lobes`).
 //!
 //! The comparison variants of §7.2 are parameter settings of the same
 //! filter (see [`make`](super::make)): a single broad Gaussian likelihood
@@ -327,6 +333,15 @@ pub struct TurboTrack {
     /// its fit: position m and covariance m² (`resting_average.rs`).
     average: ChannelAverage,
     resting: Option<(Vector3<f64>, Matrix3<f64>)>,
+    /// At rest, the lobes are decided on the average: the last search's
+    /// other lobes (position m, log-likelihood ratio on the averaged frame
+    /// against the resting fit, nats), when it last ran (s), and the
+    /// displacement to a lobe that won, to apply in `estimate`.
+    resting_lobes: Option<Vec<(Vector3<f64>, f64)>>,
+    last_resting_search_s: f64,
+    /// The averaged frames at that search (a doubling since searches again).
+    resting_search_frames: f64,
+    resting_switch: Option<Vector3<f64>>,
     // Scratch buffers reused every frame.
     scratch_positions: Vec<Vector3<f64>>,
     scratch_keys: Vec<u64>,
@@ -385,6 +400,10 @@ impl TurboTrack {
             last_far_search_s: f64::NEG_INFINITY,
             average: ChannelAverage::new(params.static_average_s),
             resting: None,
+            resting_lobes: None,
+            last_resting_search_s: f64::NEG_INFINITY,
+            resting_search_frames: 0.0,
+            resting_switch: None,
             scratch_positions: Vec::new(),
             scratch_keys: Vec::new(),
             scratch_ancestors: Vec::new(),
@@ -874,12 +893,71 @@ impl TurboTrack {
         }
         let Some(covariance) = frame_covariance(&self.geometry, &receivers, &fit) else { return };
         self.resting = Some((fit, covariance));
+        // Every `far_lobe_search_s`, and whenever the average has doubled
+        // since the last search (early in a rest each search is worth twice
+        // the frames of the one before).
+        let frames = self.average.frames();
+        let due = frame.time_s - self.last_resting_search_s >= self.params.far_lobe_search_s || frames >= 2.0 * self.resting_search_frames;
+        if self.lobe_test() && frames >= RESTING_LOBE_FRAMES && due {
+            self.last_resting_search_s = frame.time_s;
+            self.resting_search_frames = frames;
+            self.search_resting_lobes(&fit);
+        }
+    }
+
+    /// The lobe decision at rest: the initial tuple search (§5.3.1) on the
+    /// averaged frame, its fits' log-likelihood ratios against the resting
+    /// fit `fit` on that frame (K frames' evidence at once), and a switch
+    /// when one passes `lobe_switch_nats`. A distant tag beside an in-line
+    /// row has lobes that one frame barely tells apart (a rotation about the
+    /// row, seen through one receiver's tooth and the envelope), and the
+    /// per-frame tests of `lobes.rs` and `far_lobes.rs` drift between them;
+    /// at rest they pause and this decides. On the averaged frame the
+    /// envelope is K times sharper, so its receivers keep every tooth down
+    /// to `RESTING_LOBE_RELATIVE_WEIGHT` of the peak with its own weight,
+    /// and the mixture's floor (one frame's chance of a corrupt envelope)
+    /// is divided by K: with one frame's floor, a lobe one tooth off on one
+    /// receiver could never lose by more than ln(1/floor) = 6.9 nats
+    /// (docs/notes/turbotrack-experiments.md).
+    fn search_resting_lobes(&mut self, fit: &Vector3<f64>) {
+        let frames = self.average.frames();
+        let mut candidates = self.params.candidates.clone();
+        candidates.min_relative_weight = candidates.min_relative_weight.min(RESTING_LOBE_RELATIVE_WEIGHT);
+        let mut receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &candidates, self.params.distance_sigma_m, fit);
+        if receivers.len() < self.geometry.needed() {
+            return;
+        }
+        // The calibration residual (a bias per receiver, departure 14) does
+        // not average away: lobes are compared with it in each receiver's σ.
+        let calibration = self.params.calibration_sigma_m;
+        receivers.iter_mut().for_each(|r| r.candidates.sigma_m = r.candidates.sigma_m.hypot(calibration));
+        let floor = self.params.weight_floor / frames;
+        let ll = |x: &Vector3<f64>| crate::track::bistatic::mixture_log_likelihood(&self.geometry, &receivers, x, floor).0;
+        let at_fit = ll(fit);
+        let mut others: Vec<(Vector3<f64>, f64)> = Vec::new();
+        for (g, _) in self.initial_components(&receivers).iter().take(FAR_LOBE_SLOTS + 1) {
+            if (g.mean - fit).norm() > self.mode_radius() && others.iter().all(|o| (o.0 - g.mean).norm() > self.mode_radius()) {
+                others.push((g.mean, ll(&g.mean) - at_fit));
+            }
+        }
+        let best = others.iter().enumerate().max_by(|a, b| a.1 .1.total_cmp(&b.1 .1)).map(|(i, o)| (i, *o));
+        if let Some((i, (position, llr))) = best.filter(|b| b.1 .1 > self.params.lobe_switch_nats) {
+            // Re-based on the new lobe; the lobe left joins the others.
+            others.remove(i);
+            others.iter_mut().for_each(|o| o.1 -= llr);
+            others.push((*fit, -llr));
+            self.resting_switch = Some(position - fit);
+        }
+        self.resting_lobes = Some(others);
     }
 
     /// Forgets the resting average (the tag moved, a lobe switch, a restart).
     fn clear_resting(&mut self) {
         self.average.clear();
         self.resting = None;
+        self.resting_lobes = None;
+        self.resting_switch = None;
+        self.resting_search_frames = 0.0;
     }
 
     /// Particles within this distance of the best one form its mode
@@ -955,7 +1033,24 @@ impl TurboTrack {
     fn estimate(&mut self, time_s: f64, receivers: Option<&[Receiver]>) -> Option<Estimate> {
         let best = self.best_particle()?;
         let (mut mean, mut covariance, mut weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
-        if let Some(receivers) = receivers.filter(|_| self.lobe_test()) {
+        if self.resting_lobes.is_some() {
+            // At rest the average decides the lobe (`search_resting_lobes`);
+            // the per-frame tests pause and start afresh when the tag moves.
+            self.lobes.reset();
+            self.far.reset();
+            if let Some(d) = self.resting_switch.take() {
+                self.positions.iter_mut().for_each(|p| *p += d);
+                if let Some(last) = self.history.back_mut() {
+                    last.1.clone_from(&self.positions);
+                }
+                self.recent.clear();
+                self.stats.lobe_switches += 1;
+                if let Some(r) = self.resting.as_mut() {
+                    r.0 += d;
+                }
+                (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+            }
+        } else if let Some(receivers) = receivers.filter(|_| self.lobe_test()) {
             // Another lobe won: the whole cloud moves there.
             if let Some(d) = self.test_lobes(receivers, &mean) {
                 self.move_cloud(&d);
@@ -985,6 +1080,9 @@ impl TurboTrack {
         if self.lobe_test() {
             // Unresolved lobes widen the reported covariance (a mixture about the reported mean).
             covariance += self.lobes.spread(&mean) + self.far.spread(&mean);
+            if let Some(others) = &self.resting_lobes {
+                covariance += resting_spread(others, &mean);
+            }
         }
         if self.params.calibration_sigma_m > 0.0 {
             if let Some(c) = calibration_covariance(&self.geometry, &self.receive_positions, &mean, self.params.calibration_sigma_m) {
@@ -1083,7 +1181,7 @@ impl TurboTrack {
             return self.estimate(frame.time_s, Some(&receivers));
         }
         self.stats.outliers += 1;
-        if self.lobe_test() {
+        if self.lobe_test() && self.resting_lobes.is_none() {
             // A filter on a wrong far lobe sees mostly outliers: the far
             // alternatives are tested on them too.
             if let Some(position) = self.last_estimate.as_ref().map(|e| Vector3::from(e.position)) {
@@ -1123,6 +1221,28 @@ const RESTING_STATIC_WEIGHT: f64 = 0.2;
 /// The resting fit's largest squared Mahalanobis distance from the
 /// particles' mode (χ² with 3 degrees of freedom, p = 0.001).
 const RESTING_CONSISTENCY_CHI2: f64 = 16.3;
+
+/// Frames (effective, after forgetting) averaged before the lobes are
+/// decided on the average (0.1 s at 300 frames/s: 15 dB above one frame).
+const RESTING_LOBE_FRAMES: f64 = 30.0;
+
+/// The averaged frame's teeth kept for the resting lobe search, relative
+/// to the envelope's peak (one frame keeps those above half of it).
+const RESTING_LOBE_RELATIVE_WEIGHT: f64 = 0.05;
+
+/// The resting lobes' spread about `about` (m²): `Σ_k p_k (x_k − about)(x_k − about)ᵀ`,
+/// `p_k = e^{λ_k} / (1 + Σ_i e^{λ_i})`. Not tempered as the far lobes'
+/// per-frame evidence is (`far_lobes.rs`): the averaged frame's ratio is one
+/// comparison with the correlated error that frames share (the calibration
+/// residual) already in its σ, not a sum over correlated frames.
+fn resting_spread(others: &[(Vector3<f64>, f64)], about: &Vector3<f64>) -> Matrix3<f64> {
+    let odds = |llr: f64| llr.exp();
+    let total: f64 = 1.0 + others.iter().map(|o| odds(o.1)).sum::<f64>();
+    others.iter().fold(Matrix3::zeros(), |acc, (x, llr)| {
+        let d = x - about;
+        acc + d * d.transpose() * (odds(*llr) / total)
+    })
+}
 
 /// Frames (effective, after forgetting) the resting average needs before
 /// its fit is the estimate: 10 frames lift a frame's SNR by 10 dB.
