@@ -35,7 +35,7 @@ use nalgebra::{Matrix3, Vector3};
 use crate::geometry::bistatic_distance;
 
 use super::bistatic::{mixture_log_likelihood, HelperGeometry, Receiver};
-use super::lobes::{LobeDecision, LobeLevels, NORMAL_DAMPING};
+use super::lobes::{LobeDecision, LobeFrame, NORMAL_DAMPING};
 
 /// Alternatives kept at once (the best of the search's fits).
 pub const SLOTS: usize = 4;
@@ -187,15 +187,8 @@ impl FarLobes {
     /// Returns the displacement to the winning alternative when one passed
     /// the switch level; the lobe left becomes an alternative, every
     /// evidence re-based on the new lobe (`L'_m = L_m − L_won`).
-    pub fn update(
-        &mut self,
-        geometry: &HelperGeometry,
-        receivers: &[Receiver],
-        estimate: &Vector3<f64>,
-        weight_floor: f64,
-        levels: &LobeLevels,
-        into_region: impl Fn(&Vector3<f64>) -> Vector3<f64>,
-    ) -> LobeDecision {
+    pub fn update(&mut self, frame: &LobeFrame<'_>, estimate: &Vector3<f64>, into_region: impl Fn(&Vector3<f64>) -> Vector3<f64>) -> LobeDecision {
+        let LobeFrame { geometry, receivers, weight_floor, levels } = *frame;
         if self.alternatives.is_empty() || receivers.is_empty() {
             self.previous_x0 = None;
             return LobeDecision::Stay;
@@ -254,6 +247,7 @@ mod tests {
     use super::*;
 
     use crate::track::lobes::tests::geometry;
+    use crate::track::lobes::LobeLevels;
 
     /// The in-line layout (all antennas at z = 0): combs with a tooth on
     /// the path lengths of `tag`, 3 mm each, the envelope peaked on the
@@ -294,7 +288,7 @@ mod tests {
         far.offer([truth], 0.0, Some(&wrong));
         let mut switched = None;
         for frame in 0..20 {
-            if let LobeDecision::Switch(d) = far.update(&geometry(), &rx, &wrong, 1e-6, &LEVELS, |p| *p) {
+            if let LobeDecision::Switch(d) = far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &wrong, |p| *p) {
                 switched = Some((frame, d));
                 break;
             }
@@ -318,14 +312,14 @@ mod tests {
         let initial = far.spread(&truth).trace();
         assert!(initial.sqrt() > 0.5, "an unresolved far lobe widens the covariance: {initial}");
         for _ in 0..5 {
-            assert_eq!(far.update(&geometry(), &rx, &truth, 1e-6, &LEVELS, |p| *p), LobeDecision::Stay);
+            assert_eq!(far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &truth, |p| *p), LobeDecision::Stay);
         }
         // At −10 nats the tempered spread still covers the far lobe (decimetres) ...
         let young = far.spread(&truth).trace().sqrt();
         assert!(young > 0.1 && young < initial.sqrt(), "{young}");
         // ... and after 60 frames at the cap (−120 nats) nothing of it shows.
         for _ in 0..55 {
-            assert_eq!(far.update(&geometry(), &rx, &truth, 1e-6, &LEVELS, |p| *p), LobeDecision::Stay);
+            assert_eq!(far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &truth, |p| *p), LobeDecision::Stay);
         }
         assert!(far.spread(&truth).trace().sqrt() < 1e-5);
     }
@@ -360,7 +354,7 @@ mod tests {
         assert!((fit - truth).norm() < 0.2, "{fit}");
         let mut far = FarLobes::default();
         far.offer([on_plane], 0.0, Some(&wrong));
-        far.update(&geometry(), &rx, &wrong, 1e-6, &LEVELS, floor);
+        far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &wrong, floor);
         assert_eq!(far.alternatives().len(), 1);
     }
 
@@ -382,7 +376,7 @@ mod tests {
         let rx = receivers(&truth, 1.0);
         let mut far = FarLobes::default();
         far.offer([wrong], 0.0, Some(&truth));
-        far.update(&geometry(), &rx, &truth, 1e-6, &LEVELS, |p| Vector3::new(p.x, p.y, p.z.min(0.5)));
+        far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &truth, |p| Vector3::new(p.x, p.y, p.z.min(0.5)));
         assert_eq!(far.alternatives().len(), 1);
         let held = far.alternatives()[0];
         assert!(held.position.z <= 0.5);

@@ -299,6 +299,16 @@ fn approximate_evidence(
     }
 }
 
+/// One frame as the lobe tests see it: the scene's helper geometry, the
+/// frame's receivers, the mixture's weight floor and the test's levels.
+#[derive(Debug, Clone, Copy)]
+pub struct LobeFrame<'a> {
+    pub geometry: &'a HelperGeometry,
+    pub receivers: &'a [Receiver],
+    pub weight_floor: f64,
+    pub levels: &'a LobeLevels,
+}
+
 /// What one frame's lobe test concluded.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum LobeDecision {
@@ -368,15 +378,8 @@ impl LobeEvidence {
     /// filter's estimate `estimate` (m), accumulated, and the decision.
     /// `in_region` rules lobes out. After a switch the evidence is re-based
     /// on the new lobe (shifts the lattice cannot express start at 0).
-    pub fn update(
-        &mut self,
-        geometry: &HelperGeometry,
-        receivers: &[Receiver],
-        estimate: &Vector3<f64>,
-        weight_floor: f64,
-        levels: &LobeLevels,
-        in_region: impl Fn(&Vector3<f64>) -> bool,
-    ) -> LobeDecision {
+    pub fn update(&mut self, frame: &LobeFrame<'_>, estimate: &Vector3<f64>, in_region: impl Fn(&Vector3<f64>) -> bool) -> LobeDecision {
+        let LobeFrame { geometry, receivers, weight_floor, levels } = *frame;
         if !self.same_receivers(receivers) {
             // Skipped: the last frame's lobes (and their spread) stand.
             return LobeDecision::Stay;
@@ -594,7 +597,7 @@ pub(crate) mod tests {
         let mut lobes = LobeEvidence::default();
         let mut switched = None;
         for frame in 0..20 {
-            if let LobeDecision::Switch(d) = lobes.update(&g, &rx, &tag, 1e-3, &levels, |_| true) {
+            if let LobeDecision::Switch(d) = lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true) {
                 switched = Some((frame, d));
                 break;
             }
@@ -617,11 +620,11 @@ pub(crate) mod tests {
         let g = geometry();
         let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
-        assert_eq!(lobes.update(&g, &rx, &tag, 1e-3, &levels, |_| true), LobeDecision::Stay);
+        assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
         let first = lobes.spread(&tag).trace();
         // The weakest preference here is 1 nat per frame: 20 frames to the floor.
         for _ in 0..25 {
-            assert_eq!(lobes.update(&g, &rx, &tag, 1e-3, &levels, |_| true), LobeDecision::Stay);
+            assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
         }
         let last = lobes.spread(&tag).trace();
         assert!(last < first && last < 1e-8, "{first} -> {last}");
@@ -638,7 +641,7 @@ pub(crate) mod tests {
         let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
         for _ in 0..5 {
-            lobes.update(&g, &rx, &tag, 1e-3, &levels, |_| true);
+            lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         let sigma = lobes.spread(&tag).trace().sqrt();
         assert!(sigma > 0.05, "{sigma}");
@@ -652,18 +655,18 @@ pub(crate) mod tests {
         let mut lobes = LobeEvidence::default();
         let right = receivers(&tag, 0.003, [0; 4], 2.0);
         for _ in 0..10 {
-            lobes.update(&g, &right, &tag, 1e-3, &levels, |_| true);
+            lobes.update(&LobeFrame { geometry: &g, receivers: &right, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         let before = lobes.strongest();
         // Three receivers that favour another lobe, for a few frames.
         let three: Vec<Receiver> = receivers(&tag, 0.003, [1, 1, 1, 1], 50.0).into_iter().take(3).collect();
         for _ in 0..5 {
-            assert_eq!(lobes.update(&g, &three, &tag, 1e-3, &levels, |_| true), LobeDecision::Stay);
+            assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &three, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
         }
         assert_eq!(lobes.strongest(), before);
         // A receiver set that persists is adopted.
         for _ in 0..ADOPT_AFTER + 2 {
-            lobes.update(&g, &three, &tag, 1e-3, &levels, |_| true);
+            lobes.update(&LobeFrame { geometry: &g, receivers: &three, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         assert_eq!(lobes.antennas.len(), 3);
     }
@@ -677,9 +680,9 @@ pub(crate) mod tests {
         let right = receivers(&tag, 0.003, [0; 4], 2.0);
         let wrong = receivers(&tag, 0.003, [0, 0, 0, 1], 50.0);
         for _ in 0..10 {
-            lobes.update(&g, &right, &tag, 1e-3, &levels, |_| true);
+            lobes.update(&LobeFrame { geometry: &g, receivers: &right, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         // One frame with an overwhelming (corrupt) preference elsewhere.
-        assert_eq!(lobes.update(&g, &wrong, &tag, 1e-3, &levels, |_| true), LobeDecision::Stay);
+        assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &wrong, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
     }
 }

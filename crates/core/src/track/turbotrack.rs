@@ -64,7 +64,7 @@ use super::bistatic::{
 use super::key_hash::KeyMap;
 use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
 use super::resting_average::{averaged_receivers, frame_covariance, ChannelAverage};
-use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeLevels};
+use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
 /// The registry's constructor of `turbotrack`: Algorithm 1 with the
@@ -982,7 +982,7 @@ impl TurboTrack {
         };
         let (scene, margin) = (&self.scene, self.params.region_margin_m);
         let in_region = |p: &Vector3<f64>| scene.region.as_ref().is_none_or(|r| r.contains(p, margin, scene.dimensions));
-        match self.lobes.update(&self.geometry, receivers, mean, self.params.weight_floor, &levels, in_region) {
+        match self.lobes.update(&LobeFrame { geometry: &self.geometry, receivers, weight_floor: self.params.weight_floor, levels: &levels }, mean, in_region) {
             LobeDecision::Stay => None,
             LobeDecision::Switch(d) => Some(d),
         }
@@ -1012,7 +1012,7 @@ impl TurboTrack {
             Some(r) => Vector3::from_fn(|i, _| p[i].clamp(r.min[i] - margin, r.max[i] + margin)),
             None => *p,
         };
-        match self.far.update(&self.geometry, receivers, mean, self.params.weight_floor, &levels, into_region) {
+        match self.far.update(&LobeFrame { geometry: &self.geometry, receivers, weight_floor: self.params.weight_floor, levels: &levels }, mean, into_region) {
             LobeDecision::Stay => None,
             LobeDecision::Switch(d) => Some(d),
         }
