@@ -26,7 +26,7 @@ bench = _bench_turbotrack()
 
 ARGV = [
     "--seeds", "1", "--duration-s", "4", "--particles", "10,100", "--throughput-duration-s", "1",
-    "--runtime-duration-s", "0.2", "--lobe-starts", "2", "--no-progress",
+    "--runtime-duration-s", "0.2", "--lobe-starts", "2", "--far-seeds", "2", "--no-progress",
 ]
 
 
@@ -51,11 +51,11 @@ def _finite(*values):
 
 def test_every_table_is_printed_under_its_command(smoke):
     text, result = smoke
-    for number in range(1, 8):
+    for number in (1, 2, 3, 4, 5, 6, 7, 9):
         assert f"\n{number}. " in text
     assert "\n8b. " in text
     # Every table is headed by the command that produced it (8a only where the outside recordings are).
-    tables = 8 + (1 if result["lobes"]["outside"] else 0)
+    tables = 9 + (1 if result["lobes"]["outside"] else 0)
     assert text.count(f"$ {result['command']}") == tables
     assert "bench/turbotrack.py" in result["command"] and "--seeds 1" in result["command"]
     assert "\nSummary\n" in text
@@ -132,6 +132,19 @@ def test_lobe_block_counts_lock_ins_per_case_and_cell(smoke):
     if bench.lobes.helper_cases():
         assert "8a. Lobe lock-in on the outside helper recordings" in stdout
         assert {r["case"] for r in lobes["outside"]} >= {"helper-3d-multipath-4db"}
+
+
+def test_far_static_block_summarises_random_positions(smoke):
+    stdout, result = smoke
+    assert "9. Static tags at random positions on the in-line layout" in stdout
+    (row,) = result["far_static"]
+    assert row["runs"] == 2 and 0 <= row["lock_ins"] <= 2 and 0 <= row["runs_beyond_5pct"] <= 2
+    assert _finite(row["median_of_medians_cm"], row["worst_median_cm"], row["beyond_3sigma"])
+    # The positions are drawn per seed, reproducibly, inside the stated box.
+    p = bench.lobes.far_static_position(bench.lobes.FAR_STATIC_FIRST_SEED)
+    assert p == bench.lobes.far_static_position(bench.lobes.FAR_STATIC_FIRST_SEED)
+    assert all(lo <= v <= hi for v, (lo, hi) in zip(p, bench.lobes.FAR_STATIC_BOX_M))
+    assert any("Far static tags" in line for line in result["summary"])
 
 
 def test_lock_in_rule_start_offsets_and_dropped_frames():
