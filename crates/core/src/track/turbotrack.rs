@@ -1019,15 +1019,23 @@ impl TurboTrack {
     }
 
     /// Moves the whole cloud by `d`, m (its shape kept; the next frames'
-    /// cluster proposals reshape it), and the ancestry's newest entry with it.
-    fn move_cloud(&mut self, d: &Vector3<f64>) {
+    /// cluster proposals reshape it), and the ancestry's newest entry with
+    /// it; counted as a lobe switch.
+    fn shift_cloud(&mut self, d: &Vector3<f64>) {
         self.positions.iter_mut().for_each(|p| *p += d);
         if let Some(last) = self.history.back_mut() {
             last.1.clone_from(&self.positions);
         }
         self.recent.clear();
-        self.clear_resting();
         self.stats.lobe_switches += 1;
+    }
+
+    /// A per-frame lobe switch: the cloud moves, and the resting average
+    /// starts over (the switch says the filter's state was not at rest on
+    /// the lobe the average was fitted on).
+    fn move_cloud(&mut self, d: &Vector3<f64>) {
+        self.shift_cloud(d);
+        self.clear_resting();
     }
 
     fn estimate(&mut self, time_s: f64, receivers: Option<&[Receiver]>) -> Option<Estimate> {
@@ -1039,12 +1047,8 @@ impl TurboTrack {
             self.lobes.reset();
             self.far.reset();
             if let Some(d) = self.resting_switch.take() {
-                self.positions.iter_mut().for_each(|p| *p += d);
-                if let Some(last) = self.history.back_mut() {
-                    last.1.clone_from(&self.positions);
-                }
-                self.recent.clear();
-                self.stats.lobe_switches += 1;
+                // The average holds whatever the lobe: it stays.
+                self.shift_cloud(&d);
                 if let Some(r) = self.resting.as_mut() {
                     r.0 += d;
                 }
