@@ -1030,12 +1030,12 @@ impl TurboTrack {
         self.stats.lobe_switches += 1;
     }
 
-    /// A per-frame lobe switch: the cloud moves, and the resting average
-    /// starts over (the switch says the filter's state was not at rest on
-    /// the lobe the average was fitted on).
+    /// A per-frame lobe switch: the cloud moves. The resting average stays
+    /// (it is the frames' data, whatever lobe it is fitted on; a switch is
+    /// not motion); this frame's fit, made on the old lobe, goes.
     fn move_cloud(&mut self, d: &Vector3<f64>) {
         self.shift_cloud(d);
-        self.clear_resting();
+        self.resting = None;
     }
 
     fn estimate(&mut self, time_s: f64, receivers: Option<&[Receiver]>) -> Option<Estimate> {
