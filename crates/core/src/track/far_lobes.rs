@@ -32,10 +32,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-use crate::geometry::bistatic_distance;
 
 use super::bistatic::{mixture_log_likelihood, HelperGeometry, Receiver};
-use super::lobes::{LobeDecision, LobeFrame, NORMAL_DAMPING};
+use super::lobes::{path_length_step, LobeDecision, LobeFrame};
 
 /// Alternatives kept at once (the best of the search's fits).
 pub const SLOTS: usize = 4;
@@ -74,30 +73,6 @@ pub struct FarLobes {
     previous_x0: Option<Vector3<f64>>,
 }
 
-/// One Gauss–Newton step of the weighted least-squares fit of each
-/// receiver's nearest tooth to `x` (planar scenes: x and y only), m.
-fn nearest_teeth_step(geometry: &HelperGeometry, receivers: &[Receiver], x: &Vector3<f64>) -> Option<Vector3<f64>> {
-    let planar = geometry.dimensions == 2;
-    let mut normal = Matrix3::zeros();
-    let mut rhs = Vector3::zeros();
-    for rx in receivers {
-        let (d, mut g) = bistatic_distance(x, &geometry.tx_position, &rx.position);
-        if planar {
-            g.z = 0.0;
-        }
-        let c = &rx.candidates;
-        let w = 1.0 / (c.sigma_m * c.sigma_m);
-        normal += g * g.transpose() * w;
-        rhs += g * ((c.distance(c.nearest_index(d)) - d) * w);
-    }
-    if planar {
-        normal[(2, 2)] = 1.0;
-    }
-    normal += Matrix3::identity() * NORMAL_DAMPING;
-    let step = normal.try_inverse()? * rhs;
-    step.iter().all(|s| s.is_finite()).then_some(step)
-}
-
 /// The lobe around `start`: `steps` Gauss–Newton steps, each on the teeth
 /// nearest the current point (a lobe is where every receiver's path length
 /// sits on a tooth), each step at most `MAX_STEP_M` (near the antennas'
@@ -117,7 +92,8 @@ pub fn fit_nearest_lobe(
         x.z = geometry.plane_z;
     }
     for _ in 0..steps {
-        let mut step = nearest_teeth_step(geometry, receivers, &x)?;
+        let nearest = |_, rx: &Receiver, d| Some(rx.candidates.distance(rx.candidates.nearest_index(d)));
+        let mut step = path_length_step(geometry, receivers, &x, nearest).filter(|s| s.iter().all(|v| v.is_finite()))?;
         if step.norm() > MAX_STEP_M {
             step *= MAX_STEP_M / step.norm();
         }
@@ -246,6 +222,7 @@ impl FarLobes {
 mod tests {
     use super::*;
 
+    use crate::geometry::bistatic_distance;
     use crate::track::lobes::tests::geometry;
     use crate::track::lobes::LobeLevels;
 

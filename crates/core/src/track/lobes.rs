@@ -115,6 +115,40 @@ pub fn shift_lattice(receivers: usize) -> Vec<i8> {
 /// nothing else.
 pub const NORMAL_DAMPING: f64 = 1.0;
 
+/// One damped Gauss–Newton step at `x` (m) of the weighted least-squares
+/// fit `Σ_j ((d_j(x) − t_j) / σ_j)²` of every receiver's bistatic path
+/// length `d_j` to its target `t_j = target(j, receiver, d_j)` (a receiver
+/// whose target is None is left out); planar scenes step in x and y only.
+/// The lobe fits differ only in their targets: fixed teeth
+/// (`refine_on_teeth`), teeth moving towards a shift (`follow_to_teeth`),
+/// the nearest teeth (`far_lobes::fit_nearest_lobe`). None when the normal
+/// equations are singular.
+pub fn path_length_step(
+    geometry: &HelperGeometry,
+    receivers: &[Receiver],
+    x: &Vector3<f64>,
+    target: impl Fn(usize, &Receiver, f64) -> Option<f64>,
+) -> Option<Vector3<f64>> {
+    let planar = geometry.dimensions == 2;
+    let mut normal = Matrix3::zeros();
+    let mut rhs = Vector3::zeros();
+    for (j, rx) in receivers.iter().enumerate() {
+        let (d, mut g) = bistatic_distance(x, &geometry.tx_position, &rx.position);
+        let Some(t) = target(j, rx, d) else { continue };
+        if planar {
+            g.z = 0.0;
+        }
+        let w = 1.0 / (rx.candidates.sigma_m * rx.candidates.sigma_m);
+        normal += g * g.transpose() * w;
+        rhs += g * ((t - d) * w);
+    }
+    if planar {
+        normal[(2, 2)] = 1.0;
+    }
+    normal += Matrix3::identity() * NORMAL_DAMPING;
+    Some(normal.try_inverse()? * rhs)
+}
+
 /// Weighted least-squares fit of the teeth `teeth` (one index per
 /// receiver): Gauss–Newton on `Σ_j ((d_j(x) − D_j(n_j)) / σ_j)²` from
 /// `start`, at most `iterations` steps (planar scenes: x and y only).
@@ -134,22 +168,7 @@ pub fn refine_on_teeth(
         x.z = geometry.plane_z;
     }
     for _ in 0..iterations {
-        let mut normal = Matrix3::zeros();
-        let mut rhs = Vector3::zeros();
-        for (rx, &n) in receivers.iter().zip(teeth) {
-            let (d, mut g) = bistatic_distance(&x, &geometry.tx_position, &rx.position);
-            if planar {
-                g.z = 0.0;
-            }
-            let w = 1.0 / (rx.candidates.sigma_m * rx.candidates.sigma_m);
-            normal += g * g.transpose() * w;
-            rhs += g * ((rx.candidates.distance(n) - d) * w);
-        }
-        if planar {
-            normal[(2, 2)] = 1.0;
-        }
-        normal += Matrix3::identity() * NORMAL_DAMPING;
-        let step = normal.try_inverse()? * rhs;
+        let step = path_length_step(geometry, receivers, &x, |j, rx, _| teeth.get(j).map(|&n| rx.candidates.distance(n)))?;
         if !(step.norm() < 5.0) {
             return None;
         }
@@ -188,29 +207,15 @@ pub fn follow_to_teeth(
     shift: &[i8],
     x0: &Vector3<f64>,
 ) -> Option<(Vector3<f64>, f64)> {
-    let planar = geometry.dimensions == 2;
     let mut x = *x0;
     for part in 1..=FOLLOW_SUBSTEPS {
         let alpha = part as f64 / FOLLOW_SUBSTEPS as f64;
+        let target = |j: usize, rx: &Receiver, _| {
+            let (&n, &k) = (teeth.get(j)?, shift.get(j)?);
+            Some(rx.candidates.distance(n) + alpha * k as f64 * rx.candidates.spacing_m)
+        };
         for _ in 0..2 {
-            let mut normal = Matrix3::zeros();
-            let mut rhs = Vector3::zeros();
-            for ((rx, &n), &k) in receivers.iter().zip(teeth).zip(shift) {
-                let (d, mut g) = bistatic_distance(&x, &geometry.tx_position, &rx.position);
-                if planar {
-                    g.z = 0.0;
-                }
-                let c = &rx.candidates;
-                let target = c.distance(n) + alpha * k as f64 * c.spacing_m;
-                let w = 1.0 / (c.sigma_m * c.sigma_m);
-                normal += g * g.transpose() * w;
-                rhs += g * ((target - d) * w);
-            }
-            if planar {
-                normal[(2, 2)] = 1.0;
-            }
-            normal += Matrix3::identity() * NORMAL_DAMPING;
-            let mut step = normal.try_inverse()? * rhs;
+            let mut step = path_length_step(geometry, receivers, &x, target)?;
             if !step.iter().all(|v| v.is_finite()) {
                 return None;
             }
