@@ -34,7 +34,7 @@ use nalgebra::{Matrix3, Vector3};
 
 
 use super::bistatic::{mixture_log_likelihood, HelperGeometry, Receiver};
-use super::lobes::{path_length_step, LobeDecision, LobeFrame};
+use super::lobes::{mixture_spread, path_length_step, LobeDecision, LobeFrame};
 
 /// Alternatives kept at once (the best of the search's fits).
 pub const SLOTS: usize = 4;
@@ -206,15 +206,10 @@ impl FarLobes {
         LobeDecision::Switch(won.position - x0)
     }
 
-    /// The alternatives' spread about `about` (m²): `Σ_k p_k (x_k − about)(x_k − about)ᵀ`,
-    /// `p_k = e^{κ L_k} / (1 + Σ_i e^{κ L_i})` with `κ = SPREAD_TEMPERING`.
+    /// The alternatives' spread about `about` (m², `lobes::mixture_spread`)
+    /// at tempered log-odds `κ L_k`, `κ = SPREAD_TEMPERING`.
     pub fn spread(&self, about: &Vector3<f64>) -> Matrix3<f64> {
-        let odds = |a: &Alternative| (SPREAD_TEMPERING * a.evidence).exp();
-        let total: f64 = 1.0 + self.alternatives.iter().map(odds).sum::<f64>();
-        self.alternatives.iter().fold(Matrix3::zeros(), |acc, a| {
-            let d = a.position - about;
-            acc + d * d.transpose() * (odds(a) / total)
-        })
+        mixture_spread(self.alternatives.iter().map(|a| (a.position, SPREAD_TEMPERING * a.evidence)), about)
     }
 }
 

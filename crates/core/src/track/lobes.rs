@@ -304,6 +304,22 @@ fn approximate_evidence(
     }
 }
 
+/// The spread about `about` (m²) of other lobes at positions `x_k` (m)
+/// with log-odds `λ_k` (nats) against the reported one:
+/// `Σ_k p_k (x_k − about)(x_k − about)ᵀ`, `p_k = e^{λ_k} / (1 + Σ_i e^{λ_i})`
+/// (the reported lobe has odds 1). Every lobe test widens the reported
+/// covariance by it (departure 12 of docs/turbotrack.md).
+pub fn mixture_spread<I>(lobes: I, about: &Vector3<f64>) -> Matrix3<f64>
+where
+    I: Iterator<Item = (Vector3<f64>, f64)> + Clone,
+{
+    let total: f64 = 1.0 + lobes.clone().map(|(_, llr)| llr.exp()).sum::<f64>();
+    lobes.fold(Matrix3::zeros(), |acc, (x, llr)| {
+        let d = x - about;
+        acc + d * d.transpose() * (llr.exp() / total)
+    })
+}
+
 /// One frame as the lobe tests see it: the scene's helper geometry, the
 /// frame's receivers, the mixture's weight floor and the test's levels.
 #[derive(Debug, Clone, Copy)]
@@ -492,17 +508,13 @@ impl LobeEvidence {
         self.exact.clear();
     }
 
-    /// The lobes' spread about `about` (m²): `Σ_k p_k (x_k − about)(x_k − about)ᵀ`
-    /// over this frame's exactly evaluated lobes, `p_k = e^{L_k} / (1 + Σ e^{L_i})`.
+    /// The lobes' spread about `about` (m², `mixture_spread`) over this
+    /// frame's exactly evaluated lobes, at log-odds `L_k`.
     pub fn spread(&self, about: &Vector3<f64>) -> Matrix3<f64> {
         if !self.started {
             return Matrix3::zeros();
         }
-        let total: f64 = 1.0 + self.exact.iter().map(|&(i, _)| self.evidence[i].exp()).sum::<f64>();
-        self.exact.iter().fold(Matrix3::zeros(), |acc, &(i, x)| {
-            let d = x - about;
-            acc + d * d.transpose() * (self.evidence[i].exp() / total)
-        })
+        mixture_spread(self.exact.iter().map(|&(i, x)| (x, self.evidence[i])), about)
     }
 
     /// The largest accumulated evidence of any exactly evaluated lobe (nats; −∞ with none).

@@ -64,7 +64,7 @@ use super::bistatic::{
 use super::key_hash::KeyMap;
 use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
 use super::resting_average::{averaged_receivers, frame_covariance, ChannelAverage};
-use super::lobes::{refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
+use super::lobes::{mixture_spread, refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
 /// The registry's constructor of `turbotrack`: Algorithm 1 with the
@@ -1085,7 +1085,11 @@ impl TurboTrack {
             // Unresolved lobes widen the reported covariance (a mixture about the reported mean).
             covariance += self.lobes.spread(&mean) + self.far.spread(&mean);
             if let Some(others) = &self.resting_lobes {
-                covariance += resting_spread(others, &mean);
+                // Untempered, unlike the far lobes' per-frame evidence: the
+                // averaged frame's ratio is one comparison with the error
+                // that frames share (the calibration residual) already in
+                // its σ, not a sum over correlated frames.
+                covariance += mixture_spread(others.iter().copied(), &mean);
             }
         }
         if self.params.calibration_sigma_m > 0.0 {
@@ -1234,19 +1238,6 @@ const RESTING_LOBE_FRAMES: f64 = 30.0;
 /// to the envelope's peak (one frame keeps those above half of it).
 const RESTING_LOBE_RELATIVE_WEIGHT: f64 = 0.05;
 
-/// The resting lobes' spread about `about` (m²): `Σ_k p_k (x_k − about)(x_k − about)ᵀ`,
-/// `p_k = e^{λ_k} / (1 + Σ_i e^{λ_i})`. Not tempered as the far lobes'
-/// per-frame evidence is (`far_lobes.rs`): the averaged frame's ratio is one
-/// comparison with the correlated error that frames share (the calibration
-/// residual) already in its σ, not a sum over correlated frames.
-fn resting_spread(others: &[(Vector3<f64>, f64)], about: &Vector3<f64>) -> Matrix3<f64> {
-    let odds = |llr: f64| llr.exp();
-    let total: f64 = 1.0 + others.iter().map(|o| odds(o.1)).sum::<f64>();
-    others.iter().fold(Matrix3::zeros(), |acc, (x, llr)| {
-        let d = x - about;
-        acc + d * d.transpose() * (odds(*llr) / total)
-    })
-}
 
 /// Frames (effective, after forgetting) the resting average needs before
 /// its fit is the estimate: 10 frames lift a frame's SNR by 10 dB.
