@@ -56,6 +56,12 @@ impl Region {
         (0..dimensions.min(3)).all(|i| p[i] >= self.min[i] - margin && p[i] <= self.max[i] + margin)
     }
 
+    /// The point of the box grown by `margin` (m) nearest `p` (m), axis by
+    /// axis; with `dimensions == 2` z is left as it is (as in `contains`).
+    pub fn clamp(&self, p: &Vector3<f64>, margin: f64, dimensions: usize) -> Vector3<f64> {
+        Vector3::from_fn(|i, _| if i < dimensions.min(3) { p[i].clamp(self.min[i] - margin, self.max[i] + margin) } else { p[i] })
+    }
+
     /// Smallest and largest distance (m) from `point` to the box.
     pub fn distance_range(&self, point: &Vector3<f64>) -> (f64, f64) {
         let mut near = 0.0;
@@ -261,6 +267,18 @@ mod tests {
             let n = ((d - d0) / s).round();
             assert!((d0 + n * s - d).abs() < 1e-9, "d={d} d0={d0}");
         }
+    }
+
+    #[test]
+    fn region_clamp_is_the_nearest_point_that_contains_accepts() {
+        let r = Region { min: Vector3::new(0.0, 0.0, 0.0), max: Vector3::new(1.0, 2.0, 0.0) };
+        let p = Vector3::new(-0.5, 1.0, 0.7);
+        let c = r.clamp(&p, 0.1, 3);
+        assert_eq!(c, Vector3::new(-0.1, 1.0, 0.1));
+        assert!(r.contains(&c, 0.1, 3) && !r.contains(&p, 0.1, 3));
+        // In a planar scene z is not the region's to move.
+        assert_eq!(r.clamp(&p, 0.1, 2), Vector3::new(-0.1, 1.0, 0.7));
+        assert_eq!(r.clamp(&Vector3::new(0.5, 1.0, 0.0), 0.0, 3), Vector3::new(0.5, 1.0, 0.0));
     }
 
     #[test]

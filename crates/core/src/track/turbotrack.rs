@@ -975,11 +975,7 @@ impl TurboTrack {
     /// The lobe test on an accepted frame (`lobes.rs`): the displacement
     /// to another lobe when one won.
     fn test_lobes(&mut self, receivers: &[Receiver], mean: &Vector3<f64>) -> Option<Vector3<f64>> {
-        let levels = LobeLevels {
-            switch_nats: self.params.lobe_switch_nats,
-            floor_nats: self.params.lobe_floor_nats,
-            frame_cap_nats: self.params.lobe_frame_cap_nats,
-        };
+        let levels = self.lobe_levels();
         let (scene, margin) = (&self.scene, self.params.region_margin_m);
         let in_region = |p: &Vector3<f64>| scene.region.as_ref().is_none_or(|r| r.contains(p, margin, scene.dimensions));
         match self.lobes.update(&LobeFrame { geometry: &self.geometry, receivers, weight_floor: self.params.weight_floor, levels: &levels }, mean, in_region) {
@@ -1007,11 +1003,8 @@ impl TurboTrack {
             let found: Vec<Vector3<f64>> = self.initial_components(receivers).iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean).collect();
             self.far.offer(found, levels.frame_cap_nats - levels.floor_nats, Some(mean));
         }
-        let (region, margin) = (self.scene.region.clone(), self.params.region_margin_m);
-        let into_region = |p: &Vector3<f64>| match &region {
-            Some(r) => Vector3::from_fn(|i, _| p[i].clamp(r.min[i] - margin, r.max[i] + margin)),
-            None => *p,
-        };
+        let (scene, margin) = (&self.scene, self.params.region_margin_m);
+        let into_region = |p: &Vector3<f64>| scene.region.as_ref().map_or(*p, |r| r.clamp(p, margin, scene.dimensions));
         match self.far.update(&LobeFrame { geometry: &self.geometry, receivers, weight_floor: self.params.weight_floor, levels: &levels }, mean, into_region) {
             LobeDecision::Stay => None,
             LobeDecision::Switch(d) => Some(d),
