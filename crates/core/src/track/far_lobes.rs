@@ -27,8 +27,9 @@
 //! start at `−B + c`, one frame above the level at which a lobe the filter
 //! has been confirmed on protects it, so a correlated run of reflections is
 //! no easier a switch than with the lattice (and a fresh fit displaces a
-//! held alternative only once that one has sunk to the floor). Unresolved alternatives widen the reported
-//! covariance as a mixture about the reported state (as in `lobes.rs`).
+//! held alternative only once that one has sunk to the floor). Unresolved
+//! alternatives widen the reported covariance as a mixture about the
+//! reported state (`lobes::mixture_spread`, at tempered odds).
 
 use nalgebra::{Matrix3, Vector3};
 
@@ -38,7 +39,6 @@ use super::lobes::{mixture_spread, path_length_step, LobeDecision, LobeFrame};
 
 /// Alternatives kept at once (the best of the search's fits).
 pub const SLOTS: usize = 4;
-
 
 /// Two fits closer than this, m, are one lobe (neighbouring lobes are
 /// 10-60 cm apart; as `JUMP_M` in `lobes.rs`).

@@ -25,8 +25,9 @@
 //! covariance `(Σ_j g_j g_jᵀ / σ_j²)⁻¹`, is the estimate while the tag
 //! rests. The average forgets with `α = e^{−Δt/τ}` (`static_average_s` = τ)
 //! so a tag creeping by millimetres does not blur it, and starts over when
-//! the static particles lose the weight (the tag moves), on a lobe switch
-//! and on a restart. The lobe stays the filter's: the fit keeps the static
+//! its fit leaves the particles' mode (the tag moves) and on a restart; a
+//! lobe switch keeps it (the average is the frames' data, whatever lobe it
+//! is fitted on). The lobe stays the filter's: the fit keeps the static
 //! mean's teeth and is dropped if it leaves them.
 
 use nalgebra::{Complex, Matrix3, Vector3};

@@ -855,9 +855,8 @@ impl TurboTrack {
 
     /// The resting average (`resting_average.rs`) on a frame: the frame
     /// joins the average; while the static particles carry
-    /// `RESTING_STATIC_WEIGHT` of the weight
-    /// and `RESTING_MIN_FRAMES` frames are averaged, the averaged frame is
-    /// fitted on the static mean's teeth. The average starts over when its
+    /// `RESTING_STATIC_WEIGHT` of the weight and `RESTING_MIN_FRAMES` frames
+    /// are averaged, the averaged frame is fitted on the static mean's teeth. The average starts over when its
     /// fit leaves the particles' mode (`estimate`), not when the static
     /// weight dips: in a weakly observed direction the moving particles
     /// follow each frame's noise and win many frames of a resting tag.
@@ -951,7 +950,7 @@ impl TurboTrack {
         self.resting_lobes = Some(others);
     }
 
-    /// Forgets the resting average (the tag moved, a lobe switch, a restart).
+    /// Forgets the resting average and its lobes (the tag moved, a restart).
     fn clear_resting(&mut self) {
         self.average.clear();
         self.resting = None;
