@@ -113,14 +113,78 @@ impl Candidates {
     }
 }
 
+/// Subcarriers re-anchored on an exact `sin_cos` this often in the
+/// recurrence of [`steering`]: each complex multiply adds a rounding error
+/// of about 1e-16, so the phasors stay within 1e-14 of the exact ones.
+const STEERING_ANCHOR: usize = 32;
+
+/// The steering phasors `e^{+j 2π f_k d / c}` of every subcarrier, written
+/// into `out` (same length as `frequencies_hz`).
+///
+/// Why not one `sin_cos` each: candidate extraction needs them at about
+/// ten path lengths per receiver and frame, and `sin_cos` was most of a
+/// TurboTrack step. Evenly spaced subcarriers (OFDM) take two: with
+/// `ω_k = ω_0 + k Δω`, `e^{jω_k d} = e^{jω_0 d} (e^{jΔω d})^k`, one complex
+/// multiply per subcarrier, re-anchored every `STEERING_ANCHOR`. Uneven
+/// spacing (a notched band) falls back to one `sin_cos` per subcarrier.
+pub fn steering(frequencies_hz: &[f64], d: f64, out: &mut [Complex<f64>]) {
+    let two_pi_over_c = 2.0 * std::f64::consts::PI / SPEED_OF_LIGHT;
+    let exact = |f: f64| {
+        let (s, c) = (two_pi_over_c * f * d).sin_cos();
+        Complex::new(c, s)
+    };
+    match even_spacing_hz(frequencies_hz) {
+        Some(spacing) => {
+            let rotation = exact(spacing);
+            let mut current = Complex::new(1.0, 0.0);
+            for (k, (o, &f)) in out.iter_mut().zip(frequencies_hz).enumerate() {
+                current = if k % STEERING_ANCHOR == 0 {
+                    exact(f)
+                } else {
+                    current * rotation
+                };
+                *o = current;
+            }
+        }
+        None => out
+            .iter_mut()
+            .zip(frequencies_hz)
+            .for_each(|(o, &f)| *o = exact(f)),
+    }
+}
+
+/// `f_1 − f_0` when every step `f_{k+1} − f_k` equals it within 1 ppm of
+/// the step (and there are at least two subcarriers), else None.
+fn even_spacing_hz(frequencies_hz: &[f64]) -> Option<f64> {
+    let spacing = frequencies_hz.get(1)? - frequencies_hz[0];
+    let tolerance = 1e-6 * spacing.abs();
+    (spacing != 0.0
+        && frequencies_hz
+            .windows(2)
+            .all(|w| ((w[1] - w[0]) - spacing).abs() <= tolerance))
+    .then_some(spacing)
+}
+
+/// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m), with
+/// `phasors` as scratch space (length of `frequencies_hz`).
+fn beamform_with(
+    frequencies_hz: &[f64],
+    h: &[Complex<f64>],
+    d: f64,
+    phasors: &mut [Complex<f64>],
+) -> Complex<f64> {
+    steering(frequencies_hz, d, phasors);
+    h.iter().zip(phasors.iter()).map(|(hk, e)| hk * e).sum()
+}
+
 /// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m).
 pub fn beamform(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64) -> Complex<f64> {
-    let mut sum = Complex::new(0.0, 0.0);
-    for (&f, &hk) in frequencies_hz.iter().zip(h) {
-        let (s, c) = (2.0 * std::f64::consts::PI * f * d / SPEED_OF_LIGHT).sin_cos();
-        sum += hk * Complex::new(c, s);
-    }
-    sum
+    beamform_with(
+        frequencies_hz,
+        h,
+        d,
+        &mut vec![Complex::new(0.0, 0.0); frequencies_hz.len()],
+    )
 }
 
 /// Distance candidates of one receive antenna from its channel `h` at
@@ -144,7 +208,9 @@ pub fn distance_candidates(
     if k == 0 || h.len() != k || !(d_max > d_min) {
         return None;
     }
-    if h.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) || frequencies_hz.iter().any(|f| !(*f > 0.0)) {
+    if h.iter().any(|v| !(v.re.is_finite() && v.im.is_finite()))
+        || frequencies_hz.iter().any(|f| !(*f > 0.0))
+    {
         return None;
     }
     let energy: f64 = h.iter().map(|v| v.norm_sqr()).sum();
@@ -160,21 +226,11 @@ pub fn distance_candidates(
     // lobe, so a quarter-wavelength grid finds its top.
     let step = lambda / 4.0;
     let n_grid = ((d_max - d_min) / step).ceil() as usize + 1;
-    let mut phasor: Vec<Complex<f64>> = frequencies_hz
-        .iter()
-        .zip(h)
-        .map(|(&f, &hk)| {
-            let (s, c) = (two_pi_over_c * f * d_min).sin_cos();
-            hk * Complex::new(c, s)
-        })
-        .collect();
-    let rotation: Vec<Complex<f64>> = frequencies_hz
-        .iter()
-        .map(|&f| {
-            let (s, c) = (two_pi_over_c * f * step).sin_cos();
-            Complex::new(c, s)
-        })
-        .collect();
+    let mut scratch = vec![Complex::new(0.0, 0.0); k];
+    steering(frequencies_hz, d_min, &mut scratch);
+    let mut phasor: Vec<Complex<f64>> = h.iter().zip(&scratch).map(|(hk, e)| hk * e).collect();
+    let mut rotation = vec![Complex::new(0.0, 0.0); k];
+    steering(frequencies_hz, step, &mut rotation);
     let (mut best_d, mut best_mag) = (d_min, -1.0);
     for i in 0..n_grid {
         let mag = phasor.iter().sum::<Complex<f64>>().norm_sqr();
@@ -189,14 +245,11 @@ pub fn distance_candidates(
 
     // (2) Zero the phase near the peak.
     let slope = two_pi_over_c * f_mean;
-    let refine = |mut d: f64, steps: usize| -> f64 {
-        for _ in 0..steps {
-            d -= beamform(frequencies_hz, h, d).arg() / slope;
-        }
-        d
-    };
-    let d_peak = refine(best_d, 3);
-    let peak = beamform(frequencies_hz, h, d_peak).norm();
+    let mut d_peak = best_d;
+    for _ in 0..3 {
+        d_peak -= beamform_with(frequencies_hz, h, d_peak, &mut scratch).arg() / slope;
+    }
+    let peak = beamform_with(frequencies_hz, h, d_peak, &mut scratch).norm();
     if !(peak > 0.0) {
         return None;
     }
@@ -206,21 +259,10 @@ pub fn distance_candidates(
     // so one refinement (at the peak) serves every tooth. Magnitudes by
     // phasor recurrence: g_k = h_k e^{jω_k d0}, each tooth rotates g_k by
     // e^{±jω_k λ̄} (one complex multiply per subcarrier and tooth).
-    let base: Vec<Complex<f64>> = frequencies_hz
-        .iter()
-        .zip(h)
-        .map(|(&f, &hk)| {
-            let (s, c) = (two_pi_over_c * f * d_peak).sin_cos();
-            hk * Complex::new(c, s)
-        })
-        .collect();
-    let tooth: Vec<Complex<f64>> = frequencies_hz
-        .iter()
-        .map(|&f| {
-            let (s, c) = (two_pi_over_c * f * lambda).sin_cos();
-            Complex::new(c, s)
-        })
-        .collect();
+    // `scratch` holds the steering phasors at `d_peak` from the line above.
+    let base: Vec<Complex<f64>> = h.iter().zip(&scratch).map(|(hk, e)| hk * e).collect();
+    let mut tooth = vec![Complex::new(0.0, 0.0); k];
+    steering(frequencies_hz, lambda, &mut tooth);
     let mut teeth: Vec<(f64, f64)> = vec![(d_peak, peak)];
     for direction in [-1.0f64, 1.0] {
         let mut g = base.clone();
@@ -228,7 +270,10 @@ pub fn distance_candidates(
         loop {
             n += direction;
             let d = d_peak + n * lambda;
-            if d < d_min - lambda / 2.0 || d > d_max + lambda / 2.0 || teeth.len() > 4 * params.max_candidates {
+            if d < d_min - lambda / 2.0
+                || d > d_max + lambda / 2.0
+                || teeth.len() > 4 * params.max_candidates
+            {
                 break;
             }
             for (gk, r) in g.iter_mut().zip(&tooth) {
@@ -254,30 +299,35 @@ pub fn distance_candidates(
     // σ_w from the residual of the single-path fit at the peak: with
     // noise σ per subcarrier and amplitude a, the phase of B has
     // variance σ² / (2 K a²); distance = phase / slope.
+    // |h_k − a e^{−jω_k d}|² = |h_k e^{jω_k d} − a|²: the base phasors serve.
     let a = peak / k as f64;
-    let residual: f64 = frequencies_hz
-        .iter()
-        .zip(h)
-        .map(|(&f, &hk)| {
-            let (s, c) = (two_pi_over_c * f * d_peak).sin_cos();
-            (hk - Complex::new(c, -s) * a).norm_sqr()
-        })
-        .sum::<f64>()
-        / k as f64;
+    let residual: f64 = base.iter().map(|g| (g - a).norm_sqr()).sum::<f64>() / k as f64;
     let sigma_phase = (residual / (2.0 * k as f64 * a * a)).sqrt();
     let mut weights: Vec<f64> = match params.weighting {
-        CandidateWeighting::Amplitude => teeth.iter().map(|t| t.1.powf(params.weight_exponent)).collect(),
+        CandidateWeighting::Amplitude => teeth
+            .iter()
+            .map(|t| t.1.powf(params.weight_exponent))
+            .collect(),
         CandidateWeighting::Likelihood => {
             // Residual variance with K − 2 degrees of freedom used (a, d);
             // never below 1e-6 of the signal so a noiseless channel stays finite.
             let noise = (residual * k as f64 / (k as f64 - 2.0).max(1.0)).max(1e-6 * a * a);
             let top = teeth.iter().map(|t| t.1).fold(0.0, f64::max);
-            teeth.iter().map(|t| (params.likelihood_temper * (t.1 * t.1 - top * top) / (k as f64 * noise)).exp()).collect()
+            teeth
+                .iter()
+                .map(|t| {
+                    (params.likelihood_temper * (t.1 * t.1 - top * top) / (k as f64 * noise)).exp()
+                })
+                .collect()
         }
     };
     let total: f64 = weights.iter().sum();
     weights.iter_mut().for_each(|w| *w /= total);
-    let best = weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
+    let best = weights
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map_or(0, |(i, _)| i);
     let sigma_m = (sigma_phase / slope).clamp(params.min_sigma_m, params.max_sigma_m);
     Some(Candidates {
         distances_m: teeth.iter().map(|t| t.0).collect(),
@@ -306,13 +356,45 @@ mod tests {
             .collect()
     }
 
+    /// The recurrence matches one `sin_cos` per subcarrier, for even
+    /// spacing past several re-anchorings and for uneven spacing.
+    #[test]
+    fn steering_matches_the_exact_phasors() {
+        let even: Vec<f64> = (0..100).map(|k| 867.5e6 + 1.25e6 * k as f64).collect();
+        let mut uneven = subcarriers();
+        uneven[7] += 0.3e6;
+        assert!(even_spacing_hz(&even).is_some() && even_spacing_hz(&uneven).is_none());
+        assert!(even_spacing_hz(&[9e8]).is_none() && even_spacing_hz(&[9e8, 9e8]).is_none());
+        for f in [even, uneven] {
+            for d in [0.0, 0.083, 3.7, 41.25] {
+                let mut out = vec![Complex::new(0.0, 0.0); f.len()];
+                steering(&f, d, &mut out);
+                for (o, &fk) in out.iter().zip(&f) {
+                    let (s, c) = (2.0 * std::f64::consts::PI * fk * d / SPEED_OF_LIGHT).sin_cos();
+                    assert!((o - Complex::new(c, s)).norm() < 1e-12, "f={fk} d={d}");
+                }
+            }
+        }
+    }
+
     #[test]
     fn noiseless_channel_puts_a_candidate_on_the_truth() {
         let f = subcarriers();
         for d in [1.234, 2.5, 4.71, 7.9] {
-            let c = distance_candidates(&f, &channel(&f, d, 0.3), 0.5, 12.0, &CandidateParams::default()).unwrap();
+            let c = distance_candidates(
+                &f,
+                &channel(&f, d, 0.3),
+                0.5,
+                12.0,
+                &CandidateParams::default(),
+            )
+            .unwrap();
             let n = c.nearest_index(d);
-            assert!((c.distance(n) - d).abs() < 1e-6, "d={d}: {:?}", c.distances_m);
+            assert!(
+                (c.distance(n) - d).abs() < 1e-6,
+                "d={d}: {:?}",
+                c.distances_m
+            );
             assert!(n >= 0 && (n as usize) < c.distances_m.len());
             assert!((c.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
             assert!(c.sigma_m <= CandidateParams::default().min_sigma_m + 1e-12);
@@ -320,7 +402,11 @@ mod tests {
             assert!(c.weights[n as usize] > 0.99, "{:?}", c.weights);
             // 100 MHz: the main lobe spans several wavelengths (thesis: ~9).
             assert!(c.distances_m.len() >= 5, "{}", c.distances_m.len());
-            let spacing = c.distances_m.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
+            let spacing = c
+                .distances_m
+                .windows(2)
+                .map(|w| w[1] - w[0])
+                .fold(0.0, f64::max);
             assert!((spacing - c.spacing_m).abs() < 1e-3);
         }
     }
@@ -334,12 +420,32 @@ mod tests {
             let t = k as f64 * 1.7;
             *v += Complex::new(t.sin(), (2.3 * t).cos()) * 0.2;
         }
-        let c = distance_candidates(&f, &h, 0.5, 12.0, &CandidateParams { min_sigma_m: 0.0, ..Default::default() }).unwrap();
+        let c = distance_candidates(
+            &f,
+            &h,
+            0.5,
+            12.0,
+            &CandidateParams {
+                min_sigma_m: 0.0,
+                ..Default::default()
+            },
+        )
+        .unwrap();
         // Amplitude (thesis) weights are nearly flat over 100 MHz; likelihood weights are not.
-        let amplitude =
-            distance_candidates(&f, &h, 0.5, 12.0, &CandidateParams { weighting: CandidateWeighting::Amplitude, ..Default::default() })
-                .unwrap();
-        let spread = |w: &[f64]| w.iter().cloned().fold(0.0, f64::max) / w.iter().cloned().fold(1.0, f64::min);
+        let amplitude = distance_candidates(
+            &f,
+            &h,
+            0.5,
+            12.0,
+            &CandidateParams {
+                weighting: CandidateWeighting::Amplitude,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        let spread = |w: &[f64]| {
+            w.iter().cloned().fold(0.0, f64::max) / w.iter().cloned().fold(1.0, f64::min)
+        };
         assert!(spread(&amplitude.weights) < 2.5, "{:?}", amplitude.weights);
         assert!(spread(&c.weights) > 100.0, "{:?}", c.weights);
         // σφ ≈ 0.2/√(2·20) rad → σ_d ≈ 0.032 · λ/2π ≈ 1.7 mm.
@@ -350,9 +456,19 @@ mod tests {
     fn rejects_empty_and_non_finite() {
         let f = subcarriers();
         let mut h = channel(&f, 2.0, 1.0);
-        assert!(distance_candidates(&f, &vec![Complex::new(0.0, 0.0); 20], 0.5, 12.0, &Default::default()).is_none());
+        assert!(distance_candidates(
+            &f,
+            &vec![Complex::new(0.0, 0.0); 20],
+            0.5,
+            12.0,
+            &Default::default()
+        )
+        .is_none());
         h[3] = Complex::new(f64::NAN, 0.0);
         assert!(distance_candidates(&f, &h, 0.5, 12.0, &Default::default()).is_none());
-        assert!(distance_candidates(&f, &channel(&f, 2.0, 1.0), 3.0, 1.0, &Default::default()).is_none());
+        assert!(
+            distance_candidates(&f, &channel(&f, 2.0, 1.0), 3.0, 1.0, &Default::default())
+                .is_none()
+        );
     }
 }
