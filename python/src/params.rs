@@ -134,9 +134,11 @@ fn schema_from_dict(row: &Bound<'_, PyDict>) -> PyResult<Schema> {
                 .transpose()?
                 .unwrap_or_default(),
         ),
-        other => return Err(value_error(format!(
+        other => {
+            return Err(value_error(format!(
             "parameter row '{name}': kind must be bool, integer, float or choice, got {other:?}"
-        ))),
+        )))
+        }
     };
     let range: Range = text("range")?
         .parse()

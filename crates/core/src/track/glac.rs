@@ -432,6 +432,15 @@ const RESEED_SIGMA_M: f64 = 0.04;
 /// [`RESEED_SIGMA_M`]; afterwards while its hypotheses' plain-weight
 /// spread does ([`plain_spread`]). See [`Glac::unresolved`].
 const SWITCH_MEMORY_S: f64 = 5.0;
+/// Once a track has been resolved, the reported trajectory moves to
+/// another hypothesis only when that one explains the reads this much
+/// better (log-likelihood, nats) than the one nearest the last report:
+/// without it the report flips between two near-equal candidates a metre
+/// apart read by read (after a gap, single-read jumps of 0.7 m between
+/// rows 2 mm from the truth). 3 nats untempered is 1 nat at
+/// `weight_temperature` 3, the evidence `bank_switch_nats` asks of a bank
+/// switch. See [`Glac::reported`].
+const REPORT_HOLD_NATS: f64 = 3.0;
 
 /// Hypothesis arrays larger than this (and four times what is live) are
 /// shrunk after pruning ([`Hypotheses::retain`]).
@@ -646,6 +655,10 @@ pub struct Glac {
     /// The latest estimate (time s, position m, its 3×3 covariance m²):
     /// where re-acquisition starts from.
     last_good: Option<(f64, Vector3<f64>, Matrix3<f64>)>,
+    /// Whether a report of this tag has ever been resolved (largest sigma
+    /// below [`RESEED_SIGMA_M`]): from then on the report holds its
+    /// trajectory ([`Glac::reported`]).
+    resolved_once: bool,
     // Not read by a converged tag's step.
     /// The estimate after the latest read taken through the tracker, while
     /// reads wait for a later call ([`Glac::step_read`]).
@@ -841,6 +854,7 @@ impl Glac {
             line_layout,
             bias_clock: vec![BiasClock::UNSET; n_antennas],
             last_good: None,
+            resolved_once: false,
             recent: std::collections::VecDeque::new(),
             seeded_s: f64::NEG_INFINITY,
             switched_s: f64::NEG_INFINITY,
@@ -1764,7 +1778,7 @@ impl Glac {
     /// that hypothesis' own P.
     fn best_estimate(&self, time_s: f64) -> Option<Estimate> {
         let h = &self.hypotheses;
-        let best = h.best()?;
+        let best = self.reported()?;
         let (x, own) = h.state(best);
         let mut p = if h.len() == 1 {
             own
@@ -1902,11 +1916,45 @@ impl Glac {
         }
     }
 
-    /// Notes a switch of the reported trajectory: the likeliest hypothesis
+    /// The hypothesis reported: the likeliest until a report of this tag
+    /// has been resolved once; from then on, of those within
+    /// [`REPORT_HOLD_NATS`] of the likeliest, the one nearest the last
+    /// report. Candidates are at least λ/4 apart and a read moves a tag by
+    /// millimetres, so that is the trajectory reported before while it
+    /// stays a contender, and after a gap the candidate nearest where the
+    /// tag was last seen (re-acquisition from the last good state). Not
+    /// before the first resolved report: at acquisition the first leader is
+    /// a guess, and holding it delayed the right candidate's win (dev
+    /// seeds: docs/notes/glac-experiments.md). The covariance is taken
+    /// about it ([`mixture_covariance`]), so the competitors' spread still
+    /// shows in the sigma.
+    fn reported(&self) -> Option<usize> {
+        let h = &self.hypotheses;
+        let best = h.best()?;
+        let Some((_, previous, _)) = self.last_good else {
+            return Some(best);
+        };
+        if h.len() == 1 {
+            return Some(best);
+        }
+        if !self.resolved_once {
+            return Some(best);
+        }
+        let floor = h.items[best].log_likelihood - REPORT_HOLD_NATS;
+        let distance = |i: usize| {
+            let x = &h.items[i].x[0];
+            (Vector3::new(x[0], x[1], x[2]) - previous).norm_squared()
+        };
+        (0..h.len())
+            .filter(|&i| h.items[i].log_likelihood >= floor)
+            .min_by(|&a, &b| distance(a).total_cmp(&distance(b)))
+    }
+
+    /// Notes a switch of the reported trajectory: the reported hypothesis
     /// lies more than [`RESEED_SIGMA_M`] beyond where the previous estimate
     /// could have moved at its speed.
     fn note_switch(&mut self, now_s: f64) {
-        let (Some(best), Some((t, previous, _))) = (self.hypotheses.best(), self.last_good) else {
+        let (Some(best), Some((t, previous, _))) = (self.reported(), self.last_good) else {
             return;
         };
         let x = &self.hypotheses.items[best].x[0];
@@ -2443,6 +2491,7 @@ impl Glac {
             let c = &e.covariance;
             let covariance = Matrix3::from_fn(|r, k| c[r * 6 + k]);
             self.last_good = Some((e.time_s, Vector3::from(e.position), covariance));
+            self.resolved_once |= largest_sigma(&covariance) < RESEED_SIGMA_M;
         }
         estimate
     }
@@ -2855,6 +2904,40 @@ pub(crate) mod tests {
         assert_eq!(kept, vec![0.5, 0.9]);
         // None reachable: the bound was wrong, search everywhere.
         assert_eq!(tracker.reachable(vec![at(1.5)], 1.0).len(), 1);
+    }
+
+    /// The report: the likeliest until a resolved report; then the
+    /// hypothesis nearest the last report while it is within
+    /// `REPORT_HOLD_NATS` of the likeliest, and the likeliest beyond that.
+    #[test]
+    fn a_resolved_report_holds_its_trajectory_against_a_near_equal_rival() {
+        let mut tracker = Glac::new(scene(), GlacParams::default()).unwrap();
+        let (h, a, _) = two_hypotheses(0.4);
+        tracker.hypotheses = h;
+        tracker.last_good = Some((
+            0.0,
+            Vector3::new(a[0], a[1], a[2]),
+            Matrix3::identity() * 1e-6,
+        ));
+        // Never resolved: the likeliest (the second, 0.6 against 0.4).
+        assert_eq!(tracker.reported(), Some(1));
+        tracker.remember(tracker.best_estimate(0.0));
+        assert!(
+            !tracker.resolved_once,
+            "a report covering both rivals is not resolved"
+        );
+        tracker.resolved_once = true;
+        tracker.last_good = Some((
+            0.0,
+            Vector3::new(a[0], a[1], a[2]),
+            Matrix3::identity() * 1e-6,
+        ));
+        // Resolved once: the first, nearest the last report, 0.4 nats behind.
+        assert_eq!(tracker.reported(), Some(0));
+        // A rival REPORT_HOLD_NATS + 0.1 ahead takes the report.
+        tracker.hypotheses.items[1].log_likelihood =
+            tracker.hypotheses.items[0].log_likelihood + REPORT_HOLD_NATS + 0.1;
+        assert_eq!(tracker.reported(), Some(1));
     }
 
     /// The AR(1) bias prediction: ρ = exp(−Δt/τ) since the antenna's last
