@@ -5,8 +5,8 @@
 //! count skips by kind. Type stubs: `python/scattertrack/_core.pyi`.
 
 use numpy::{
-    Complex32, Complex64, IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1,
-    PyReadonlyArray2, PyReadonlyArray3,
+    Complex32, Complex64, IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2,
+    PyReadonlyArray3,
 };
 use pyo3::create_exception;
 use pyo3::exceptions::PyValueError;
@@ -60,33 +60,24 @@ impl OfdmDsp {
         payload_bits: usize,
         decision_margin: f64,
     ) -> PyResult<Self> {
-        let config =
-            OfdmConfig::new(bandwidth_hz, subcarriers, centre_hz, blf_hz).map_err(dsp_error)?;
+        let config = OfdmConfig::new(bandwidth_hz, subcarriers, centre_hz, blf_hz).map_err(dsp_error)?;
         let symbol = KnownSymbol::from_frequency(symbol.as_array().to_vec()).map_err(dsp_error)?;
         let options = ReplyOptions {
             encoding: Encoding::parse(encoding).map_err(dsp_error)?,
             trext,
-            detection: DetectionOptions {
-                threshold,
-                blf_tolerance,
-            },
+            detection: DetectionOptions { threshold, blf_tolerance },
             feature: Feature::parse(feature).map_err(dsp_error)?,
             guard_symbols,
             use_payload,
             payload_bits,
             decision_margin,
         };
-        Ok(Self {
-            inner: ReplyProcessor::new(config, symbol, options).map_err(dsp_error)?,
-        })
+        Ok(Self { inner: ReplyProcessor::new(config, symbol, options).map_err(dsp_error)? })
     }
 
     /// Active subcarrier frequencies, Hz, ascending (N − 1, DC dropped).
     fn subcarrier_frequencies<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f64>> {
-        self.inner
-            .config()
-            .subcarrier_frequencies()
-            .into_pyarray(py)
+        self.inner.config().subcarrier_frequencies().into_pyarray(py)
     }
 
     /// Per-rx timing reference (see `ReplyProcessor::process`), or None.
@@ -97,9 +88,7 @@ impl OfdmDsp {
 
     #[setter]
     fn set_timing_reference(&mut self, reference: Option<Vec<usize>>) -> PyResult<()> {
-        self.inner
-            .set_timing_reference(reference)
-            .map_err(dsp_error)
+        self.inner.set_timing_reference(reference).map_err(dsp_error)
     }
 
     /// One reply: `windows` (R, L) complex64, `tx_phase` the tx stream index
@@ -126,17 +115,11 @@ impl OfdmDsp {
         d.set_item("tag_channel", reshape(e.tag_channel)?)?;
         d.set_item(
             "variance",
-            e.variance
-                .into_pyarray(py)
-                .reshape([r, f])
-                .map_err(|x| PyValueError::new_err(x.to_string()))?,
+            e.variance.into_pyarray(py).reshape([r, f]).map_err(|x| PyValueError::new_err(x.to_string()))?,
         )?;
         d.set_item(
             "antenna_errors",
-            e.antenna_errors
-                .iter()
-                .map(|x| x.as_ref().map(|x| format!("{}: {x}", x.kind())))
-                .collect::<Vec<_>>(),
+            e.antenna_errors.iter().map(|x| x.as_ref().map(|x| format!("{}: {x}", x.kind()))).collect::<Vec<_>>(),
         )?;
         d.set_item("start_sample", e.start_sample)?;
         d.set_item("start_symbol", e.detection.start_symbol)?;
@@ -150,23 +133,14 @@ impl OfdmDsp {
         let states: Vec<u8> = e.states.iter().map(|s| *s as u8).collect();
         d.set_item(
             "states",
-            states
-                .into_pyarray(py)
-                .reshape([r, j])
-                .map_err(|x| PyValueError::new_err(x.to_string()))?,
+            states.into_pyarray(py).reshape([r, j]).map_err(|x| PyValueError::new_err(x.to_string()))?,
         )?;
         let counts = PyDict::new(py);
         counts.set_item("high", e.counts.iter().map(|c| c.high).collect::<Vec<_>>())?;
         counts.set_item("low", e.counts.iter().map(|c| c.low).collect::<Vec<_>>())?;
         counts.set_item("edge", e.counts.iter().map(|c| c.edge).collect::<Vec<_>>())?;
-        counts.set_item(
-            "outside",
-            e.counts.iter().map(|c| c.outside).collect::<Vec<_>>(),
-        )?;
-        counts.set_item(
-            "invalid",
-            e.counts.iter().map(|c| c.invalid).collect::<Vec<_>>(),
-        )?;
+        counts.set_item("outside", e.counts.iter().map(|c| c.outside).collect::<Vec<_>>())?;
+        counts.set_item("invalid", e.counts.iter().map(|c| c.invalid).collect::<Vec<_>>())?;
         d.set_item("counts", counts)?;
         Ok(d)
     }
@@ -178,9 +152,7 @@ fn e_reshape(
     rows: usize,
     columns: usize,
 ) -> PyResult<Bound<'_, PyArray2<Complex64>>> {
-    v.into_pyarray(py)
-        .reshape([rows, columns])
-        .map_err(|x| PyValueError::new_err(x.to_string()))
+    v.into_pyarray(py).reshape([rows, columns]).map_err(|x| PyValueError::new_err(x.to_string()))
 }
 
 /// Exponential moving average across replies (`estimate::Ema`).
@@ -193,9 +165,7 @@ pub struct DspEma {
 impl DspEma {
     #[new]
     fn new(alpha: f64) -> PyResult<Self> {
-        Ok(Self {
-            inner: Ema::new(alpha).map_err(dsp_error)?,
-        })
+        Ok(Self { inner: Ema::new(alpha).map_err(dsp_error)? })
     }
 
     /// Adds one reply's channel (R, F) and returns the smoothed state (R, F).
@@ -226,15 +196,8 @@ impl DspEma {
 
 /// The known symbol X (N,) complex128, FFT order, DC = 0, from a seed.
 #[pyfunction]
-fn dsp_known_symbol<'py>(
-    py: Python<'py>,
-    subcarriers: usize,
-    seed: u64,
-) -> PyResult<Bound<'py, PyArray1<Complex64>>> {
-    Ok(KnownSymbol::generate(subcarriers, seed)
-        .map_err(dsp_error)?
-        .frequency
-        .into_pyarray(py))
+fn dsp_known_symbol<'py>(py: Python<'py>, subcarriers: usize, seed: u64) -> PyResult<Bound<'py, PyArray1<Complex64>>> {
+    Ok(KnownSymbol::generate(subcarriers, seed).map_err(dsp_error)?.frequency.into_pyarray(py))
 }
 
 /// Validates an OFDM configuration (design rule N < B/(2 BLF)); returns the
@@ -247,8 +210,7 @@ fn dsp_subcarrier_frequencies<'py>(
     centre_hz: f64,
     blf_hz: f64,
 ) -> PyResult<Bound<'py, PyArray1<f64>>> {
-    let config =
-        OfdmConfig::new(bandwidth_hz, subcarriers, centre_hz, blf_hz).map_err(dsp_error)?;
+    let config = OfdmConfig::new(bandwidth_hz, subcarriers, centre_hz, blf_hz).map_err(dsp_error)?;
     Ok(config.subcarrier_frequencies().into_pyarray(py))
 }
 
@@ -281,14 +243,10 @@ fn dsp_calibration<'py>(
 ) -> PyResult<Bound<'py, PyArray2<Complex64>>> {
     let (m, r) = (measured.as_array(), reference.as_array());
     let (antennas, subcarriers) = (r.nrows(), r.ncols());
-    let replies: Vec<Vec<Complex64>> = m
-        .outer_iter()
-        .map(|x| x.iter().copied().collect())
-        .collect();
+    let replies: Vec<Vec<Complex64>> = m.outer_iter().map(|x| x.iter().copied().collect()).collect();
     let refs: Vec<&[Complex64]> = replies.iter().map(|x| x.as_slice()).collect();
     let reference: Vec<Complex64> = r.iter().copied().collect();
-    let c = Calibration::from_measurements(&refs, &reference, antennas, subcarriers)
-        .map_err(dsp_error)?;
+    let c = Calibration::from_measurements(&refs, &reference, antennas, subcarriers).map_err(dsp_error)?;
     e_reshape(py, c.correction, antennas, subcarriers)
 }
 

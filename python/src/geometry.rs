@@ -16,10 +16,7 @@ fn triple(v: &Vector3<f64>) -> [f64; 3] {
 }
 
 fn options(evidence_reads: Option<f64>, remedies: bool) -> AmbiguityOptions {
-    let mut o = AmbiguityOptions {
-        remedies,
-        ..AmbiguityOptions::default()
-    };
+    let mut o = AmbiguityOptions { remedies, ..AmbiguityOptions::default() };
     if let Some(n) = evidence_reads {
         o.tolerance.evidence_reads = n;
     }
@@ -40,21 +37,12 @@ fn analyse_scene<'py>(
     let scene = &scene.inner;
     let opts = options(evidence_reads, remedies);
     let frequencies = ambiguity::joint_frequencies(scene, &read_frequencies);
-    let report = py
-        .detach(|| ambiguity::analyse_scene(scene, &frequencies, &opts))
-        .map_err(value_error)?;
+    let report = py.detach(|| ambiguity::analyse_scene(scene, &frequencies, &opts)).map_err(value_error)?;
     let out = PyDict::new(py);
     let layout = PyList::empty(py);
     for f in &report.layout {
         let d = PyDict::new(py);
-        d.set_item(
-            "kind",
-            match f.kind {
-                LayoutKind::Coincident => "coincident",
-                LayoutKind::Collinear => "collinear",
-                LayoutKind::Coplanar => "coplanar",
-            },
-        )?;
+        d.set_item("kind", match f.kind { LayoutKind::Coincident => "coincident", LayoutKind::Collinear => "collinear", LayoutKind::Coplanar => "coplanar" })?;
         d.set_item("antennas", &f.antennas)?;
         d.set_item("deviation_m", f.deviation_m)?;
         d.set_item("plane", f.plane.map(|(p, n)| (triple(&p), triple(&n))))?;
@@ -87,10 +75,7 @@ fn analyse_scene<'py>(
         d.set_item("direction", triple(&r.direction))?;
         d.set_item("offset_m", r.offset_m)?;
         d.set_item("hopping_breaks", r.hopping_breaks)?;
-        d.set_item(
-            "region_plane",
-            r.region_plane.map(|(p, n)| (triple(&p), triple(&n))),
-        )?;
+        d.set_item("region_plane", r.region_plane.map(|(p, n)| (triple(&p), triple(&n))))?;
         families.append(d)?;
     }
     out.set_item("layout", layout)?;
@@ -98,10 +83,7 @@ fn analyse_scene<'py>(
     out.set_item("frequencies_hz", &report.frequencies_hz)?;
     out.set_item("samples", report.samples)?;
     out.set_item("shifts_tried", report.shifts_tried)?;
-    out.set_item(
-        "bounds",
-        (triple(&report.bounds.0), triple(&report.bounds.1)),
-    )?;
+    out.set_item("bounds", (triple(&report.bounds.0), triple(&report.bounds.1)))?;
     out.set_item("region_given", report.region_given)?;
     out.set_item("inconclusive", report.inconclusive.clone())?;
     out.set_item("evidence_reads", opts.tolerance.evidence_reads)?;
@@ -126,13 +108,8 @@ fn twin_positions(
     let scene = &scene.inner;
     let opts = options(evidence_reads, false);
     let p = Vector3::from(position);
-    let twins = py
-        .detach(|| ambiguity::twin_positions(scene, &p, &frequencies, &opts))
-        .map_err(value_error)?;
-    Ok(twins
-        .into_iter()
-        .map(|t| (triple(&t.position), t.shift, t.chi_square))
-        .collect())
+    let twins = py.detach(|| ambiguity::twin_positions(scene, &p, &frequencies, &opts)).map_err(value_error)?;
+    Ok(twins.into_iter().map(|t| (triple(&t.position), t.shift, t.chi_square)).collect())
 }
 
 pub fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

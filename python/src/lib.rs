@@ -9,16 +9,14 @@ mod lora;
 mod params;
 mod scene;
 
-use numpy::{
-    IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3,
-};
+use numpy::{IntoPyArray, PyArray2, PyArrayMethods, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray3};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
-use nalgebra::Complex;
 use scattertrack_core::engine::Engine as CoreEngine;
 use scattertrack_core::track::{Estimate, Measurement, PhaseRead, TrackerStats, WidebandFrame};
+use nalgebra::Complex;
 
 // mimalloc for the extension's own allocations: thousands of tags allocate
 // and free hypothesis arrays of every size from two tracker threads, and
@@ -85,8 +83,7 @@ impl Columns {
         self.velocity.extend_from_slice(&e.velocity);
         if self.sigma_only {
             // As `track.columns.position_sigma` does: the diagonal, clipped at 0.
-            self.covariance
-                .extend([0, 7, 14].map(|k| e.covariance[k].max(0.0).sqrt()));
+            self.covariance.extend([0, 7, 14].map(|k| e.covariance[k].max(0.0).sqrt()));
         } else {
             self.covariance.extend_from_slice(&e.covariance);
         }
@@ -118,14 +115,7 @@ impl Columns {
 /// One frame's rows (sorted by receiver, then frequency) as a
 /// `WidebandFrame`; blocks with different subcarriers give a frame whose
 /// sizes do not match, which the trackers decline as invalid.
-fn frame_from_rows(
-    time_s: f64,
-    tx: usize,
-    rx: &[i64],
-    f: &[f64],
-    re: &[f64],
-    im: &[f64],
-) -> WidebandFrame {
+fn frame_from_rows(time_s: f64, tx: usize, rx: &[i64], f: &[f64], re: &[f64], im: &[f64]) -> WidebandFrame {
     let mut receivers: Vec<usize> = Vec::new();
     let mut block_len = 0usize;
     for (i, &r) in rx.iter().enumerate() {
@@ -139,32 +129,13 @@ fn frame_from_rows(
     let frequencies: Vec<f64> = f[..block_len].to_vec();
     let consistent = block_len * receivers.len() == rx.len()
         && (0..rx.len()).all(|i| (f[i] - frequencies[i % block_len.max(1)]).abs() < 1.0);
-    let h: Vec<Complex<f64>> = if consistent {
-        re.iter()
-            .zip(im)
-            .map(|(&a, &b)| Complex::new(a, b))
-            .collect()
-    } else {
-        Vec::new()
-    };
-    WidebandFrame {
-        time_s,
-        tx,
-        rx: receivers,
-        frequencies_hz: frequencies,
-        h,
-    }
+    let h: Vec<Complex<f64>> =
+        if consistent { re.iter().zip(im).map(|(&a, &b)| Complex::new(a, b)).collect() } else { Vec::new() };
+    WidebandFrame { time_s, tx, rx: receivers, frequencies_hz: frequencies, h }
 }
 
 fn estimate_tuple(e: Estimate) -> (f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64) {
-    (
-        e.time_s,
-        e.position,
-        e.velocity,
-        e.covariance.to_vec(),
-        e.hypotheses,
-        e.weight,
-    )
+    (e.time_s, e.position, e.velocity, e.covariance.to_vec(), e.hypotheses, e.weight)
 }
 
 /// Many tags, one tracker each (a thin wrapper over `engine::Engine`).
@@ -184,21 +155,11 @@ impl Engine {
     /// (name → value) checked by the method's table.
     #[new]
     #[pyo3(signature = (scene, method, params=None))]
-    fn new(
-        scene: PyRef<'_, scene::Scene>,
-        method: &str,
-        params: Option<&Bound<'_, PyDict>>,
-    ) -> PyResult<Self> {
+    fn new(scene: PyRef<'_, scene::Scene>, method: &str, params: Option<&Bound<'_, PyDict>>) -> PyResult<Self> {
         let scene = scene.inner.clone();
         let antennas = scene.antennas.len();
-        let inner = CoreEngine::new(scene, method, params::make_params(method, params)?)
-            .map_err(value_error)?;
-        Ok(Self {
-            inner,
-            antennas,
-            batch_tags: Vec::new(),
-            batch_reads: Vec::new(),
-        })
+        let inner = CoreEngine::new(scene, method, params::make_params(method, params)?).map_err(value_error)?;
+        Ok(Self { inner, antennas, batch_tags: Vec::new(), batch_reads: Vec::new() })
     }
 
     /// One measurement of tag `tag` → `None` or
@@ -211,12 +172,7 @@ impl Engine {
         frequency_hz: f64,
         phase_rad: f64,
     ) -> Option<(f64, [f64; 3], [f64; 3], Vec<f64>, usize, f64)> {
-        let m = Measurement::Phase(PhaseRead {
-            time_s,
-            antenna,
-            frequency_hz,
-            phase_rad,
-        });
+        let m = Measurement::Phase(PhaseRead { time_s, antenna, frequency_hz, phase_rad });
         self.inner.step(tag, &m).map(estimate_tuple)
     }
 
@@ -237,25 +193,14 @@ impl Engine {
         phase_rad: PyReadonlyArray1<f64>,
         covariance: bool,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (tag, t, a, f, ph) = (
-            tag.as_array(),
-            time_s.as_array(),
-            antenna.as_array(),
-            frequency_hz.as_array(),
-            phase_rad.as_array(),
-        );
+        let (tag, t, a, f, ph) =
+            (tag.as_array(), time_s.as_array(), antenna.as_array(), frequency_hz.as_array(), phase_rad.as_array());
         let n = t.len();
-        if [tag.len(), a.len(), f.len(), ph.len()]
-            .iter()
-            .any(|&l| l != n)
-        {
+        if [tag.len(), a.len(), f.len(), ph.len()].iter().any(|&l| l != n) {
             return Err(value_error("all columns must have the same length"));
         }
         if let Some(bad) = a.iter().position(|&x| x < 0 || x as usize >= self.antennas) {
-            return Err(value_error(format!(
-                "row {bad}: antenna index {} out of range",
-                a[bad]
-            )));
+            return Err(value_error(format!("row {bad}: antenna index {} out of range", a[bad])));
         }
         if tag.iter().any(|&x| x < 0) {
             return Err(value_error("tag indices must be non-negative"));
@@ -268,12 +213,7 @@ impl Engine {
             tags.extend(tag.iter().map(|&k| k as usize));
             reads.clear();
             reads.extend((0..n).map(|i| {
-                Measurement::Phase(PhaseRead {
-                    time_s: t[i],
-                    antenna: a[i] as usize,
-                    frequency_hz: f[i],
-                    phase_rad: ph[i],
-                })
+                Measurement::Phase(PhaseRead { time_s: t[i], antenna: a[i] as usize, frequency_hz: f[i], phase_rad: ph[i] })
             }));
             // Nearly every read gives a row once its tag commits; the cap
             // keeps a whole in-memory recording from reserving it all at once.
@@ -309,47 +249,24 @@ impl Engine {
         h_re: PyReadonlyArray1<f64>,
         h_im: PyReadonlyArray1<f64>,
     ) -> PyResult<Bound<'py, PyDict>> {
-        let (tag, t, tx, start) = (
-            tag.as_array().to_vec(),
-            time_s.as_array().to_vec(),
-            tx.as_array().to_vec(),
-            frame_start.as_array().to_vec(),
-        );
-        let (rx, f, re, im) = (
-            rx.as_array().to_vec(),
-            frequency_hz.as_array().to_vec(),
-            h_re.as_array().to_vec(),
-            h_im.as_array().to_vec(),
-        );
+        let (tag, t, tx, start) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx.as_array().to_vec(), frame_start.as_array().to_vec());
+        let (rx, f, re, im) = (rx.as_array().to_vec(), frequency_hz.as_array().to_vec(), h_re.as_array().to_vec(), h_im.as_array().to_vec());
         let m = t.len();
         let n = rx.len();
         if tag.len() != m || tx.len() != m || start.len() != m + 1 {
-            return Err(value_error(
-                "tag, time_s and tx need one entry per frame, frame_start one more",
-            ));
+            return Err(value_error("tag, time_s and tx need one entry per frame, frame_start one more"));
         }
         if f.len() != n || re.len() != n || im.len() != n {
-            return Err(value_error(
-                "rx, frequency_hz, h_re and h_im must have the same length",
-            ));
+            return Err(value_error("rx, frequency_hz, h_re and h_im must have the same length"));
         }
-        if start.windows(2).any(|w| w[1] < w[0])
-            || start.first() != Some(&0)
-            || start.last() != Some(&(n as i64))
-        {
-            return Err(value_error(
-                "frame_start must rise from 0 to the number of rows",
-            ));
+        if start.windows(2).any(|w| w[1] < w[0]) || start.first() != Some(&0) || start.last() != Some(&(n as i64)) {
+            return Err(value_error("frame_start must rise from 0 to the number of rows"));
         }
         if tag.iter().any(|&x| x < 0) {
             return Err(value_error("tag indices must be non-negative"));
         }
         let antennas = self.antennas as i64;
-        if let Some(bad) = rx
-            .iter()
-            .chain(tx.iter())
-            .find(|&&x| x < 0 || x >= antennas)
-        {
+        if let Some(bad) = rx.iter().chain(tx.iter()).find(|&&x| x < 0 || x >= antennas) {
             return Err(value_error(format!("antenna index {bad} out of range")));
         }
         let inner = &mut self.inner;
@@ -357,14 +274,7 @@ impl Engine {
             let mut c = Columns::default();
             for k in 0..m {
                 let rows = start[k] as usize..start[k + 1] as usize;
-                let frame = frame_from_rows(
-                    t[k],
-                    tx[k] as usize,
-                    &rx[rows.clone()],
-                    &f[rows.clone()],
-                    &re[rows.clone()],
-                    &im[rows],
-                );
+                let frame = frame_from_rows(t[k], tx[k] as usize, &rx[rows.clone()], &f[rows.clone()], &re[rows.clone()], &im[rows]);
                 if let Some(e) = inner.step(tag[k] as usize, &Measurement::Wideband(frame)) {
                     c.push(k, &e);
                 }
@@ -412,14 +322,7 @@ impl Engine {
         tx: usize,
         rx: Vec<usize>,
         windows: Option<PyReadonlyArray3<num_complex::Complex32>>,
-        file: Option<(
-            std::path::PathBuf,
-            String,
-            usize,
-            f32,
-            usize,
-            PyReadonlyArray1<i64>,
-        )>,
+        file: Option<(std::path::PathBuf, String, usize, f32, usize, PyReadonlyArray1<i64>)>,
         timing_reference: Option<Vec<usize>>,
         correction: Option<PyReadonlyArray2<'py, num_complex::Complex64>>,
         ema_alpha: Option<f64>,
@@ -430,35 +333,19 @@ impl Engine {
         prewake_s: f64,
     ) -> PyResult<Bound<'py, PyDict>> {
         use scattertrack_runtime::source::{IqFileReplies, SampleFormat, WindowSpec};
-        use scattertrack_runtime::Workers;
         use scattertrack_runtime::{InMemory, Reply};
+        use scattertrack_runtime::Workers;
         let cores = std::thread::available_parallelism().map_or(2, |n| n.get());
         let workers = match layout {
             "team" => Workers::Team(workers.unwrap_or(cores).max(1)),
             "per-antenna" => Workers::PerAntenna(workers.unwrap_or(1).max(1)),
             "shared" => Workers::Shared(workers.unwrap_or(cores).max(1)),
-            other => {
-                return Err(value_error(format!(
-                    "layout '{other}' is not one of team, per-antenna, shared"
-                )))
-            }
+            other => return Err(value_error(format!("layout '{other}' is not one of team, per-antenna, shared"))),
         };
         if !(prewake_s.is_finite() && (0.0..=1.0).contains(&prewake_s)) {
-            return Err(value_error(format!(
-                "prewake_s must be in [0, 1] s, got {prewake_s}"
-            )));
+            return Err(value_error(format!("prewake_s must be in [0, 1] s, got {prewake_s}")));
         }
-        let options = StreamOptions {
-            tx,
-            rx,
-            timing_reference,
-            correction,
-            ema_alpha,
-            workers,
-            queue_depth,
-            speed,
-            prewake_s,
-        };
+        let options = StreamOptions { tx, rx, timing_reference, correction, ema_alpha, workers, queue_depth, speed, prewake_s };
         match (windows, file) {
             (Some(windows), None) => {
                 let array = windows.as_array();
@@ -471,9 +358,7 @@ impl Engine {
                         tag: h.tag,
                         time_s: h.time_s,
                         tx_phase: h.tx_phase,
-                        windows: (0..r)
-                            .map(|a| array.slice(numpy::ndarray::s![i, a, ..]).to_vec())
-                            .collect(),
+                        windows: (0..r).map(|a| array.slice(numpy::ndarray::s![i, a, ..]).to_vec()).collect(),
                     })
                     .collect();
                 self.stream(py, InMemory::new(replies), r, &dsp.inner, options, None)
@@ -482,11 +367,7 @@ impl Engine {
                 let format = match datatype.as_str() {
                     "ci16_le" => SampleFormat::ComplexI16,
                     "cf32_le" => SampleFormat::ComplexF32,
-                    other => {
-                        return Err(value_error(format!(
-                            "unsupported datatype {other:?} (ci16_le or cf32_le)"
-                        )))
-                    }
+                    other => return Err(value_error(format!("unsupported datatype {other:?} (ci16_le or cf32_le)"))),
                 };
                 let starts = start_sample.as_array().to_vec();
                 if starts.iter().any(|&x| x < 0) {
@@ -496,21 +377,10 @@ impl Engine {
                 let specs = headers
                     .iter()
                     .zip(&starts)
-                    .map(|(h, &start)| WindowSpec {
-                        start_sample: start as u64,
-                        tag: h.tag,
-                        time_s: h.time_s,
-                        tx_phase: h.tx_phase,
-                    })
+                    .map(|(h, &start)| WindowSpec { start_sample: start as u64, tag: h.tag, time_s: h.time_s, tx_phase: h.tx_phase })
                     .collect();
-                let replies =
-                    IqFileReplies::open(&path, format, channels, scale, window_len, specs)
-                        .map_err(|e| {
-                            PyErr::new::<pyo3::exceptions::PyOSError, _>(format!(
-                                "{}: {e}",
-                                path.display()
-                            ))
-                        })?;
+                let replies = IqFileReplies::open(&path, format, channels, scale, window_len, specs)
+                    .map_err(|e| PyErr::new::<pyo3::exceptions::PyOSError, _>(format!("{}: {e}", path.display())))?;
                 let unreadable = replies.unreadable.clone();
                 self.stream(py, replies, channels, &dsp.inner, options, Some(unreadable))
             }
@@ -560,18 +430,10 @@ impl Engine {
         let (t, e, v) = (time_s.as_array(), epc.as_array(), values.as_array());
         let n = t.len();
         if e.len() != n || v.nrows() != n {
-            return Err(value_error(
-                "time_s, epc and values need one entry (row) per track row",
-            ));
+            return Err(value_error("time_s, epc and values need one entry (row) per track row"));
         }
-        if let Some(bad) = e
-            .iter()
-            .position(|&k| k < 0 || k as usize >= epc_cells.len())
-        {
-            return Err(value_error(format!(
-                "row {bad}: epc code {} out of range",
-                e[bad]
-            )));
+        if let Some(bad) = e.iter().position(|&k| k < 0 || k as usize >= epc_cells.len()) {
+            return Err(value_error(format!("row {bad}: epc code {} out of range", e[bad])));
         }
         let (t, e, v) = (t.to_vec(), e.to_vec(), v.to_owned());
         let text = py.detach(move || {
@@ -605,25 +467,15 @@ fn stream_headers(
     tx_phase: &PyReadonlyArray1<i64>,
     k: usize,
 ) -> PyResult<Vec<StreamHeader>> {
-    let (tag, t, phase) = (
-        tag.as_array().to_vec(),
-        time_s.as_array().to_vec(),
-        tx_phase.as_array().to_vec(),
-    );
+    let (tag, t, phase) = (tag.as_array().to_vec(), time_s.as_array().to_vec(), tx_phase.as_array().to_vec());
     if tag.len() != k || t.len() != k || phase.len() != k {
-        return Err(value_error(
-            "tag, time_s and tx_phase need one entry per reply",
-        ));
+        return Err(value_error("tag, time_s and tx_phase need one entry per reply"));
     }
     if tag.iter().any(|&x| x < 0) {
         return Err(value_error("tag indices must be non-negative"));
     }
     Ok((0..k)
-        .map(|i| StreamHeader {
-            tag: tag[i] as usize,
-            time_s: t[i],
-            tx_phase: (phase[i] >= 0).then_some(phase[i] as usize),
-        })
+        .map(|i| StreamHeader { tag: tag[i] as usize, time_s: t[i], tx_phase: (phase[i] >= 0).then_some(phase[i] as usize) })
         .collect())
 }
 
@@ -658,16 +510,9 @@ impl Engine {
         use scattertrack_runtime::dsp::DspSetup;
         use scattertrack_runtime::{Pacing, RuntimeConfig};
         if o.rx.len() != r {
-            return Err(value_error(format!(
-                "{} rx antennas for windows of {r} rx",
-                o.rx.len()
-            )));
+            return Err(value_error(format!("{} rx antennas for windows of {r} rx", o.rx.len())));
         }
-        if let Some(bad) =
-            o.rx.iter()
-                .chain(std::iter::once(&o.tx))
-                .find(|&&x| x >= self.antennas)
-        {
+        if let Some(bad) = o.rx.iter().chain(std::iter::once(&o.tx)).find(|&&x| x >= self.antennas) {
             return Err(value_error(format!("antenna index {bad} out of range")));
         }
         if let Some(s) = o.speed {
@@ -685,16 +530,12 @@ impl Engine {
         };
         setup.validate(r).map_err(|e| value_error(e.to_string()))?;
         let pool = scattertrack_runtime::dsp::BufferPool::default();
-        let mut fusion = setup
-            .fusion(&pool)
-            .map_err(|e| value_error(e.to_string()))?;
+        let mut fusion = setup.fusion(&pool).map_err(|e| value_error(e.to_string()))?;
         let workers = o.workers;
         let config = RuntimeConfig {
             workers,
             queue_depth: o.queue_depth,
-            pacing: o
-                .speed
-                .map_or(Pacing::AsFastAsPossible, |speed| Pacing::Recorded { speed }),
+            pacing: o.speed.map_or(Pacing::AsFastAsPossible, |speed| Pacing::Recorded { speed }),
             tx: o.tx,
             rx: o.rx,
             frequencies_hz: setup.config.subcarrier_frequencies(),
@@ -702,13 +543,7 @@ impl Engine {
         };
         let inner = &mut self.inner;
         let report = py.detach(move || {
-            scattertrack_runtime::run_source(
-                replies,
-                |_| setup.worker(&pool).expect("validated"),
-                &mut fusion,
-                inner,
-                &config,
-            )
+            scattertrack_runtime::run_source(replies, |_| setup.worker(&pool).expect("validated"), &mut fusion, inner, &config)
         });
         let mut c = Columns::default();
         for out in &report.outputs {
@@ -719,27 +554,14 @@ impl Engine {
         let d = c.into_dict(py)?;
         let latency: Vec<u64> = report.outputs.iter().map(|o| o.latency_ns).collect();
         let receivers: Vec<i64> = report.outputs.iter().map(|o| o.receivers as i64).collect();
-        let stages: Vec<u64> = report
-            .stage_ns
-            .iter()
-            .flat_map(|s| s.iter().copied())
-            .collect();
+        let stages: Vec<u64> = report.stage_ns.iter().flat_map(|s| s.iter().copied()).collect();
         d.set_item("latency_ns", latency.into_pyarray(py))?;
         d.set_item("receivers", receivers.into_pyarray(py))?;
-        d.set_item(
-            "stage_ns",
-            stages
-                .into_pyarray(py)
-                .reshape([report.stage_ns.len(), 5])
-                .map_err(value_error)?,
-        )?;
+        d.set_item("stage_ns", stages.into_pyarray(py).reshape([report.stage_ns.len(), 5]).map_err(value_error)?)?;
         d.set_item("stages", scattertrack_runtime::STAGES.to_vec())?;
         d.set_item("wall_s", report.wall_s)?;
         d.set_item("no_channel", report.no_channel)?;
-        d.set_item(
-            "unreadable",
-            unreadable.map_or(0, |u| u.load(std::sync::atomic::Ordering::Relaxed)),
-        )?;
+        d.set_item("unreadable", unreadable.map_or(0, |u| u.load(std::sync::atomic::Ordering::Relaxed)))?;
         let declined = PyDict::new(py);
         for (reason, count) in &report.declined {
             declined.set_item(reason, count)?;
@@ -760,3 +582,4 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     scene::register(m)?;
     Ok(())
 }
+

@@ -15,11 +15,7 @@ fn phasors(re: &PyReadonlyArray1<f64>, im: &PyReadonlyArray1<f64>) -> PyResult<V
     if re.len() != im.len() {
         return Err(value_error("z_re and z_im must have one entry per read"));
     }
-    Ok(re
-        .iter()
-        .zip(im)
-        .map(|(a, b)| Complex::new(*a, *b))
-        .collect())
+    Ok(re.iter().zip(im).map(|(a, b)| Complex::new(*a, *b)).collect())
 }
 
 fn points(array: &PyReadonlyArray2<f64>, what: &str) -> PyResult<Vec<Vector3<f64>>> {
@@ -27,11 +23,7 @@ fn points(array: &PyReadonlyArray2<f64>, what: &str) -> PyResult<Vec<Vector3<f64
     if view.ncols() != 3 {
         return Err(value_error(format!("{what} must be (n, 3)")));
     }
-    Ok(view
-        .rows()
-        .into_iter()
-        .map(|r| Vector3::new(r[0], r[1], r[2]))
-        .collect())
+    Ok(view.rows().into_iter().map(|r| Vector3::new(r[0], r[1], r[2])).collect())
 }
 
 /// Every tag's phase candidates (`scattertrack_core::locate::phase_candidates`),
@@ -63,34 +55,17 @@ fn locate_batch<'py>(
     hopping_spread_hz: f64,
     max_points: usize,
     threads: usize,
-) -> PyResult<(
-    Bound<'py, PyArray2<f64>>,
-    Bound<'py, numpy::PyArray3<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<f64>>,
-    Bound<'py, PyArray1<i64>>,
-)> {
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, numpy::PyArray3<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<i64>>)> {
     let z = phasors(&z_re, &z_im)?;
     let (k, time_s) = (k.as_slice()?, time_s.as_slice()?);
     let anchor_points = points(&anchors, "anchors")?;
     let antenna = anchor_indices(antenna.as_slice()?, anchor_points.len())?;
     if k.len() != z.len() || time_s.len() != z.len() || antenna.len() != z.len() {
-        return Err(value_error(
-            "z, k, time_s and antenna must have one entry per read",
-        ));
+        return Err(value_error("z, k, time_s and antenna must have one entry per read"));
     }
-    let bounds: Vec<usize> = bounds
-        .as_slice()?
-        .iter()
-        .map(|&b| usize::try_from(b).unwrap_or(usize::MAX))
-        .collect();
-    if bounds.first().is_some_and(|&b| b != 0)
-        || bounds.windows(2).any(|w| w[0] > w[1])
-        || bounds.last().is_some_and(|&b| b != z.len())
-    {
-        return Err(value_error(
-            "bounds must rise from 0 to the number of reads",
-        ));
+    let bounds: Vec<usize> = bounds.as_slice()?.iter().map(|&b| usize::try_from(b).unwrap_or(usize::MAX)).collect();
+    if bounds.first().is_some_and(|&b| b != 0) || bounds.windows(2).any(|w| w[0] > w[1]) || bounds.last().is_some_and(|&b| b != z.len()) {
+        return Err(value_error("bounds must rise from 0 to the number of reads"));
     }
     let (low, high) = (points(&low, "low")?, points(&high, "high")?);
     let tags = bounds.len().saturating_sub(1);
@@ -100,74 +75,34 @@ fn locate_batch<'py>(
     if !(axes == 2 || axes == 3) {
         return Err(value_error("axes must be 2 or 3"));
     }
-    let settings = Settings {
-        temperature,
-        bias_sigma_rad,
-        correlation_s,
-        max_candidates,
-        min_weight,
-        hopping_spread_hz,
-        max_points,
-    };
-    let threads = if threads == 0 {
-        std::thread::available_parallelism().map_or(1, |n| n.get())
-    } else {
-        threads
-    };
+    let settings = Settings { temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points };
+    let threads = if threads == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { threads };
     let found = py.detach(|| {
-        let batch = TagBatch {
-            z: &z,
-            k,
-            time_s,
-            antenna: &antenna,
-            anchors: &anchor_points,
-            bounds: &bounds,
-            low: &low,
-            high: &high,
-        };
+        let batch = TagBatch { z: &z, k, time_s, antenna: &antenna, anchors: &anchor_points, bounds: &bounds, low: &low, high: &high };
         locate::locate_batch(&batch, axes, &settings, threads)
     });
     let all: Vec<&locate::Candidate> = found.iter().flatten().collect();
-    let positions =
-        numpy::ndarray::Array2::from_shape_fn((all.len(), 3), |(i, j)| all[i].position[j]);
-    let covariances = numpy::ndarray::Array3::from_shape_fn((all.len(), 3, 3), |(i, r, c)| {
-        all[i].covariance[(r, c)]
-    });
+    let positions = numpy::ndarray::Array2::from_shape_fn((all.len(), 3), |(i, j)| all[i].position[j]);
+    let covariances = numpy::ndarray::Array3::from_shape_fn((all.len(), 3, 3), |(i, r, c)| all[i].covariance[(r, c)]);
     let weights: Vec<f64> = all.iter().map(|c| c.weight).collect();
     let coherences: Vec<f64> = all.iter().map(|c| c.coherence).collect();
     let mut candidate_bounds = vec![0i64];
     for tag in &found {
         candidate_bounds.push(candidate_bounds.last().copied().unwrap_or(0) + tag.len() as i64);
     }
-    Ok((
-        positions.into_pyarray(py),
-        covariances.into_pyarray(py),
-        weights.into_pyarray(py),
-        coherences.into_pyarray(py),
-        candidate_bounds.into_pyarray(py),
-    ))
+    Ok((positions.into_pyarray(py), covariances.into_pyarray(py), weights.into_pyarray(py), coherences.into_pyarray(py), candidate_bounds.into_pyarray(py)))
 }
 
 fn anchor_indices(antenna: &[i64], anchors: usize) -> PyResult<Vec<usize>> {
     antenna
         .iter()
-        .map(|&a| {
-            usize::try_from(a)
-                .ok()
-                .filter(|&a| a < anchors)
-                .ok_or_else(|| value_error(format!("antenna index {a} is not an anchor")))
-        })
+        .map(|&a| usize::try_from(a).ok().filter(|&a| a < anchors).ok_or_else(|| value_error(format!("antenna index {a} is not an anchor"))))
         .collect()
 }
 
 /// One antenna's (range m, 1-sigma m) from its reads over several channels, or None.
 #[pyfunction]
-fn locate_hop_range(
-    z_re: PyReadonlyArray1<f64>,
-    z_im: PyReadonlyArray1<f64>,
-    k: PyReadonlyArray1<f64>,
-    max_range_m: f64,
-) -> PyResult<Option<(f64, f64)>> {
+fn locate_hop_range(z_re: PyReadonlyArray1<f64>, z_im: PyReadonlyArray1<f64>, k: PyReadonlyArray1<f64>, max_range_m: f64) -> PyResult<Option<(f64, f64)>> {
     let z = phasors(&z_re, &z_im)?;
     let k = k.as_slice()?;
     if k.len() != z.len() {

@@ -6,16 +6,16 @@
 
 use numpy::ndarray::{Array1, Array2, Array3};
 use numpy::{
-    Complex32, Complex64, IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2,
-    PyReadonlyArray4, PyUntypedArrayMethods,
+    Complex32, Complex64, IntoPyArray, PyArray1, PyReadonlyArray1, PyReadonlyArray2, PyReadonlyArray4,
+    PyUntypedArrayMethods,
 };
 use pyo3::prelude::*;
 use pyo3::types::{PyComplex, PyDict};
 
 use scattertrack_dsp::lora::{
-    estimate_clock_error, music, solve_yaw, AngleCombine, ArrayGeometry, ChirpConfig, Corrections,
-    EpochConfig, EpochProcessor, HeadingConfig, Mat3, MusicConfig, PairObservation, PeakFinder,
-    PeakOptions, RangeCoherence, RangeWindow, Vec3, YawGeometry,
+    estimate_clock_error, music, solve_yaw, AngleCombine, ArrayGeometry, ChirpConfig, Corrections, EpochConfig,
+    EpochProcessor, HeadingConfig, Mat3, MusicConfig, PairObservation, PeakFinder, PeakOptions, RangeCoherence,
+    RangeWindow, Vec3, YawGeometry,
 };
 use scattertrack_dsp::Error;
 
@@ -50,9 +50,7 @@ fn mat3(a: Option<PyReadonlyArray2<f64>>, name: &str) -> PyResult<Option<Mat3>> 
             if m.shape() != [3, 3] {
                 return Err(bad(format!("{name} must be 3 x 3")));
             }
-            Ok(Some(std::array::from_fn(|i| {
-                std::array::from_fn(|j| m[(i, j)])
-            })))
+            Ok(Some(std::array::from_fn(|i| std::array::from_fn(|j| m[(i, j)]))))
         }
     }
 }
@@ -127,11 +125,7 @@ impl LoraEpochProcessor {
             (_, Some(e)) => ArrayGeometry::new(rows3(e, "array_elements")?).map_err(lora_error)?,
             ("triangle", None) => ArrayGeometry::triangle(0.16),
             ("linear", None) => ArrayGeometry::linear(0.16, 3),
-            (other, None) => {
-                return Err(bad(format!(
-                    "array must be triangle or linear, got {other}"
-                )))
-            }
+            (other, None) => return Err(bad(format!("array must be triangle or linear, got {other}"))),
         };
         c.music = MusicConfig {
             grid_step_rad: music_grid_deg.to_radians(),
@@ -141,10 +135,7 @@ impl LoraEpochProcessor {
         if let Some(cal) = calibration_rad {
             let a = cal.as_array();
             if a.shape() != [c.array.len(), 8] {
-                return Err(bad(format!(
-                    "calibration_rad must be ({}, 8)",
-                    c.array.len()
-                )));
+                return Err(bad(format!("calibration_rad must be ({}, 8)", c.array.len())));
             }
             c.calibration_rad = a.iter().copied().collect();
         }
@@ -156,42 +147,25 @@ impl LoraEpochProcessor {
             "pair-sums" => RangeCoherence::PairSums,
             "across-tags" => RangeCoherence::AcrossTags,
             other => {
-                return Err(bad(format!(
-                    "range_coherence must be per-tag, pair-sums or across-tags, got {other}"
-                )))
+                return Err(bad(format!("range_coherence must be per-tag, pair-sums or across-tags, got {other}")))
             }
         };
-        let fringe =
-            scattertrack_dsp::SPEED_OF_LIGHT / (2.0 * (c.channels_hz[1] - c.channels_hz[0]).abs());
+        let fringe = scattertrack_dsp::SPEED_OF_LIGHT / (2.0 * (c.channels_hz[1] - c.channels_hz[0]).abs());
         c.range_window = if range_full {
             RangeWindow::Full
         } else {
-            RangeWindow::AroundTiming {
-                half_width_m: range_window_m.unwrap_or(fringe),
-            }
+            RangeWindow::AroundTiming { half_width_m: range_window_m.unwrap_or(fringe) }
         };
         c.magnitude_weights = magnitude_weights;
         c.angle_combine = match angle_combine {
             "harmonic" => AngleCombine::HarmonicMean,
             "mean-direction" => AngleCombine::MeanDirection,
-            other => {
-                return Err(bad(format!(
-                    "angle_combine must be harmonic or mean-direction, got {other}"
-                )))
-            }
+            other => return Err(bad(format!("angle_combine must be harmonic or mean-direction, got {other}"))),
         };
-        c.heading = HeadingConfig {
-            min_omega_rad_s,
-            chirp_rate_hz_per_s: Some(c.chirp.chirp_rate_hz_per_s()),
-        };
+        c.heading = HeadingConfig { min_omega_rad_s, chirp_rate_hz_per_s: Some(c.chirp.chirp_rate_hz_per_s()) };
         c.ignore_doppler = ignore_doppler;
-        c.peak = PeakOptions {
-            search_hz: peak_search_hz,
-            ..PeakOptions::default()
-        };
-        Ok(Self {
-            inner: EpochProcessor::new(c).map_err(lora_error)?,
-        })
+        c.peak = PeakOptions { search_hz: peak_search_hz, ..PeakOptions::default() };
+        Ok(Self { inner: EpochProcessor::new(c).map_err(lora_error)? })
     }
 
     /// Samples per chirp `2^SF`.
@@ -215,14 +189,8 @@ impl LoraEpochProcessor {
     /// Received carriers `f_j + s_k/2`, Hz, (2, 4).
     fn carriers_hz<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyAny>> {
         let c = self.inner.config();
-        let v: Vec<f64> = (0..2)
-            .flat_map(|j| (0..4).map(move |k| (j, k)))
-            .map(|(j, k)| c.carrier_hz(j, k))
-            .collect();
-        Ok(Array2::from_shape_vec((2, 4), v)
-            .expect("2 x 4")
-            .into_pyarray(py)
-            .into_any())
+        let v: Vec<f64> = (0..2).flat_map(|j| (0..4).map(move |k| (j, k))).map(|(j, k)| c.carrier_hz(j, k)).collect();
+        Ok(Array2::from_shape_vec((2, 4), v).expect("2 x 4").into_pyarray(py).into_any())
     }
 
     /// One epoch: `samples` complex64 (2, 4, M, N). Returns a dict (see the
@@ -262,74 +230,40 @@ impl LoraEpochProcessor {
             Err(_) => samples.as_array().iter().copied().collect(),
         };
         let inner = &mut self.inner;
-        let f = py
-            .detach(move || inner.process(&flat, &corrections))
-            .map_err(lora_error)?;
+        let f = py.detach(move || inner.process(&flat, &corrections)).map_err(lora_error)?;
 
         let d = PyDict::new(py);
         let per_chirp = |g: &dyn Fn(&scattertrack_dsp::lora::Peak) -> f64| -> Array3<f64> {
             Array3::from_shape_vec((2, 4, m), f.peaks.iter().map(g).collect()).expect("2 x 4 x M")
         };
-        d.set_item(
-            "frequency_hz",
-            per_chirp(&|p| p.frequency_hz).into_pyarray(py),
-        )?;
-        d.set_item(
-            "frequency_sigma_hz",
-            per_chirp(&|p| p.frequency_sigma_hz).into_pyarray(py),
-        )?;
-        d.set_item(
-            "phase_sigma_rad",
-            per_chirp(&|p| p.phase_sigma_rad).into_pyarray(py),
-        )?;
-        d.set_item(
-            "snr_db",
-            per_chirp(&|p| 10.0 * p.snr.max(1e-30).log10()).into_pyarray(py),
-        )?;
+        d.set_item("frequency_hz", per_chirp(&|p| p.frequency_hz).into_pyarray(py))?;
+        d.set_item("frequency_sigma_hz", per_chirp(&|p| p.frequency_sigma_hz).into_pyarray(py))?;
+        d.set_item("phase_sigma_rad", per_chirp(&|p| p.phase_sigma_rad).into_pyarray(py))?;
+        d.set_item("snr_db", per_chirp(&|p| 10.0 * p.snr.max(1e-30).log10()).into_pyarray(py))?;
         let amplitude: Vec<Complex64> = f.peaks.iter().map(|p| p.amplitude_centre).collect();
-        d.set_item(
-            "amplitude",
-            Array3::from_shape_vec((2, 4, m), amplitude)
-                .expect("shape")
-                .into_pyarray(py),
-        )?;
+        d.set_item("amplitude", Array3::from_shape_vec((2, 4, m), amplitude).expect("shape").into_pyarray(py))?;
         let start: Vec<Complex64> = f.peaks.iter().map(|p| p.amplitude).collect();
-        d.set_item(
-            "amplitude_start",
-            Array3::from_shape_vec((2, 4, m), start)
-                .expect("shape")
-                .into_pyarray(py),
-        )?;
+        d.set_item("amplitude_start", Array3::from_shape_vec((2, 4, m), start).expect("shape").into_pyarray(py))?;
         d.set_item(
             "phase_rad",
-            Array3::from_shape_vec((2, 4, m), f.phases_rad.clone())
-                .expect("shape")
-                .into_pyarray(py),
+            Array3::from_shape_vec((2, 4, m), f.phases_rad.clone()).expect("shape").into_pyarray(py),
         )?;
         d.set_item(
             "carriers_hz",
-            Array2::from_shape_vec((2, 4), f.carriers_hz.clone())
-                .expect("shape")
-                .into_pyarray(py),
+            Array2::from_shape_vec((2, 4), f.carriers_hz.clone()).expect("shape").into_pyarray(py),
         )?;
         d.set_item("reference_time_s", f.reference_time_s)?;
         d.set_item(
             "pair_mean_hz",
-            Array3::from_shape_vec((2, m, 2), f.pair_mean_hz.clone())
-                .expect("shape")
-                .into_pyarray(py),
+            Array3::from_shape_vec((2, m, 2), f.pair_mean_hz.clone()).expect("shape").into_pyarray(py),
         )?;
         d.set_item(
             "rotational_hz",
-            Array3::from_shape_vec((2, m, 2), f.rotational_hz.clone())
-                .expect("shape")
-                .into_pyarray(py),
+            Array3::from_shape_vec((2, m, 2), f.rotational_hz.clone()).expect("shape").into_pyarray(py),
         )?;
         d.set_item(
             "translational_hz",
-            Array2::from_shape_vec((2, 4), f.translational_hz.clone())
-                .expect("shape")
-                .into_pyarray(py),
+            Array2::from_shape_vec((2, 4), f.translational_hz.clone()).expect("shape").into_pyarray(py),
         )?;
         d.set_item("timing_hz", f.timing_hz)?;
         d.set_item("timing_sigma_hz", f.timing_sigma_hz)?;
@@ -341,10 +275,7 @@ impl LoraEpochProcessor {
         d.set_item("range_power", f.range.power)?;
         d.set_item("range_ambiguity", f.range.ambiguity)?;
         d.set_item("range_resolution_m", f.range.resolution_m)?;
-        d.set_item(
-            "antenna_ranges_m",
-            Array1::from(f.antenna_ranges_m.clone()).into_pyarray(py),
-        )?;
+        d.set_item("antenna_ranges_m", Array1::from(f.antenna_ranges_m.clone()).into_pyarray(py))?;
         let tags = |g: &dyn Fn(&scattertrack_dsp::lora::MusicEstimate) -> f64| -> Bound<'py, PyArray1<f64>> {
             f.tag_angles.iter().map(g).collect::<Vec<f64>>().into_pyarray(py)
         };
@@ -391,26 +322,13 @@ fn lora_peak<'py>(
     search_hz: Option<f64>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let c = ChirpConfig::new(spreading_factor, bandwidth_hz).map_err(lora_error)?;
-    let mut finder = PeakFinder::new(
-        c,
-        PeakOptions {
-            search_hz,
-            ..PeakOptions::default()
-        },
-    )
-    .map_err(lora_error)?;
+    let mut finder = PeakFinder::new(c, PeakOptions { search_hz, ..PeakOptions::default() }).map_err(lora_error)?;
     let s: Vec<Complex32> = samples.as_array().iter().copied().collect();
     let p = finder.process(&s).map_err(lora_error)?;
     let d = PyDict::new(py);
     d.set_item("frequency_hz", p.frequency_hz)?;
-    d.set_item(
-        "amplitude",
-        PyComplex::from_doubles(py, p.amplitude.re, p.amplitude.im),
-    )?;
-    d.set_item(
-        "amplitude_centre",
-        PyComplex::from_doubles(py, p.amplitude_centre.re, p.amplitude_centre.im),
-    )?;
+    d.set_item("amplitude", PyComplex::from_doubles(py, p.amplitude.re, p.amplitude.im))?;
+    d.set_item("amplitude_centre", PyComplex::from_doubles(py, p.amplitude_centre.re, p.amplitude_centre.im))?;
     d.set_item("snr", p.snr)?;
     d.set_item("noise_power", p.noise_power)?;
     d.set_item("frequency_sigma_hz", p.frequency_sigma_hz)?;
@@ -436,12 +354,8 @@ fn lora_music<'py>(
         Some(e) => ArrayGeometry::new(rows3(e, "elements")?).map_err(lora_error)?,
         None => ArrayGeometry::triangle(0.16),
     };
-    let config = MusicConfig {
-        grid_step_rad: grid_deg.to_radians(),
-        focus,
-        sources,
-        ..MusicConfig::for_array(&geometry)
-    };
+    let config =
+        MusicConfig { grid_step_rad: grid_deg.to_radians(), focus, sources, ..MusicConfig::for_array(&geometry) };
     let phases: Vec<f64> = phases_rad.as_array().iter().copied().collect();
     let freqs: Vec<f64> = frequencies_hz.as_array().to_vec();
     let e = music(&geometry, &config, &phases, &freqs).map_err(lora_error)?;
@@ -474,26 +388,14 @@ fn lora_heading<'py>(
     chirp_rate_hz_per_s: Option<f64>,
     min_omega_rad_s: f64,
 ) -> PyResult<Option<Bound<'py, PyDict>>> {
-    let (d, f, s) = (
-        differences_hz.as_array(),
-        carriers_hz.as_array(),
-        sigmas_hz.as_array(),
-    );
+    let (d, f, s) = (differences_hz.as_array(), carriers_hz.as_array(), sigmas_hz.as_array());
     let (a, b) = (rows3(tags_a, "tags_a")?, rows3(tags_b, "tags_b")?);
     let n = d.len();
     if f.len() != n || s.len() != n || a.len() != n || b.len() != n {
-        return Err(DspError::new_err(
-            "shape: one carrier, sigma and tag pair per difference",
-        ));
+        return Err(DspError::new_err("shape: one carrier, sigma and tag pair per difference"));
     }
     let observations: Vec<PairObservation> = (0..n)
-        .map(|i| PairObservation {
-            tag_a: a[i],
-            tag_b: b[i],
-            carrier_hz: f[i],
-            difference_hz: d[i],
-            sigma_hz: s[i],
-        })
+        .map(|i| PairObservation { tag_a: a[i], tag_b: b[i], carrier_hz: f[i], difference_hz: d[i], sigma_hz: s[i] })
         .collect();
     let geometry = YawGeometry {
         roll_pitch: mat3(Some(roll_pitch), "roll_pitch")?.expect("given"),
@@ -502,13 +404,8 @@ fn lora_heading<'py>(
         velocity: vec3(velocity, "velocity")?,
         range_m,
     };
-    let config = HeadingConfig {
-        min_omega_rad_s,
-        chirp_rate_hz_per_s,
-    };
-    let Some(h) = solve_yaw(&observations, &geometry, &config) else {
-        return Ok(None);
-    };
+    let config = HeadingConfig { min_omega_rad_s, chirp_rate_hz_per_s };
+    let Some(h) = solve_yaw(&observations, &geometry, &config) else { return Ok(None) };
     let out = PyDict::new(py);
     out.set_item("yaw", h.yaw)?;
     out.set_item("sigma_rad", h.sigma_rad)?;
@@ -528,15 +425,9 @@ fn lora_clock_error<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let p = peaks_hz.as_array();
     if p.ncols() != 4 {
-        return Err(DspError::new_err(
-            "shape: peaks_hz must be (observations, 4)",
-        ));
+        return Err(DspError::new_err("shape: peaks_hz must be (observations, 4)"));
     }
-    let rows: Vec<[f64; 4]> = p
-        .rows()
-        .into_iter()
-        .map(|r| [r[0], r[1], r[2], r[3]])
-        .collect();
+    let rows: Vec<[f64; 4]> = p.rows().into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
     let e = estimate_clock_error(&tag_shifts_hz, &pairs, &rows).map_err(lora_error)?;
     let d = PyDict::new(py);
     d.set_item("clock_error", e.clock_error)?;

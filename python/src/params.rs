@@ -36,14 +36,8 @@ fn value_from_py(name: &str, object: &Bound<'_, PyAny>) -> PyResult<Value> {
         });
     }
     object.extract::<f64>().map(Value::Float).map_err(|_| {
-        let type_name = object
-            .get_type()
-            .name()
-            .map(|n| n.to_string())
-            .unwrap_or_default();
-        value_error(format!(
-            "invalid parameter '{name}': expected a number, bool, text or None, got a {type_name}"
-        ))
+        let type_name = object.get_type().name().map(|n| n.to_string()).unwrap_or_default();
+        value_error(format!("invalid parameter '{name}': expected a number, bool, text or None, got a {type_name}"))
     })
 }
 
@@ -59,9 +53,7 @@ fn value_to_py<'py>(py: Python<'py>, value: &Value) -> PyResult<Bound<'py, PyAny
 
 /// A dict of name → value as (name, value) pairs, in the dict's order.
 fn values_from_dict(params: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String, Value)>> {
-    let Some(params) = params else {
-        return Ok(Vec::new());
-    };
+    let Some(params) = params else { return Ok(Vec::new()) };
     params
         .iter()
         .map(|(key, value)| {
@@ -72,10 +64,7 @@ fn values_from_dict(params: Option<&Bound<'_, PyDict>>) -> PyResult<Vec<(String,
         .collect()
 }
 
-fn values_to_dict<'py>(
-    py: Python<'py>,
-    values: &[(String, Value)],
-) -> PyResult<Bound<'py, PyDict>> {
+fn values_to_dict<'py>(py: Python<'py>, values: &[(String, Value)]) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     for (name, value) in values {
         d.set_item(name, value_to_py(py, value)?)?;
@@ -115,51 +104,22 @@ fn schema_to_dict<'py>(py: Python<'py>, s: &Schema) -> PyResult<Bound<'py, PyDic
 /// `Range` writes it: "> 0", "[0, 1]"), `unit`, `description`.
 fn schema_from_dict(row: &Bound<'_, PyDict>) -> PyResult<Schema> {
     let item = |key: &str| row.get_item(key);
-    let name: String = item("name")?
-        .ok_or_else(|| value_error("a parameter row needs a 'name'"))?
-        .extract()?;
-    let text = |key: &str| -> PyResult<String> {
-        Ok(item(key)?
-            .map(|v| v.extract())
-            .transpose()?
-            .unwrap_or_default())
-    };
+    let name: String = item("name")?.ok_or_else(|| value_error("a parameter row needs a 'name'"))?.extract()?;
+    let text = |key: &str| -> PyResult<String> { Ok(item(key)?.map(|v| v.extract()).transpose()?.unwrap_or_default()) };
     let kind = match text("kind")?.as_str() {
         "bool" => Kind::Bool,
         "integer" => Kind::Integer,
         "float" => Kind::Float,
-        "choice" => Kind::Choice(
-            item("choices")?
-                .map(|v| v.extract())
-                .transpose()?
-                .unwrap_or_default(),
-        ),
-        other => {
-            return Err(value_error(format!(
-            "parameter row '{name}': kind must be bool, integer, float or choice, got {other:?}"
-        )))
-        }
+        "choice" => Kind::Choice(item("choices")?.map(|v| v.extract()).transpose()?.unwrap_or_default()),
+        other => return Err(value_error(format!("parameter row '{name}': kind must be bool, integer, float or choice, got {other:?}"))),
     };
-    let range: Range = text("range")?
-        .parse()
-        .map_err(|e| value_error(format!("parameter row '{name}': {e}")))?;
+    let range: Range = text("range")?.parse().map_err(|e| value_error(format!("parameter row '{name}': {e}")))?;
     let default = match item("default")? {
         Some(v) => value_from_py(&name, &v)?,
         None => Value::None,
     };
-    let optional = item("optional")?
-        .map(|v| v.extract())
-        .transpose()?
-        .unwrap_or(false);
-    Ok(Schema {
-        kind,
-        optional,
-        range,
-        unit: text("unit")?,
-        description: text("description")?,
-        default,
-        name,
-    })
+    let optional = item("optional")?.map(|v| v.extract()).transpose()?.unwrap_or(false);
+    Ok(Schema { kind, optional, range, unit: text("unit")?, description: text("description")?, default, name })
 }
 
 /// One method's parameter table: its rows (name, type, default, range,
@@ -175,21 +135,14 @@ impl ParameterTable {
     /// must pass its own row's check.
     #[new]
     fn new(label: &str, rows: Vec<Bound<'_, PyDict>>) -> PyResult<Self> {
-        let rows = rows
-            .iter()
-            .map(schema_from_dict)
-            .collect::<PyResult<Vec<_>>>()?;
-        Ok(Self {
-            inner: Schemas::from_rows(label, rows).map_err(value_error)?,
-        })
+        let rows = rows.iter().map(schema_from_dict).collect::<PyResult<Vec<_>>>()?;
+        Ok(Self { inner: Schemas::from_rows(label, rows).map_err(value_error)? })
     }
 
     /// The table of a core method (ValueError for an unknown or Python-side one).
     #[staticmethod]
     fn of_method(method: &str) -> PyResult<Self> {
-        Ok(Self {
-            inner: registry::schemas(method).map_err(value_error)?,
-        })
+        Ok(Self { inner: registry::schemas(method).map_err(value_error)? })
     }
 
     /// Whose parameters these are (a method name).
@@ -200,12 +153,7 @@ impl ParameterTable {
 
     /// Every row as a dict, in table order.
     fn rows<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyList>> {
-        let rows = self
-            .inner
-            .rows
-            .iter()
-            .map(|s| schema_to_dict(py, s))
-            .collect::<PyResult<Vec<_>>>()?;
+        let rows = self.inner.rows.iter().map(|s| schema_to_dict(py, s)).collect::<PyResult<Vec<_>>>()?;
         PyList::new(py, rows)
     }
 
@@ -216,35 +164,19 @@ impl ParameterTable {
 
     /// name → default.
     fn defaults<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
-        let values: Vec<(String, Value)> = self
-            .inner
-            .rows
-            .iter()
-            .map(|s| (s.name.clone(), s.default.clone()))
-            .collect();
+        let values: Vec<(String, Value)> = self.inner.rows.iter().map(|s| (s.name.clone(), s.default.clone())).collect();
         values_to_dict(py, &values)
     }
 
     /// `params` (name → value) checked and converted to each row's type;
     /// ValueError naming the parameter, what it must be and the value.
-    fn check<'py>(
-        &self,
-        py: Python<'py>,
-        params: &Bound<'py, PyDict>,
-    ) -> PyResult<Bound<'py, PyDict>> {
-        let values = self
-            .inner
-            .convert_all(&values_from_dict(Some(params))?)
-            .map_err(value_error)?;
+    fn check<'py>(&self, py: Python<'py>, params: &Bound<'py, PyDict>) -> PyResult<Bound<'py, PyDict>> {
+        let values = self.inner.convert_all(&values_from_dict(Some(params))?).map_err(value_error)?;
         values_to_dict(py, &values)
     }
 
     /// `(name, text)` pairs (the command line's NAME=TEXT) as typed values.
-    fn parse<'py>(
-        &self,
-        py: Python<'py>,
-        pairs: Vec<(String, String)>,
-    ) -> PyResult<Bound<'py, PyDict>> {
+    fn parse<'py>(&self, py: Python<'py>, pairs: Vec<(String, String)>) -> PyResult<Bound<'py, PyDict>> {
         let values = self.inner.parse_all(&pairs).map_err(value_error)?;
         values_to_dict(py, &values)
     }

@@ -33,15 +33,10 @@ pub struct Scene {
 
 /// Three floats from a position-like attribute (array, list or tuple).
 fn triple(value: &Bound<'_, PyAny>, what: &str) -> PyResult<Vector3<f64>> {
-    let v: Vec<f64> = value
-        .extract()
-        .map_err(|_| value_error(format!("{what} must be 3 numbers")))?;
+    let v: Vec<f64> = value.extract().map_err(|_| value_error(format!("{what} must be 3 numbers")))?;
     match v.as_slice() {
         [x, y, z] => Ok(Vector3::new(*x, *y, *z)),
-        _ => Err(value_error(format!(
-            "{what} must have 3 entries, got {}",
-            v.len()
-        ))),
+        _ => Err(value_error(format!("{what} must have 3 entries, got {}", v.len()))),
     }
 }
 
@@ -50,9 +45,7 @@ fn role(text: &str) -> PyResult<Role> {
         "txrx" => Ok(Role::TxRx),
         "tx" => Ok(Role::Tx),
         "rx" => Ok(Role::Rx),
-        other => Err(value_error(format!(
-            "antenna role must be txrx, tx or rx, got {other}"
-        ))),
+        other => Err(value_error(format!("antenna role must be txrx, tx or rx, got {other}"))),
     }
 }
 
@@ -77,26 +70,14 @@ pub fn core_scene(scene: &Bound<'_, PyAny>) -> PyResult<CoreScene> {
         let id: i64 = a.getattr("id")?.extract()?;
         let position = triple(&a.getattr("position")?, &format!("antenna {id} position"))?;
         let phase_offset_rad: f64 = a.getattr("phase_offset_rad")?.extract()?;
-        let role = if helper {
-            role(&a.getattr("role")?.extract::<String>()?)?
-        } else {
-            Role::TxRx
-        };
-        antennas.push(Antenna {
-            id,
-            position,
-            phase_offset_rad,
-            role,
-        });
+        let role = if helper { role(&a.getattr("role")?.extract::<String>()?)? } else { Role::TxRx };
+        antennas.push(Antenna { id, position, phase_offset_rad, role });
     }
     let region = scene.getattr("region")?;
     let region = if region.is_none() {
         None
     } else {
-        Some(Region {
-            min: triple(&region.getattr("min")?, "region min")?,
-            max: triple(&region.getattr("max")?, "region max")?,
-        })
+        Some(Region { min: triple(&region.getattr("min")?, "region min")?, max: triple(&region.getattr("max")?, "region max")? })
     };
     let mut channels = Vec::new();
     if !helper {
@@ -108,17 +89,8 @@ pub fn core_scene(scene: &Bound<'_, PyAny>) -> PyResult<CoreScene> {
             });
         }
     }
-    CoreScene::new(
-        dimensions,
-        plane_z.unwrap_or(0.0),
-        phase_sign,
-        phase_period,
-        phase_noise_rad,
-        antennas,
-        region,
-        channels,
-    )
-    .map_err(value_error)
+    CoreScene::new(dimensions, plane_z.unwrap_or(0.0), phase_sign, phase_period, phase_noise_rad, antennas, region, channels)
+        .map_err(value_error)
 }
 
 #[pymethods]
@@ -127,9 +99,7 @@ impl Scene {
     /// scene the core rejects.
     #[new]
     fn new(scene: &Bound<'_, PyAny>) -> PyResult<Self> {
-        Ok(Self {
-            inner: core_scene(scene)?,
-        })
+        Ok(Self { inner: core_scene(scene)? })
     }
 
     /// 2 or 3.

@@ -35,9 +35,7 @@ use nalgebra::Vector3;
 use scattertrack_core::filter::{predict, update_scalar};
 use scattertrack_core::model::{range, MotionModel, StateMatrix, StateVector};
 use scattertrack_core::scene::{Scene, SPEED_OF_LIGHT};
-use scattertrack_core::track::{
-    initial_hypotheses, Glac, GlacParams, InitialState, Measurement, PhaseRead, Tracker,
-};
+use scattertrack_core::track::{initial_hypotheses, Glac, GlacParams, InitialState, Measurement, PhaseRead, Tracker};
 
 /// Loop radius of `common::truth`, metres.
 const LOOP_RADIUS_M: f64 = 0.2;
@@ -47,12 +45,7 @@ const SPEED_M_S: f64 = 0.1;
 const SEED: u64 = 3;
 
 fn options(dimensions: usize, duration: f64) -> Options {
-    Options {
-        dimensions,
-        speed: SPEED_M_S,
-        duration,
-        ..Default::default()
-    }
+    Options { dimensions, speed: SPEED_M_S, duration, ..Default::default() }
 }
 
 /// A periodic read stream: `n_periods` whole loops, so that reads shifted
@@ -68,12 +61,7 @@ fn periodic_stream(dimensions: usize, n_periods: usize) -> Stream {
     let period = std::f64::consts::TAU * LOOP_RADIUS_M / SPEED_M_S;
     let span_s = period * n_periods as f64;
     let (scene, reads, truths) = simulate(&options(dimensions, span_s), SEED);
-    Stream {
-        scene,
-        reads,
-        truths,
-        span_s,
-    }
+    Stream { scene, reads, truths, span_s }
 }
 
 /// Steps `stream` cyclically: read `i` of pass `k` is read `i` with its time
@@ -86,11 +74,7 @@ struct Cycler<'a> {
 
 impl<'a> Cycler<'a> {
     fn new(stream: &'a Stream) -> Self {
-        Self {
-            stream,
-            index: 0,
-            offset_s: 0.0,
-        }
+        Self { stream, index: 0, offset_s: 0.0 }
     }
 
     #[inline]
@@ -178,9 +162,7 @@ fn converged_step(c: &mut Criterion) {
             stats.reinitialisations - stats_before.reinitialisations,
             worst_after.unwrap_or(f64::NAN) * 1e3
         );
-        if stats.reinitialisations != stats_before.reinitialisations
-            || tracker.hypothesis_count() != 1
-        {
+        if stats.reinitialisations != stats_before.reinitialisations || tracker.hypothesis_count() != 1 {
             eprintln!(
                 "WARNING glac/converged_step/{label}: the tracker did not stay converged during timing: \
                  the number above mixes in other steps"
@@ -208,12 +190,7 @@ fn initialising_step(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(3));
     for (label, dimensions) in [("3d", 3usize), ("2d", 2)] {
         let (scene, reads, _) = simulate(&options(dimensions, 3.0), SEED);
-        let stream = Stream {
-            scene,
-            reads,
-            truths: Vec::new(),
-            span_s: 0.0,
-        };
+        let stream = Stream { scene, reads, truths: Vec::new(), span_s: 0.0 };
         let (n_init, live) = initialising_reads(&stream);
         eprintln!(
             "glac/initialising_step/{label}: initialised after {n_init} reads ({:.2} s); \
@@ -237,12 +214,7 @@ fn initialising_step(c: &mut Criterion) {
         });
 
         // Everything a fresh tracker does in its first half second.
-        let window: Vec<PhaseRead> = stream
-            .reads
-            .iter()
-            .copied()
-            .filter(|m| m.time_s < 0.5)
-            .collect();
+        let window: Vec<PhaseRead> = stream.reads.iter().copied().filter(|m| m.time_s < 0.5).collect();
         group.throughput(Throughput::Elements(window.len() as u64));
         group.bench_function(BenchmarkId::new("first_half_second", label), |b| {
             b.iter_batched_ref(
@@ -304,31 +276,13 @@ fn initial(c: &mut Criterion) {
         let settings = InitialState::default();
         let (_, hypotheses) = initial_hypotheses(&scene, &window, &settings, range_sigma, true)
             .expect("initial state pruning found no hypothesis");
-        eprintln!(
-            "initial/initial_hypotheses/{label}: {} reads in 0.35 s -> {} hypotheses",
-            window.len(),
-            hypotheses.len()
-        );
+        eprintln!("initial/initial_hypotheses/{label}: {} reads in 0.35 s -> {} hypotheses", window.len(), hypotheses.len());
         group.bench_function(BenchmarkId::new("initial_hypotheses", label), |b| {
-            b.iter(|| {
-                black_box(initial_hypotheses(
-                    &scene,
-                    black_box(&window),
-                    &settings,
-                    range_sigma,
-                    true,
-                ))
-            })
+            b.iter(|| black_box(initial_hypotheses(&scene, black_box(&window), &settings, range_sigma, true)))
         });
     }
     group.finish();
 }
 
-criterion_group!(
-    benches,
-    converged_step,
-    initialising_step,
-    ekf_predict_update,
-    initial
-);
+criterion_group!(benches, converged_step, initialising_step, ekf_predict_update, initial);
 criterion_main!(benches);

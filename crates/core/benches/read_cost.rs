@@ -38,13 +38,7 @@ struct Row {
 /// tracker is deterministic, so each pass does the same work) and keeps
 /// each read's fastest pass: a read the scheduler preempted on a shared
 /// machine (a 4 ms tick) is not the tracker's cost.
-fn record(
-    options: &Options,
-    params: &GlacParams,
-    converged: &mut Row,
-    initialising: &mut Row,
-    whole: Option<&mut Row>,
-) {
+fn record(options: &Options, params: &GlacParams, converged: &mut Row, initialising: &mut Row, whole: Option<&mut Row>) {
     let mut whole = whole;
     for seed in 0..SEEDS {
         let (scene, reads, _) = simulate(options, seed);
@@ -87,21 +81,12 @@ fn record(
 /// `n_tags` tags on 2D circles (10 cm/s, each at its own phase of the
 /// loop), 30 reads/s each over 4 antennas, interleaved in time order as a
 /// reader returns them: the scene and (tag, read) in time order.
-fn many_tag_reads(
-    n_tags: usize,
-    duration_s: f64,
-) -> (scattertrack_core::scene::Scene, Vec<(usize, PhaseRead)>) {
-    let options = Options {
-        dimensions: 2,
-        duration: 0.1,
-        ..Default::default()
-    };
+fn many_tag_reads(n_tags: usize, duration_s: f64) -> (scattertrack_core::scene::Scene, Vec<(usize, PhaseRead)>) {
+    let options = Options { dimensions: 2, duration: 0.1, ..Default::default() };
     let (scene, _, _) = simulate(&options, 1);
     let mut state = 99u64;
     let mut uniform = move || {
-        state = state
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
+        state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
     };
     let frequency = 915.25e6;
@@ -116,19 +101,9 @@ fn many_tag_reads(
             let p = Vector3::new(0.7 + 0.2 * angle.cos(), 0.35 + 0.2 * angle.sin(), 0.0);
             let d = (p - scene.antennas[a].position).norm();
             // Box–Muller: σφ = 0.1 rad.
-            let noise =
-                0.1 * (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
-            let phase =
-                (scene.ideal_phase(a, frequency, d) + noise).rem_euclid(std::f64::consts::TAU);
-            reads.push((
-                tag,
-                PhaseRead {
-                    time_s: t,
-                    antenna: a,
-                    frequency_hz: frequency,
-                    phase_rad: phase,
-                },
-            ));
+            let noise = 0.1 * (-2.0 * uniform().ln()).sqrt() * (std::f64::consts::TAU * uniform()).cos();
+            let phase = (scene.ideal_phase(a, frequency, d) + noise).rem_euclid(std::f64::consts::TAU);
+            reads.push((tag, PhaseRead { time_s: t, antenna: a, frequency_hz: frequency, phase_rad: phase }));
         }
         k += 1;
     }
@@ -142,13 +117,8 @@ fn many_tags(n_tags: usize, duration_s: f64, warm_s: f64, params: &GlacParams) -
     let (scene, reads) = many_tag_reads(n_tags, duration_s);
     // As the engine makes them: one scene and parameter table for all.
     let prototype = Glac::new(scene, params.clone()).unwrap();
-    let mut trackers: Vec<Box<dyn Tracker>> =
-        (0..n_tags).map(|_| prototype.fresh().unwrap()).collect();
-    let mut row = Row {
-        name: "",
-        costs_ns: Vec::with_capacity(reads.len()),
-        max_expanded: 0,
-    };
+    let mut trackers: Vec<Box<dyn Tracker>> = (0..n_tags).map(|_| prototype.fresh().unwrap()).collect();
+    let mut row = Row { name: "", costs_ns: Vec::with_capacity(reads.len()), max_expanded: 0 };
     for (tag, read) in &reads {
         let start = Instant::now();
         let estimate = trackers[*tag].step(&Measurement::Phase(*read));
@@ -157,11 +127,7 @@ fn many_tags(n_tags: usize, duration_s: f64, warm_s: f64, params: &GlacParams) -
             row.costs_ns.push(ns);
         }
     }
-    row.max_expanded = trackers
-        .iter()
-        .map(|t| t.stats().max_expanded_per_read)
-        .max()
-        .unwrap_or(0);
+    row.max_expanded = trackers.iter().map(|t| t.stats().max_expanded_per_read).max().unwrap_or(0);
     row
 }
 
@@ -171,20 +137,10 @@ fn many_tags(n_tags: usize, duration_s: f64, warm_s: f64, params: &GlacParams) -
 /// the next tag's state. The engine's own per-step times of the converged
 /// reads after `warm_s`; and the batches' wall time per read (what the
 /// grouping and prefetching cost is in it).
-fn many_tags_batched(
-    n_tags: usize,
-    duration_s: f64,
-    warm_s: f64,
-    params: &GlacParams,
-    window_s: f64,
-) -> (Row, f64) {
+fn many_tags_batched(n_tags: usize, duration_s: f64, warm_s: f64, params: &GlacParams, window_s: f64) -> (Row, f64) {
     let (scene, reads) = many_tag_reads(n_tags, duration_s);
     let mut engine = Engine::new(scene, "glac", Params::from(params.clone())).unwrap();
-    let mut row = Row {
-        name: "",
-        costs_ns: Vec::with_capacity(reads.len()),
-        max_expanded: 0,
-    };
+    let mut row = Row { name: "", costs_ns: Vec::with_capacity(reads.len()), max_expanded: 0 };
     let (mut wall_ns, mut timed) = (0.0, 0usize);
     let mut first = 0;
     while first < reads.len() {
@@ -192,14 +148,11 @@ fn many_tags_batched(
         let last = first + reads[first..].partition_point(|(_, m)| m.time_s < until);
         let batch = &reads[first..last];
         let tags: Vec<usize> = batch.iter().map(|(t, _)| *t).collect();
-        let measurements: Vec<Measurement> =
-            batch.iter().map(|(_, m)| Measurement::Phase(*m)).collect();
+        let measurements: Vec<Measurement> = batch.iter().map(|(_, m)| Measurement::Phase(*m)).collect();
         let mut converged = vec![false; batch.len()];
         let done = engine.latency().samples_ns.len();
         let start = Instant::now();
-        engine.run_batch(&tags, &measurements, |i, e| {
-            converged[i] = e.hypotheses == 1
-        });
+        engine.run_batch(&tags, &measurements, |i, e| converged[i] = e.hypotheses == 1);
         if batch[0].1.time_s >= warm_s {
             wall_ns += start.elapsed().as_nanos() as f64;
             timed += batch.len();
@@ -210,16 +163,12 @@ fn many_tags_batched(
         order.sort_by_key(|&i| tags[i]);
         for (j, &i) in order.iter().enumerate() {
             if batch[i].1.time_s >= warm_s && converged[i] {
-                row.costs_ns
-                    .push(engine.latency().samples_ns[done + j] as f64);
+                row.costs_ns.push(engine.latency().samples_ns[done + j] as f64);
             }
         }
         first = last;
     }
-    row.max_expanded = (0..n_tags)
-        .map(|t| engine.stats(t).max_expanded_per_read)
-        .max()
-        .unwrap_or(0);
+    row.max_expanded = (0..n_tags).map(|t| engine.stats(t).max_expanded_per_read).max().unwrap_or(0);
     (row, wall_ns / timed.max(1) as f64 / 1e3)
 }
 
@@ -228,86 +177,24 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
 }
 
 fn main() {
-    let params = GlacParams {
-        phase_wander_rad: 0.1,
-        ..GlacParams::default()
-    };
-    let row = |name| Row {
-        name,
-        costs_ns: Vec::new(),
-        max_expanded: 0,
-    };
+    let params = GlacParams { phase_wander_rad: 0.1, ..GlacParams::default() };
+    let row = |name| Row { name, costs_ns: Vec::new(), max_expanded: 0 };
     let (mut converged, mut initialising) = (row("converged 2D"), row("initialising 2D"));
-    record(
-        &Options {
-            dimensions: 2,
-            duration: 20.0,
-            ..Default::default()
-        },
-        &params,
-        &mut converged,
-        &mut initialising,
-        None,
-    );
+    record(&Options { dimensions: 2, duration: 20.0, ..Default::default() }, &params, &mut converged, &mut initialising, None);
     let (mut tracking3, mut initialising3) = (row("converged 3D"), row("initialising 3D"));
-    record(
-        &Options {
-            duration: 20.0,
-            ..Default::default()
-        },
-        &params,
-        &mut tracking3,
-        &mut initialising3,
-        None,
-    );
+    record(&Options { duration: 20.0, ..Default::default() }, &params, &mut tracking3, &mut initialising3, None);
     let (mut c2, mut i2, mut pi2) = (row("-"), row("-"), row("mod-pi 2D"));
-    record(
-        &Options {
-            dimensions: 2,
-            mod_pi: true,
-            speed: 0.4,
-            duration: 10.0,
-            ..Default::default()
-        },
-        &params,
-        &mut c2,
-        &mut i2,
-        Some(&mut pi2),
-    );
+    record(&Options { dimensions: 2, mod_pi: true, speed: 0.4, duration: 10.0, ..Default::default() }, &params, &mut c2, &mut i2, Some(&mut pi2));
     let (mut c3, mut i3, mut pi3) = (row("-"), row("-"), row("mod-pi 3D"));
-    record(
-        &Options {
-            dimensions: 3,
-            mod_pi: true,
-            duration: 10.0,
-            ..Default::default()
-        },
-        &params,
-        &mut c3,
-        &mut i3,
-        Some(&mut pi3),
-    );
+    record(&Options { dimensions: 3, mod_pi: true, duration: 10.0, ..Default::default() }, &params, &mut c3, &mut i3, Some(&mut pi3));
     let mut thousand = many_tags(1_000, 6.0, 3.0, &params);
     thousand.name = "converged 1k tags";
     let mut ten_thousand = many_tags(10_000, 4.0, 2.5, &params);
     ten_thousand.name = "converged 10k tags";
     let (mut batched, batched_wall_us) = many_tags_batched(10_000, 4.0, 2.5, &params, 0.23);
     batched.name = "10k tags, batched";
-    println!(
-        "{:<20} {:>8} {:>9} {:>9} {:>10} {:>10} {:>13}",
-        "per-read cost", "reads", "p50 µs", "p99 µs", "p99.99 µs", "max µs", "max expanded"
-    );
-    for r in [
-        thousand,
-        ten_thousand,
-        batched,
-        converged,
-        initialising,
-        tracking3,
-        initialising3,
-        pi2,
-        pi3,
-    ] {
+    println!("{:<20} {:>8} {:>9} {:>9} {:>10} {:>10} {:>13}", "per-read cost", "reads", "p50 µs", "p99 µs", "p99.99 µs", "max µs", "max expanded");
+    for r in [thousand, ten_thousand, batched, converged, initialising, tracking3, initialising3, pi2, pi3] {
         let mut v = r.costs_ns;
         if v.is_empty() {
             println!("{:<20} {:>8}", r.name, 0);
@@ -317,13 +204,7 @@ fn main() {
         let us = |q: f64| quantile(&v, q) / 1e3;
         println!(
             "{:<20} {:>8} {:>9.2} {:>9.2} {:>10.1} {:>10.1} {:>13}",
-            r.name,
-            v.len(),
-            us(0.5),
-            us(0.99),
-            us(0.9999),
-            v[v.len() - 1] / 1e3,
-            r.max_expanded
+            r.name, v.len(), us(0.5), us(0.99), us(0.9999), v[v.len() - 1] / 1e3, r.max_expanded
         );
     }
     println!("10k tags, batched: {batched_wall_us:.2} µs per read over whole batches (every read; grouping and prefetching included)");

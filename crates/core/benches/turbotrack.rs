@@ -20,23 +20,11 @@ fn converged_step(c: &mut Criterion) {
     let mut group = c.benchmark_group("turbotrack");
     group.warm_up_time(Duration::from_secs(1));
     group.measurement_time(Duration::from_secs(3));
-    let o = HelperOptions {
-        dimensions: 3,
-        speed: 0.3,
-        duration_s: 30.0,
-        ..Default::default()
-    };
+    let o = HelperOptions { dimensions: 3, speed: 0.3, duration_s: 30.0, ..Default::default() };
     let (scene, frames, _) = simulate_frames(&o, 11);
     let frames: Vec<Measurement> = frames.into_iter().map(Measurement::Wideband).collect();
     for particles in [100usize, 1000] {
-        let mut tracker = TurboTrack::new(
-            scene.clone(),
-            TurboTrackParams {
-                particles,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut tracker = TurboTrack::new(scene.clone(), TurboTrackParams { particles, ..Default::default() }).unwrap();
         // Converge on the first second, then cycle through the rest.
         for m in &frames[..300] {
             tracker.step(m);
@@ -61,15 +49,7 @@ fn converged_step(c: &mut Criterion) {
     if let Measurement::Wideband(f) = &frames[0] {
         let h = &f.h[..f.frequencies_hz.len()];
         group.bench_function("candidates_one_rx", |b| {
-            b.iter(|| {
-                black_box(distance_candidates(
-                    &f.frequencies_hz,
-                    black_box(h),
-                    0.4,
-                    7.5,
-                    &CandidateParams::default(),
-                ))
-            })
+            b.iter(|| black_box(distance_candidates(&f.frequencies_hz, black_box(h), 0.4, 7.5, &CandidateParams::default())))
         });
     }
     group.finish();

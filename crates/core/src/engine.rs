@@ -45,8 +45,7 @@ impl Latency {
         }
         let mut sorted = self.samples_ns.clone();
         sorted.sort_unstable();
-        let rank =
-            ((q.clamp(0.0, 1.0) * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+        let rank = ((q.clamp(0.0, 1.0) * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
         sorted[rank - 1] as f64
     }
 
@@ -126,10 +125,7 @@ impl Engine {
         }
         if self.trackers[tag].is_none() {
             // The method and parameters were validated in `new`.
-            self.trackers[tag] = self
-                .prototype
-                .fresh()
-                .or_else(|| make(&self.method, &self.scene, &self.params).ok());
+            self.trackers[tag] = self.prototype.fresh().or_else(|| make(&self.method, &self.scene, &self.params).ok());
         }
         let tracker = self.trackers[tag].as_mut()?;
         let start = Instant::now();
@@ -147,20 +143,14 @@ impl Engine {
     /// with thousands of tags a tag's state is out of cache by its next
     /// read in time order, and grouped it is fetched once per batch
     /// instead of once per read. Causal per tag, as every tracker is.
-    pub fn run_batch(
-        &mut self,
-        tags: &[usize],
-        measurements: &[Measurement],
-        mut emit: impl FnMut(usize, &Estimate),
-    ) {
+    pub fn run_batch(&mut self, tags: &[usize], measurements: &[Measurement], mut emit: impl FnMut(usize, &Estimate)) {
         assert_eq!(tags.len(), measurements.len(), "one tag per measurement");
         let mut b = std::mem::take(&mut self.batch);
         grouped_by_tag(tags, &mut b.order, &mut b.counts);
         let order = &b.order;
         let tag_at = |j: usize| tags[order[j] as usize];
         b.starts.clear();
-        b.starts
-            .extend((0..order.len()).filter(|&j| j == 0 || tag_at(j) != tag_at(j - 1)));
+        b.starts.extend((0..order.len()).filter(|&j| j == 0 || tag_at(j) != tag_at(j - 1)));
         b.slot.clear();
         b.slot.resize(tags.len(), u32::MAX);
         b.estimates.clear();
@@ -168,21 +158,10 @@ impl Engine {
             // While this tag is stepped, the next two load: the tracker
             // after next its own lines (no read of it needed), the next
             // one what they point to (they arrived during the last tag).
-            if let Some(Some(later)) = b
-                .starts
-                .get(g + 2)
-                .and_then(|&j| self.trackers.get(tag_at(j)))
-            {
-                crate::prefetch::bytes(
-                    (&**later as *const dyn Tracker).cast(),
-                    4 * crate::prefetch::LINE_BYTES,
-                );
+            if let Some(Some(later)) = b.starts.get(g + 2).and_then(|&j| self.trackers.get(tag_at(j))) {
+                crate::prefetch::bytes((&**later as *const dyn Tracker).cast(), 4 * crate::prefetch::LINE_BYTES);
             }
-            if let Some(Some(next)) = b
-                .starts
-                .get(g + 1)
-                .and_then(|&j| self.trackers.get(tag_at(j)))
-            {
+            if let Some(Some(next)) = b.starts.get(g + 1).and_then(|&j| self.trackers.get(tag_at(j))) {
                 next.prefetch();
             }
             let end = b.starts.get(g + 1).copied().unwrap_or(order.len());
@@ -205,26 +184,17 @@ impl Engine {
 
     /// Counters of tag `tag` (zero if never seen).
     pub fn stats(&self, tag: usize) -> TrackerStats {
-        self.trackers
-            .get(tag)
-            .and_then(|t| t.as_ref())
-            .map_or_else(TrackerStats::default, |t| t.stats())
+        self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(TrackerStats::default, |t| t.stats())
     }
 
     /// Live hypotheses of tag `tag` (position m, normalised log-likelihood).
     pub fn hypotheses(&self, tag: usize) -> Vec<([f64; 3], f64)> {
-        self.trackers
-            .get(tag)
-            .and_then(|t| t.as_ref())
-            .map_or_else(Vec::new, |t| t.hypotheses())
+        self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(Vec::new, |t| t.hypotheses())
     }
 
     /// Smoothed trajectory of tag `tag` (methods that revise the past).
     pub fn trajectory(&self, tag: usize) -> Vec<(f64, [f64; 3])> {
-        self.trackers
-            .get(tag)
-            .and_then(|t| t.as_ref())
-            .map_or_else(Vec::new, |t| t.trajectory())
+        self.trackers.get(tag).and_then(|t| t.as_ref()).map_or_else(Vec::new, |t| t.trajectory())
     }
 
     pub fn latency(&self) -> &Latency {
@@ -310,12 +280,7 @@ pub struct ReorderWindow {
 
 impl ReorderWindow {
     pub fn new(window_s: f64) -> Self {
-        Self {
-            window_s,
-            newest_s: f64::NEG_INFINITY,
-            released_s: f64::NEG_INFINITY,
-            ..Default::default()
-        }
+        Self { window_s, newest_s: f64::NEG_INFINITY, released_s: f64::NEG_INFINITY, ..Default::default() }
     }
 
     /// Adds a measurement; returns those now older than the window.
@@ -324,11 +289,7 @@ impl ReorderWindow {
             self.late += 1;
         }
         self.newest_s = self.newest_s.max(measurement.time_s());
-        self.heap.push(Pending {
-            tag,
-            sequence: self.sequence,
-            measurement,
-        });
+        self.heap.push(Pending { tag, sequence: self.sequence, measurement });
         self.sequence += 1;
         self.release(self.newest_s - self.window_s)
     }
@@ -340,11 +301,7 @@ impl ReorderWindow {
 
     fn release(&mut self, until_s: f64) -> Vec<(usize, Measurement)> {
         let mut out = Vec::new();
-        while self
-            .heap
-            .peek()
-            .is_some_and(|p| p.measurement.time_s() <= until_s)
-        {
+        while self.heap.peek().is_some_and(|p| p.measurement.time_s() <= until_s) {
             let p = self.heap.pop().unwrap();
             self.released_s = self.released_s.max(p.measurement.time_s());
             out.push((p.tag, p.measurement));
@@ -358,12 +315,7 @@ mod tests {
     use super::*;
 
     fn m(t: f64) -> Measurement {
-        Measurement::Phase(crate::track::PhaseRead {
-            time_s: t,
-            antenna: 0,
-            frequency_hz: 915e6,
-            phase_rad: 0.0,
-        })
+        Measurement::Phase(crate::track::PhaseRead { time_s: t, antenna: 0, frequency_hz: 915e6, phase_rad: 0.0 })
     }
 
     fn grouped(tags: &[usize]) -> Vec<u32> {
@@ -384,35 +336,17 @@ mod tests {
 
     #[test]
     fn a_batch_gives_the_estimates_of_stepping_in_input_order() {
-        use crate::scene::{Antenna, Region};
         use crate::track::{GlacParams, PhaseRead};
+        use crate::scene::{Antenna, Region};
         use nalgebra::Vector3;
         // GLAC's 2D layout, the region excluding the mirror.
         let antennas = [[0.0, 0.0], [0.0, 0.3], [0.0, 0.8], [0.8, 0.8]]
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], 0.0),
-                phase_offset_rad: 0.0,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
-        let region = Region {
-            min: Vector3::new(0.1, -0.5, 0.0),
-            max: Vector3::new(1.6, 1.5, 0.0),
-        };
-        let scene = Scene::new(
-            2,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            0.1,
-            antennas,
-            Some(region),
-            vec![],
-        )
-        .unwrap();
+        let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
+        let scene = Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap();
         let params = crate::track::Params::from(GlacParams::default());
         // Three tags on circles, read round-robin over the antennas.
         let mut tags = Vec::new();
@@ -424,30 +358,17 @@ mod tests {
             let p = Vector3::new(0.7 + 0.2 * angle.cos(), 0.35 + 0.2 * angle.sin(), 0.0);
             let a = (k / 3) % scene.antennas.len();
             let d = (p - scene.antennas[a].position).norm();
-            let phase = scene
-                .ideal_phase(a, 915.25e6, d)
-                .rem_euclid(std::f64::consts::TAU);
+            let phase = scene.ideal_phase(a, 915.25e6, d).rem_euclid(std::f64::consts::TAU);
             tags.push(tag * 7); // sparse codes, as shards give them
-            reads.push(Measurement::Phase(PhaseRead {
-                time_s: t,
-                antenna: a,
-                frequency_hz: 915.25e6,
-                phase_rad: phase,
-            }));
+            reads.push(Measurement::Phase(PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: phase }));
         }
         let mut one_by_one = Engine::new(scene.clone(), "glac", params.clone()).unwrap();
-        let expected: Vec<(usize, Estimate)> = tags
-            .iter()
-            .zip(&reads)
-            .enumerate()
-            .filter_map(|(i, (&t, m))| one_by_one.step(t, m).map(|e| (i, e)))
-            .collect();
+        let expected: Vec<(usize, Estimate)> =
+            tags.iter().zip(&reads).enumerate().filter_map(|(i, (&t, m))| one_by_one.step(t, m).map(|e| (i, e))).collect();
         let mut batched = Engine::new(scene, "glac", params).unwrap();
         let mut got = Vec::new();
         for (lo, hi) in [(0, 250), (250, 251), (251, 900)] {
-            batched.run_batch(&tags[lo..hi], &reads[lo..hi], |i, e| {
-                got.push((lo + i, e.clone()))
-            });
+            batched.run_batch(&tags[lo..hi], &reads[lo..hi], |i, e| got.push((lo + i, e.clone())));
         }
         assert!(expected.len() > 800, "the tags are tracked");
         assert_eq!(got, expected);

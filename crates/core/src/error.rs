@@ -15,16 +15,8 @@ pub enum Error {
     UnknownMethod(String, String),
     /// A parameter name that the method's table does not have; `close`
     /// holds the likely intended names, `known` all of them.
-    #[error(
-        "unknown parameter '{name}' for method '{method}' ({})",
-        unknown_hint(close, known)
-    )]
-    UnknownParameter {
-        name: String,
-        method: String,
-        close: Vec<String>,
-        known: Vec<String>,
-    },
+    #[error("unknown parameter '{name}' for method '{method}' ({})", unknown_hint(close, known))]
+    UnknownParameter { name: String, method: String, close: Vec<String>, known: Vec<String> },
     /// A registered method whose estimator is not in the core (Marvel's
     /// factor graph is in Python, `scattertrack.fusion`).
     #[error("method '{0}' is estimated in Python (scattertrack.fusion), not by the Rust core")]

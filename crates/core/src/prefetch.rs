@@ -24,11 +24,7 @@ pub fn bytes(start: *const u8, bytes: usize) {
             // whatever the address (null, freed or unmapped included), and
             // its one effect is timing. `wrapping_add` forms the address
             // without claiming it lies in an allocation.
-            unsafe {
-                std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(
-                    start.wrapping_add(offset).cast(),
-                )
-            };
+            unsafe { std::arch::x86_64::_mm_prefetch::<{ std::arch::x86_64::_MM_HINT_T0 }>(start.wrapping_add(offset).cast()) };
             offset += LINE_BYTES;
         }
     }

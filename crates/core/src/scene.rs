@@ -59,13 +59,7 @@ impl Region {
     /// The point of the box grown by `margin` (m) nearest `p` (m), axis by
     /// axis; with `dimensions == 2` z is left as it is (as in `contains`).
     pub fn clamp(&self, p: &Vector3<f64>, margin: f64, dimensions: usize) -> Vector3<f64> {
-        Vector3::from_fn(|i, _| {
-            if i < dimensions.min(3) {
-                p[i].clamp(self.min[i] - margin, self.max[i] + margin)
-            } else {
-                p[i]
-            }
-        })
+        Vector3::from_fn(|i, _| if i < dimensions.min(3) { p[i].clamp(self.min[i] - margin, self.max[i] + margin) } else { p[i] })
     }
 
     /// Smallest and largest distance (m) from `point` to the box.
@@ -74,13 +68,7 @@ impl Region {
         let mut far = 0.0;
         for i in 0..3 {
             let (lo, hi) = (self.min[i] - point[i], self.max[i] - point[i]);
-            let n = if lo > 0.0 {
-                lo
-            } else if hi < 0.0 {
-                hi
-            } else {
-                0.0
-            };
+            let n = if lo > 0.0 { lo } else if hi < 0.0 { hi } else { 0.0 };
             let f = lo.abs().max(hi.abs());
             near += n * n;
             far += f * f;
@@ -122,38 +110,14 @@ impl Scene {
     /// 40 cm around it in z = 0, a region in front of the array, 0.1 rad
     /// phase noise. `dimensions` 2 tracks in the plane z = `plane_z`.
     pub fn plus_helper(dimensions: usize, plane_z: f64) -> Self {
-        let layout = [
-            ((0.4, 0.4), Role::Tx),
-            ((0.0, 0.4), Role::Rx),
-            ((0.8, 0.4), Role::Rx),
-            ((0.4, 0.0), Role::Rx),
-            ((0.4, 0.8), Role::Rx),
-        ];
+        let layout = [((0.4, 0.4), Role::Tx), ((0.0, 0.4), Role::Rx), ((0.8, 0.4), Role::Rx), ((0.4, 0.0), Role::Rx), ((0.4, 0.8), Role::Rx)];
         let antennas = layout
             .iter()
             .enumerate()
-            .map(|(i, ((x, y), role))| Antenna {
-                id: i as i64,
-                position: Vector3::new(*x, *y, 0.0),
-                phase_offset_rad: 0.0,
-                role: *role,
-            })
+            .map(|(i, ((x, y), role))| Antenna { id: i as i64, position: Vector3::new(*x, *y, 0.0), phase_offset_rad: 0.0, role: *role })
             .collect();
-        let region = Region {
-            min: Vector3::new(-1.0, -0.5, 0.05),
-            max: Vector3::new(2.0, 3.0, 2.0),
-        };
-        Self::new(
-            dimensions,
-            plane_z,
-            1.0,
-            TWO_PI,
-            0.1,
-            antennas,
-            Some(region),
-            vec![],
-        )
-        .expect("the plus layout is a valid scene")
+        let region = Region { min: Vector3::new(-1.0, -0.5, 0.05), max: Vector3::new(2.0, 3.0, 2.0) };
+        Self::new(dimensions, plane_z, 1.0, TWO_PI, 0.1, antennas, Some(region), vec![]).expect("the plus layout is a valid scene")
     }
 
     /// A validated scene. Fails on no antennas, dimensions ∉ {2, 3}, a
@@ -192,9 +156,7 @@ impl Scene {
                 return bad("region min > max");
             }
         }
-        let finite = antennas
-            .iter()
-            .all(|a| a.position.iter().all(|v| v.is_finite()));
+        let finite = antennas.iter().all(|a| a.position.iter().all(|v| v.is_finite()));
         if !finite || !plane_z.is_finite() {
             return bad("non-finite antenna position or plane_z");
         }
@@ -267,9 +229,7 @@ impl Scene {
 
     /// Indices of the helper's receive antennas (`role = "rx"`).
     pub fn receivers(&self) -> Vec<usize> {
-        (0..self.antennas.len())
-            .filter(|&i| self.antennas[i].role == Role::Rx)
-            .collect()
+        (0..self.antennas.len()).filter(|&i| self.antennas[i].role == Role::Rx).collect()
     }
 
     /// Phase (rad, in [0, P)) that an ideal reader reports for a tag at
@@ -277,10 +237,7 @@ impl Scene {
     pub fn ideal_phase(&self, antenna: usize, frequency_hz: f64, distance: f64) -> f64 {
         let lambda = SPEED_OF_LIGHT / frequency_hz;
         let offset = self.antennas[antenna].phase_offset_rad + self.channel_offset(frequency_hz);
-        wrap(
-            self.phase_sign * 4.0 * std::f64::consts::PI * distance / lambda + offset,
-            self.phase_period,
-        )
+        wrap(self.phase_sign * 4.0 * std::f64::consts::PI * distance / lambda + offset, self.phase_period)
     }
 }
 
@@ -293,12 +250,7 @@ mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], 0.0),
-                phase_offset_rad: 0.3 * i as f64,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.3 * i as f64, role: Default::default() })
             .collect();
         Scene::new(dimensions, 0.0, -1.0, TWO_PI, 0.1, antennas, None, vec![]).unwrap()
     }
@@ -319,28 +271,19 @@ mod tests {
 
     #[test]
     fn region_clamp_is_the_nearest_point_that_contains_accepts() {
-        let r = Region {
-            min: Vector3::new(0.0, 0.0, 0.0),
-            max: Vector3::new(1.0, 2.0, 0.0),
-        };
+        let r = Region { min: Vector3::new(0.0, 0.0, 0.0), max: Vector3::new(1.0, 2.0, 0.0) };
         let p = Vector3::new(-0.5, 1.0, 0.7);
         let c = r.clamp(&p, 0.1, 3);
         assert_eq!(c, Vector3::new(-0.1, 1.0, 0.1));
         assert!(r.contains(&c, 0.1, 3) && !r.contains(&p, 0.1, 3));
         // In a planar scene z is not the region's to move.
         assert_eq!(r.clamp(&p, 0.1, 2), Vector3::new(-0.1, 1.0, 0.7));
-        assert_eq!(
-            r.clamp(&Vector3::new(0.5, 1.0, 0.0), 0.0, 3),
-            Vector3::new(0.5, 1.0, 0.0)
-        );
+        assert_eq!(r.clamp(&Vector3::new(0.5, 1.0, 0.0), 0.0, 3), Vector3::new(0.5, 1.0, 0.0));
     }
 
     #[test]
     fn region_distance_range() {
-        let r = Region {
-            min: Vector3::new(1.0, 0.0, 0.0),
-            max: Vector3::new(2.0, 1.0, 1.0),
-        };
+        let r = Region { min: Vector3::new(1.0, 0.0, 0.0), max: Vector3::new(2.0, 1.0, 1.0) };
         let (near, far) = r.distance_range(&Vector3::zeros());
         assert!((near - 1.0).abs() < 1e-12);
         assert!((far - 6f64.sqrt()).abs() < 1e-12);
@@ -349,12 +292,7 @@ mod tests {
     #[test]
     fn rejects_bad_scenes() {
         assert!(Scene::new(3, 0.0, 1.0, TWO_PI, 0.1, vec![], None, vec![]).is_err());
-        let a = vec![Antenna {
-            id: 1,
-            position: Vector3::zeros(),
-            phase_offset_rad: 0.0,
-            role: Default::default(),
-        }];
+        let a = vec![Antenna { id: 1, position: Vector3::zeros(), phase_offset_rad: 0.0, role: Default::default() }];
         assert!(Scene::new(4, 0.0, 1.0, TWO_PI, 0.1, a.clone(), None, vec![]).is_err());
         assert!(Scene::new(3, 0.0, 0.5, TWO_PI, 0.1, a.clone(), None, vec![]).is_err());
         assert!(Scene::new(3, 0.0, 1.0, 1.0, 0.1, a, None, vec![]).is_err());

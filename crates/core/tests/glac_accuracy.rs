@@ -15,10 +15,7 @@ fn median_error(o: &Options, seed: u64, settle_s: f64) -> f64 {
     for (m, p) in reads.iter().zip(&truths) {
         if let Some(e) = tracker.step(&(*m).into()) {
             if m.time_s > settle_s {
-                let d = ((e.position[0] - p.x).powi(2)
-                    + (e.position[1] - p.y).powi(2)
-                    + (e.position[2] - p.z).powi(2))
-                .sqrt();
+                let d = ((e.position[0] - p.x).powi(2) + (e.position[1] - p.y).powi(2) + (e.position[2] - p.z).powi(2)).sqrt();
                 errors.push(d);
             }
         }
@@ -29,24 +26,11 @@ fn median_error(o: &Options, seed: u64, settle_s: f64) -> f64 {
 
 #[test]
 fn paper_conditions_2d_and_3d() {
-    for (dimensions, speed, settle, bound) in [
-        (2, 0.1, 0.0, 0.008),
-        (2, 0.4, 0.0, 0.008),
-        (3, 0.1, 3.0, 0.012),
-        (3, 0.3, 3.0, 0.012),
-    ] {
-        let o = Options {
-            dimensions,
-            speed,
-            ..Default::default()
-        };
+    for (dimensions, speed, settle, bound) in [(2, 0.1, 0.0, 0.008), (2, 0.4, 0.0, 0.008), (3, 0.1, 3.0, 0.012), (3, 0.3, 3.0, 0.012)] {
+        let o = Options { dimensions, speed, ..Default::default() };
         for seed in 0..3 {
             let med = median_error(&o, seed, settle);
-            assert!(
-                med < bound,
-                "{dimensions}D {speed} m/s seed {seed}: median {:.1} mm",
-                med * 1e3
-            );
+            assert!(med < bound, "{dimensions}D {speed} m/s seed {seed}: median {:.1} mm", med * 1e3);
         }
     }
 }
@@ -54,24 +38,9 @@ fn paper_conditions_2d_and_3d() {
 #[test]
 fn hopping_negative_sign_and_mod_pi() {
     let cases = [
-        Options {
-            dimensions: 2,
-            speed: 0.3,
-            hopping: true,
-            ..Default::default()
-        },
-        Options {
-            dimensions: 2,
-            speed: 0.3,
-            phase_sign: -1.0,
-            ..Default::default()
-        },
-        Options {
-            dimensions: 2,
-            speed: 0.3,
-            mod_pi: true,
-            ..Default::default()
-        },
+        Options { dimensions: 2, speed: 0.3, hopping: true, ..Default::default() },
+        Options { dimensions: 2, speed: 0.3, phase_sign: -1.0, ..Default::default() },
+        Options { dimensions: 2, speed: 0.3, mod_pi: true, ..Default::default() },
     ];
     for (k, o) in cases.iter().enumerate() {
         let med = median_error(o, 11 + k as u64, 1.0);

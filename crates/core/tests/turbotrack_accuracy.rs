@@ -17,12 +17,7 @@ fn errors(method: &str, o: &HelperOptions, seed: u64, settle_s: f64) -> (f64, f6
         let t = f.time_s;
         if let Some(e) = tracker.step(&Measurement::Wideband(f)) {
             if t >= settle_s {
-                errors.push(
-                    ((e.position[0] - p.x).powi(2)
-                        + (e.position[1] - p.y).powi(2)
-                        + (e.position[2] - p.z).powi(2))
-                    .sqrt(),
-                );
+                errors.push(((e.position[0] - p.x).powi(2) + (e.position[1] - p.y).powi(2) + (e.position[2] - p.z).powi(2)).sqrt());
             }
         }
     }
@@ -35,46 +30,24 @@ fn errors(method: &str, o: &HelperOptions, seed: u64, settle_s: f64) -> (f64, f6
 fn turbotrack_reaches_millimetres_in_3d_and_2d() {
     for (dimensions, speed) in [(3, 0.0), (3, 0.2), (2, 0.5)] {
         for seed in 0..3 {
-            let o = HelperOptions {
-                dimensions,
-                speed,
-                ..Default::default()
-            };
+            let o = HelperOptions { dimensions, speed, ..Default::default() };
             let (median, p90, n) = errors("turbotrack", &o, seed, 1.0);
             eprintln!("turbotrack {dimensions}D {speed} m/s seed {seed}: median {:.2} mm p90 {:.2} mm ({n})", median * 1e3, p90 * 1e3);
-            assert!(
-                median < 0.01 && p90 < 0.02,
-                "{dimensions}D {speed} m/s seed {seed}: {median} {p90}"
-            );
+            assert!(median < 0.01 && p90 < 0.02, "{dimensions}D {speed} m/s seed {seed}: {median} {p90}");
         }
     }
 }
 
 #[test]
 fn baselines_run_and_full_method_wins() {
-    let o = HelperOptions {
-        dimensions: 2,
-        speed: 0.2,
-        duration_s: 4.0,
-        ..Default::default()
-    };
+    let o = HelperOptions { dimensions: 2, speed: 0.2, duration_s: 4.0, ..Default::default() };
     let (full, _, _) = errors("turbotrack", &o, 7, 1.0);
     let (ellipse, _, _) = errors("ellipse-intersection", &o, 7, 1.0);
     let (gaussian, _, _) = errors("gaussian-pf", &o, 7, 1.0);
-    eprintln!(
-        "2D: turbotrack {:.1} mm, ellipse {:.1} mm, gaussian-pf {:.1} mm",
-        full * 1e3,
-        ellipse * 1e3,
-        gaussian * 1e3
-    );
+    eprintln!("2D: turbotrack {:.1} mm, ellipse {:.1} mm, gaussian-pf {:.1} mm", full * 1e3, ellipse * 1e3, gaussian * 1e3);
     assert!(full < ellipse && full < gaussian);
     // A static tag: RFind answers once its acquisition window is full.
-    let o = HelperOptions {
-        dimensions: 3,
-        speed: 0.0,
-        duration_s: 4.0,
-        ..Default::default()
-    };
+    let o = HelperOptions { dimensions: 3, speed: 0.0, duration_s: 4.0, ..Default::default() };
     let (rfind, _, n) = errors("rfind", &o, 3, 0.0);
     eprintln!("static: rfind {:.1} mm over {n} estimates", rfind * 1e3);
     assert!(rfind < 0.05, "{rfind}");
@@ -82,12 +55,7 @@ fn baselines_run_and_full_method_wins() {
 
 #[test]
 fn declined_frames_are_counted() {
-    let o = HelperOptions {
-        dimensions: 3,
-        speed: 0.1,
-        duration_s: 1.0,
-        ..Default::default()
-    };
+    let o = HelperOptions { dimensions: 3, speed: 0.1, duration_s: 1.0, ..Default::default() };
     let (scene, frames, _) = simulate_frames(&o, 1);
     let mut tracker = make("turbotrack", &scene, &Params::default()).unwrap();
     for f in frames.iter().take(50) {
@@ -95,27 +63,18 @@ fn declined_frames_are_counted() {
     }
     // All subcarriers NaN: declined as unusable, counted.
     let mut nan = frames[50].clone();
-    nan.h
-        .iter_mut()
-        .for_each(|h| *h = nalgebra::Complex::new(f64::NAN, f64::NAN));
+    nan.h.iter_mut().for_each(|h| *h = nalgebra::Complex::new(f64::NAN, f64::NAN));
     assert!(tracker.step(&Measurement::Wideband(nan)).is_none());
     // Out of time order.
     let mut late = frames[51].clone();
     late.time_s = frames[10].time_s;
     assert!(tracker.step(&Measurement::Wideband(late)).is_none());
     // A COTS phase read is not this method's input.
-    let read = scattertrack_core::track::PhaseRead {
-        time_s: 10.0,
-        antenna: 1,
-        frequency_hz: 915e6,
-        phase_rad: 0.1,
-    };
+    let read = scattertrack_core::track::PhaseRead { time_s: 10.0, antenna: 1, frequency_hz: 915e6, phase_rad: 0.1 };
     assert!(tracker.step(&Measurement::Phase(read)).is_none());
     let s = tracker.stats();
     assert_eq!(s.measurements, 53);
     assert_eq!(s.invalid, 2);
     assert_eq!(s.out_of_order, 1);
-    assert!(tracker
-        .step(&Measurement::Wideband(frames[52].clone()))
-        .is_some());
+    assert!(tracker.step(&Measurement::Wideband(frames[52].clone())).is_some());
 }

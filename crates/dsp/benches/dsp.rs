@@ -33,13 +33,11 @@ use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use num_complex::{Complex32, Complex64};
 use scattertrack_dsp::backscatter::{preamble_chips, Encoding};
 use scattertrack_dsp::detect::{
-    combined_magnitude, combined_projection, combined_projection_from_sums, detect_preamble,
-    DetectionOptions, Feature, FeatureSums, Template,
+    combined_magnitude, combined_projection, combined_projection_from_sums, detect_preamble, DetectionOptions, Feature,
+    FeatureSums, Template,
 };
 use scattertrack_dsp::estimate::{symbol_states, tag_channel, ChipGrid, SymbolSums};
-use scattertrack_dsp::lora::{
-    music, Corrections, EpochConfig, EpochProcessor, PeakFinder, PeakOptions,
-};
+use scattertrack_dsp::lora::{music, Corrections, EpochConfig, EpochProcessor, PeakFinder, PeakOptions};
 use scattertrack_dsp::ofdm::{symbol_timing, ChannelMatrix, ChannelTransform, Demodulator};
 use scattertrack_dsp::reply::{AntennaFront, AntennaSymbols, ReplyOptions, ReplyProcessor};
 
@@ -51,24 +49,16 @@ fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("reply");
     group.throughput(Throughput::Elements(1));
     group.measurement_time(Duration::from_secs(4));
-    for (name, feature) in [
-        ("process_4rx", Feature::Projection),
-        ("process_4rx_magnitude", Feature::CombinedMagnitude),
-    ] {
-        let options = ReplyOptions {
-            feature,
-            ..Default::default()
-        };
-        let mut processor =
-            ReplyProcessor::new(reply.config.clone(), reply.symbol.clone(), options).unwrap();
+    for (name, feature) in [("process_4rx", Feature::Projection), ("process_4rx_magnitude", Feature::CombinedMagnitude)]
+    {
+        let options = ReplyOptions { feature, ..Default::default() };
+        let mut processor = ReplyProcessor::new(reply.config.clone(), reply.symbol.clone(), options).unwrap();
         let check = processor.process(&refs, None).unwrap();
         println!(
             "{name}: score {:.3}, {} symbols, {} payload chips, counts rx0 {:?}",
             check.detection.score, check.symbols, check.payload_chips, check.counts[0]
         );
-        group.bench_function(name, |b| {
-            b.iter(|| black_box(processor.process(black_box(&refs), Some(7)).unwrap()))
-        });
+        group.bench_function(name, |b| b.iter(|| black_box(processor.process(black_box(&refs), Some(7)).unwrap())));
     }
     group.finish();
 
@@ -80,35 +70,23 @@ fn bench(c: &mut Criterion) {
     let mut demodulator = Demodulator::new(&reply.config, &reply.symbol).unwrap();
     let mut h = ChannelMatrix::default();
     group.bench_function("demodulate", |b| {
-        b.iter(|| {
-            demodulator
-                .demodulate(black_box(refs[0]), 3, &mut h)
-                .unwrap()
-        });
+        b.iter(|| demodulator.demodulate(black_box(refs[0]), 3, &mut h).unwrap());
     });
     demodulator.demodulate(refs[0], 3, &mut h).unwrap();
     let mut feature = Vec::new();
-    group.bench_function("projection", |b| {
-        b.iter(|| combined_projection(black_box(&h), 15, &mut feature))
-    });
+    group.bench_function("projection", |b| b.iter(|| combined_projection(black_box(&h), 15, &mut feature)));
     // The real-time path: time-domain symbol sums, and the projection from
     // them (no per-symbol FFT).
     let mut sums = SymbolSums::default();
-    group.bench_function("symbol_sums", |b| {
-        b.iter(|| sums.reset(black_box(refs[0]), 3, 20).unwrap())
-    });
+    group.bench_function("symbol_sums", |b| b.iter(|| sums.reset(black_box(refs[0]), 3, 20).unwrap()));
     sums.reset(refs[0], 3, 20).unwrap();
     let mut transform = ChannelTransform::new(&reply.config, &reply.symbol).unwrap();
     group.bench_function("projection_from_sums", |b| {
         b.iter(|| combined_projection_from_sums(black_box(&sums), &mut transform, 15, &mut feature))
     });
-    group.bench_function("magnitude", |b| {
-        b.iter(|| combined_magnitude(black_box(&h), &mut feature))
-    });
+    group.bench_function("magnitude", |b| b.iter(|| combined_magnitude(black_box(&h), &mut feature)));
     combined_projection(&h, 15, &mut feature);
-    let sums: Vec<FeatureSums> = (0..4)
-        .map(|_| FeatureSums::new(&feature).unwrap())
-        .collect();
+    let sums: Vec<FeatureSums> = (0..4).map(|_| FeatureSums::new(&feature).unwrap()).collect();
     let template = Template::new(preamble_chips(Encoding::Fm0, false).unwrap()).unwrap();
     let options = DetectionOptions::default();
     group.bench_function("detect_preamble_4rx", |b| {
@@ -125,22 +103,17 @@ fn bench(c: &mut Criterion) {
     let levels: Vec<Option<u8>> = template.levels.iter().map(|&l| Some(l)).collect();
     let mut states = Vec::new();
     symbol_states(&grid, &levels, &h.valid, &mut states);
-    group.bench_function("tag_channel", |b| {
-        b.iter(|| black_box(tag_channel(black_box(&h), &states).unwrap()))
-    });
+    group.bench_function("tag_channel", |b| b.iter(|| black_box(tag_channel(black_box(&h), &states).unwrap())));
 
     // The runtime's split: one antenna's front with the symbol grid known
     // (a worker's job), and the joint finish over 4 antennas (fusion).
     let options = ReplyOptions::default();
-    let mut processor =
-        ReplyProcessor::new(reply.config.clone(), reply.symbol.clone(), options.clone()).unwrap();
+    let mut processor = ReplyProcessor::new(reply.config.clone(), reply.symbol.clone(), options.clone()).unwrap();
     processor.process(&refs, Some(7)).unwrap(); // learns the timing reference
     let mut front = AntennaFront::new(&reply.config, &reply.symbol, &options).unwrap();
     let mut one = AntennaSymbols::default();
     let first = processor.first_sample(0, Some(7));
-    group.bench_function("front_known_grid", |b| {
-        b.iter(|| front.process(black_box(refs[0]), first, &mut one))
-    });
+    group.bench_function("front_known_grid", |b| b.iter(|| front.process(black_box(refs[0]), first, &mut one)));
     let mut antennas: Vec<AntennaSymbols> = (0..refs.len())
         .map(|a| {
             let mut out = AntennaSymbols::default();
@@ -148,9 +121,7 @@ fn bench(c: &mut Criterion) {
             out
         })
         .collect();
-    group.bench_function("finish_4rx", |b| {
-        b.iter(|| black_box(processor.finish(&mut antennas, Some(7)).unwrap()))
-    });
+    group.bench_function("finish_4rx", |b| b.iter(|| black_box(processor.finish(&mut antennas, Some(7)).unwrap())));
     group.finish();
 }
 
@@ -171,14 +142,11 @@ fn lora_epoch(config: &EpochConfig) -> Vec<Complex32> {
         for k in 0..4 {
             let f = config.carrier_hz(j, k);
             for e in config.array.elements() {
-                let phase = std::f64::consts::TAU * f / scattertrack_dsp::SPEED_OF_LIGHT
-                    * (e[0] * u[0] + e[1] * u[1] + e[2] * u[2]);
+                let phase = std::f64::consts::TAU * f / scattertrack_dsp::SPEED_OF_LIGHT * (e[0] * u[0] + e[1] * u[1] + e[2] * u[2]);
                 let tone = 3.0 + k as f64 - 0.5 * j as f64;
                 for (n, c) in up.iter().enumerate() {
-                    let s = c * Complex64::from_polar(
-                        1.0,
-                        phase + std::f64::consts::TAU * tone * n as f64 / fs,
-                    ) + Complex64::new(noise.sample(&mut rng), noise.sample(&mut rng));
+                    let s = c * Complex64::from_polar(1.0, phase + std::f64::consts::TAU * tone * n as f64 / fs)
+                        + Complex64::new(noise.sample(&mut rng), noise.sample(&mut rng));
                     out.push(Complex32::new(s.re as f32, s.im as f32));
                 }
             }
@@ -206,29 +174,14 @@ fn bench_lora(c: &mut Criterion) {
     let mut group = c.benchmark_group("lora");
     group.measurement_time(Duration::from_secs(4));
     group.throughput(Throughput::Elements(1));
-    group.bench_function("epoch", |b| {
-        b.iter(|| {
-            black_box(
-                processor
-                    .process(black_box(&samples), &corrections)
-                    .unwrap(),
-            )
-        })
-    });
+    group.bench_function("epoch", |b| b.iter(|| black_box(processor.process(black_box(&samples), &corrections).unwrap())));
     let mut finder = PeakFinder::new(config.chirp, PeakOptions::default()).unwrap();
     let n = config.chirp.samples();
-    group.bench_function("peak", |b| {
-        b.iter(|| black_box(finder.process(black_box(&samples[..n])).unwrap()))
-    });
-    let phases: Vec<f64> = (0..3)
-        .flat_map(|m| (0..2).map(move |j| (j, m)))
-        .map(|(j, m)| check.peaks[j * 12 + m].amplitude_centre.arg())
-        .collect();
+    group.bench_function("peak", |b| b.iter(|| black_box(finder.process(black_box(&samples[..n])).unwrap())));
+    let phases: Vec<f64> = (0..3).flat_map(|m| (0..2).map(move |j| (j, m))).map(|(j, m)| check.peaks[j * 12 + m].amplitude_centre.arg()).collect();
     let freqs = [config.carrier_hz(0, 0), config.carrier_hz(1, 0)];
     group.bench_function("music_tag", |b| {
-        b.iter(|| {
-            black_box(music(&config.array, &config.music, black_box(&phases), &freqs).unwrap())
-        })
+        b.iter(|| black_box(music(&config.array, &config.music, black_box(&phases), &freqs).unwrap()))
     });
     group.finish();
 }

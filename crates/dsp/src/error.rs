@@ -14,19 +14,13 @@ pub enum Error {
     Shape(String),
     /// Not enough samples or symbols for the step to work.
     #[error("too short: {what} needs at least {needed}, got {got}")]
-    TooShort {
-        what: &'static str,
-        needed: usize,
-        got: usize,
-    },
+    TooShort { what: &'static str, needed: usize, got: usize },
     /// Input with NaN or infinite values where finite ones are required.
     #[error("non-finite input: {0}")]
     NonFinite(String),
     /// No tag reply: the best normalised preamble correlation stayed below
     /// the threshold.
-    #[error(
-        "no preamble detected: best normalised correlation {score:.3} < threshold {threshold:.3}"
-    )]
+    #[error("no preamble detected: best normalised correlation {score:.3} < threshold {threshold:.3}")]
     NoPreamble { score: f64, threshold: f64 },
     /// After edge-flip elimination a tag state has no clean symbol left.
     #[error("no clean symbols: {high} in the reflective and {low} in the non-reflective state")]

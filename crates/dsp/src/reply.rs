@@ -8,18 +8,12 @@ use num_complex::{Complex32, Complex64};
 
 use crate::backscatter::{preamble_chips, Encoding};
 use crate::detect::{
-    combined_magnitude, combined_projection_from_sums, detect_on_grid, detect_preamble,
-    moving_average, refine_detection, CoarseGrid, Detection, DetectionOptions, Feature,
+    combined_magnitude, combined_projection_from_sums, detect_on_grid, detect_preamble, CoarseGrid, moving_average, refine_detection, Detection, DetectionOptions, Feature,
     FeatureSums, Template,
 };
 use crate::error::{Error, Result};
-use crate::estimate::{
-    symbol_states, tag_channel_from_sums, ChipGrid, SymbolState, SymbolSums, TagChannel,
-};
-use crate::ofdm::{
-    symbol_timing, ChannelMatrix, ChannelTransform, Demodulator, KnownSymbol, OfdmConfig,
-    SymbolTiming,
-};
+use crate::estimate::{symbol_states, tag_channel_from_sums, ChipGrid, SymbolState, SymbolSums, TagChannel};
+use crate::ofdm::{symbol_timing, ChannelMatrix, ChannelTransform, Demodulator, KnownSymbol, OfdmConfig, SymbolTiming};
 
 /// How replies are detected and which symbols are used.
 #[derive(Debug, Clone, PartialEq)]
@@ -71,29 +65,17 @@ impl ReplyOptions {
     pub fn validate(&self) -> Result<()> {
         self.encoding.validate()?;
         if !(self.guard_symbols >= 0.0 && self.guard_symbols.is_finite()) {
-            return Err(Error::BadConfig(format!(
-                "guard_symbols must be ≥ 0, got {}",
-                self.guard_symbols
-            )));
+            return Err(Error::BadConfig(format!("guard_symbols must be ≥ 0, got {}", self.guard_symbols)));
         }
         if !(self.decision_margin > 0.0 && self.decision_margin < 1.0) {
-            return Err(Error::BadConfig(format!(
-                "decision_margin must be in (0, 1), got {}",
-                self.decision_margin
-            )));
+            return Err(Error::BadConfig(format!("decision_margin must be in (0, 1), got {}", self.decision_margin)));
         }
         let d = &self.detection;
         if !(d.threshold > 0.0 && d.threshold <= 1.0) {
-            return Err(Error::BadConfig(format!(
-                "threshold must be in (0, 1], got {}",
-                d.threshold
-            )));
+            return Err(Error::BadConfig(format!("threshold must be in (0, 1], got {}", d.threshold)));
         }
         if !(d.blf_tolerance >= 0.0 && d.blf_tolerance < 0.5) {
-            return Err(Error::BadConfig(format!(
-                "blf_tolerance must be in [0, 0.5), got {}",
-                d.blf_tolerance
-            )));
+            return Err(Error::BadConfig(format!("blf_tolerance must be in [0, 0.5), got {}", d.blf_tolerance)));
         }
         Ok(())
     }
@@ -245,12 +227,7 @@ impl AntennaFront {
     /// Processes one antenna's window into `out` (buffers reused). With
     /// `first_sample` (from [`ReplyProcessor::first_sample`]) the
     /// correlation timing is skipped: the reference fixes the symbol grid.
-    pub fn process(
-        &mut self,
-        window: &[Complex32],
-        first_sample: Option<usize>,
-        out: &mut AntennaSymbols,
-    ) {
+    pub fn process(&mut self, window: &[Complex32], first_sample: Option<usize>, out: &mut AntennaSymbols) {
         out.error = None;
         out.feature_error = None;
         out.timing = None;
@@ -269,10 +246,7 @@ impl AntennaFront {
             },
         };
         out.first_sample = first;
-        if let Err(e) = out
-            .symbol_sums
-            .reset(window, first, self.transform.symbol_len())
-        {
+        if let Err(e) = out.symbol_sums.reset(window, first, self.transform.symbol_len()) {
             out.error = Some(e);
             return;
         }
@@ -285,18 +259,11 @@ impl AntennaFront {
         match self.feature_kind {
             Feature::CombinedMagnitude => {
                 // Σ_f |H(f, n)| needs every symbol demodulated.
-                let _ = self
-                    .demodulator
-                    .demodulate(&sums.samples, 0, &mut self.matrix);
+                let _ = self.demodulator.demodulate(&sums.samples, 0, &mut self.matrix);
                 self.matrix.valid.copy_from_slice(&sums.valid);
                 combined_magnitude(&self.matrix, &mut self.feature)
             }
-            Feature::Projection => combined_projection_from_sums(
-                sums,
-                &mut self.transform,
-                self.block,
-                &mut self.feature,
-            ),
+            Feature::Projection => combined_projection_from_sums(sums, &mut self.transform, self.block, &mut self.feature),
         }
         moving_average(&self.feature, self.smoothing, &mut self.smoothed);
         out.feature_error = out.sums.reset(&self.smoothed).err();
@@ -316,12 +283,7 @@ impl AntennaFront {
     /// per window length (the fronts and the joint stage share it).
     fn ensure_grid(&mut self, symbols: usize) {
         if self.grid.as_ref().is_none_or(|g| g.symbols != symbols) {
-            self.grid = Some(CoarseGrid::new(
-                symbols,
-                self.template.len(),
-                self.nominal_chip_symbols,
-                self.blf_tolerance,
-            ));
+            self.grid = Some(CoarseGrid::new(symbols, self.template.len(), self.nominal_chip_symbols, self.blf_tolerance));
         }
     }
 }
@@ -387,10 +349,7 @@ impl ReplyProcessor {
     pub fn set_timing_reference(&mut self, reference: Option<Vec<usize>>) -> Result<()> {
         if let Some(r) = &reference {
             if let Some(bad) = r.iter().find(|&&d| d >= self.config.subcarriers) {
-                return Err(Error::BadConfig(format!(
-                    "timing reference {bad} ≥ N = {}",
-                    self.config.subcarriers
-                )));
+                return Err(Error::BadConfig(format!("timing reference {bad} ≥ N = {}", self.config.subcarriers)));
             }
         }
         self.timing_reference = reference;
@@ -436,11 +395,7 @@ impl ReplyProcessor {
     /// whole reply: [`Error::Shape`] (no window, reference of the wrong
     /// length), every antenna failing (that antenna's error), and the
     /// detection's ([`Error::NoPreamble`], [`Error::TooShort`]).
-    pub fn process(
-        &mut self,
-        windows: &[&[Complex32]],
-        tx_phase: Option<usize>,
-    ) -> Result<ReplyEstimate> {
+    pub fn process(&mut self, windows: &[&[Complex32]], tx_phase: Option<usize>) -> Result<ReplyEstimate> {
         let r = windows.len();
         if r == 0 {
             return Err(Error::Shape("no rx window given".into()));
@@ -472,10 +427,7 @@ impl ReplyProcessor {
     fn check_reference(&self, r: usize, tx_phase: Option<usize>) -> Result<()> {
         if let Some(reference) = &self.timing_reference {
             if tx_phase.is_some() && reference.len() != r {
-                return Err(Error::Shape(format!(
-                    "timing reference has {} antennas, reply has {r}",
-                    reference.len()
-                )));
+                return Err(Error::Shape(format!("timing reference has {} antennas, reply has {r}", reference.len())));
             }
         }
         Ok(())
@@ -487,11 +439,7 @@ impl ReplyProcessor {
     /// workers). With `tx_phase` and no timing reference yet, the reference
     /// is learnt from the antennas' correlation timing when all succeeded.
     /// The antennas' matrices may be truncated to a common symbol count.
-    pub fn finish(
-        &mut self,
-        antennas: &mut [AntennaSymbols],
-        tx_phase: Option<usize>,
-    ) -> Result<ReplyEstimate> {
+    pub fn finish(&mut self, antennas: &mut [AntennaSymbols], tx_phase: Option<usize>) -> Result<ReplyEstimate> {
         let r = antennas.len();
         let n = self.config.subcarriers;
         let f_count = self.config.active_count();
@@ -504,23 +452,14 @@ impl ReplyProcessor {
         let first_samples: Vec<usize> = antennas.iter().map(|a| a.first_sample).collect();
         let good: Vec<usize> = (0..r).filter(|&a| errors[a].is_none()).collect();
         if good.is_empty() {
-            return Err(errors
-                .into_iter()
-                .flatten()
-                .next()
-                .unwrap_or(Error::Shape("no antenna".into())));
+            return Err(errors.into_iter().flatten().next().unwrap_or(Error::Shape("no antenna".into())));
         }
         if let (Some(phase), None) = (tx_phase, &self.timing_reference) {
             if good.len() == r {
-                self.timing_reference =
-                    Some(first_samples.iter().map(|&m| (m + phase) % n).collect());
+                self.timing_reference = Some(first_samples.iter().map(|&m| (m + phase) % n).collect());
             }
         }
-        let symbols = good
-            .iter()
-            .map(|&a| antennas[a].symbol_sums.symbols)
-            .min()
-            .unwrap_or(0);
+        let symbols = good.iter().map(|&a| antennas[a].symbol_sums.symbols).min().unwrap_or(0);
         for &a in &good {
             if antennas[a].symbol_sums.symbols != symbols {
                 // Unequal windows: truncate and recompute the feature on the
@@ -534,51 +473,26 @@ impl ReplyProcessor {
                 errors[a] = Some(e.clone());
             }
         }
-        let detecting: Vec<usize> = good
-            .iter()
-            .copied()
-            .filter(|&a| antennas[a].feature_error.is_none())
-            .collect();
+        let detecting: Vec<usize> = good.iter().copied().filter(|&a| antennas[a].feature_error.is_none()).collect();
         if detecting.is_empty() {
-            return Err(errors
-                .into_iter()
-                .flatten()
-                .next()
-                .unwrap_or(Error::Shape("no antenna".into())));
+            return Err(errors.into_iter().flatten().next().unwrap_or(Error::Shape("no antenna".into())));
         }
         let chip_nominal = self.config.chip_symbols();
         let features: Vec<&FeatureSums> = detecting.iter().map(|&a| &antennas[a].sums).collect();
         // Stage 1 of the search was done per antenna (by the fronts) when all
         // windows had the same length; the shares add up.
-        let precomputed = detecting
-            .iter()
-            .all(|&a| antennas[a].coarse_symbols == symbols && !antennas[a].coarse.is_empty());
+        let precomputed = detecting.iter().all(|&a| antennas[a].coarse_symbols == symbols && !antennas[a].coarse.is_empty());
         let mut detection = if precomputed {
             // The front was built from the same options: its grid is this one.
             self.front.ensure_grid(symbols);
             let grid = self.front.grid.as_ref().expect("just built");
             let mut summed = vec![0.0; grid.len()];
             for &a in &detecting {
-                summed
-                    .iter_mut()
-                    .zip(&antennas[a].coarse)
-                    .for_each(|(s, c)| *s += c);
+                summed.iter_mut().zip(&antennas[a].coarse).for_each(|(s, c)| *s += c);
             }
-            detect_on_grid(
-                &features,
-                &self.template,
-                chip_nominal,
-                &self.options.detection,
-                &grid,
-                &summed,
-            )?
+            detect_on_grid(&features, &self.template, chip_nominal, &self.options.detection, &grid, &summed)?
         } else {
-            detect_preamble(
-                &features,
-                &self.template,
-                chip_nominal,
-                &self.options.detection,
-            )?
+            detect_preamble(&features, &self.template, chip_nominal, &self.options.detection)?
         };
 
         // 4: edge elimination and tag channel on the preamble.
@@ -593,14 +507,8 @@ impl ReplyProcessor {
         let mut levels: Vec<Option<u8>> = self.template.levels.iter().map(|&l| Some(l)).collect();
         let mut estimates: Vec<Option<TagChannel>> = vec![None; r];
         for &a in &detecting {
-            symbol_states(
-                &grid,
-                &levels,
-                &antennas[a].symbol_sums.valid,
-                &mut self.states,
-            );
-            match tag_channel_from_sums(&antennas[a].symbol_sums, &self.states, &mut self.transform)
-            {
+            symbol_states(&grid, &levels, &antennas[a].symbol_sums.valid, &mut self.states);
+            match tag_channel_from_sums(&antennas[a].symbol_sums, &self.states, &mut self.transform) {
                 Ok(t) => estimates[a] = Some(t),
                 Err(e) => errors[a] = Some(e),
             }
@@ -623,8 +531,7 @@ impl ReplyProcessor {
                 // narrow. Score and correlations stay the preamble's.
                 let extended = Template::new(levels.iter().map(|l| l.unwrap_or(0)).collect())?;
                 // ±4 steps must cover the preamble's own scale uncertainty.
-                let step =
-                    (1.0 / (16.0 * extended.len() as f64)).max(detection.scale_uncertainty / 4.0);
+                let step = (1.0 / (16.0 * extended.len() as f64)).max(detection.scale_uncertainty / 4.0);
                 let refined = refine_detection(
                     &features,
                     &extended,
@@ -648,17 +555,8 @@ impl ReplyProcessor {
                     if estimates[a].is_none() {
                         continue;
                     }
-                    symbol_states(
-                        &grid,
-                        &levels,
-                        &antennas[a].symbol_sums.valid,
-                        &mut self.states,
-                    );
-                    match tag_channel_from_sums(
-                        &antennas[a].symbol_sums,
-                        &self.states,
-                        &mut self.transform,
-                    ) {
+                    symbol_states(&grid, &levels, &antennas[a].symbol_sums.valid, &mut self.states);
+                    match tag_channel_from_sums(&antennas[a].symbol_sums, &self.states, &mut self.transform) {
                         Ok(t) => estimates[a] = Some(t),
                         Err(e) => {
                             errors[a] = Some(e);
@@ -677,29 +575,17 @@ impl ReplyProcessor {
         let mut counts = vec![StateCounts::default(); r];
         for a in 0..r {
             let Some(t) = &estimates[a] else {
-                counts[a] = StateCounts {
-                    invalid: symbols,
-                    ..Default::default()
-                };
+                counts[a] = StateCounts { invalid: symbols, ..Default::default() };
                 continue;
             };
             channel[a * f_count..(a + 1) * f_count].copy_from_slice(&t.h);
             variance[a * f_count..(a + 1) * f_count].copy_from_slice(&t.variance);
-            symbol_states(
-                &grid,
-                &levels,
-                &antennas[a].symbol_sums.valid,
-                &mut self.states,
-            );
+            symbol_states(&grid, &levels, &antennas[a].symbol_sums.valid, &mut self.states);
             states[a * symbols..(a + 1) * symbols].copy_from_slice(&self.states);
             counts[a] = StateCounts::of(&self.states);
         }
         if estimates.iter().all(|e| e.is_none()) {
-            return Err(errors
-                .into_iter()
-                .flatten()
-                .next()
-                .unwrap_or(Error::NoCleanSymbols { high: 0, low: 0 }));
+            return Err(errors.into_iter().flatten().next().unwrap_or(Error::NoCleanSymbols { high: 0, low: 0 }));
         }
         let reference_antenna = good[0];
         Ok(ReplyEstimate {
@@ -710,8 +596,7 @@ impl ReplyProcessor {
             variance,
             antenna_errors: errors,
             blf_hz: self.config.blf_hz * detection.blf_scale,
-            start_sample: first_samples[reference_antenna] as f64
-                + detection.start_symbol * n as f64,
+            start_sample: first_samples[reference_antenna] as f64 + detection.start_symbol * n as f64,
             detection,
             first_samples,
             timings,
@@ -756,17 +641,11 @@ impl ReplyProcessor {
             if k == 0.0 {
                 continue;
             }
-            time.iter_mut()
-                .zip(&sums.reference)
-                .for_each(|(x, r)| *x += r * k);
+            time.iter_mut().zip(&sums.reference).for_each(|(x, r)| *x += r * k);
             self.transform.apply(&time, &mut channel);
             let energy: f64 = t.h.iter().map(|v| v.norm_sqr()).sum();
-            let projection: f64 = channel
-                .iter()
-                .zip(&t.midpoint)
-                .zip(&t.h)
-                .map(|((h, m), d)| ((h - m * k) * d.conj()).re)
-                .sum();
+            let projection: f64 =
+                channel.iter().zip(&t.midpoint).zip(&t.h).map(|((h, m), d)| ((h - m * k) * d.conj()).re).sum();
             numerator += projection;
             denominator += k * energy / 2.0;
         }
@@ -806,19 +685,11 @@ mod tests {
     impl Synthetic {
         fn new() -> Self {
             let config = OfdmConfig::new(100e6, 20, 915e6, 40e3).unwrap();
-            Self {
-                config,
-                symbol: KnownSymbol::generate(20, 17).unwrap(),
-                tx_phase: 7,
-                antennas: 3,
-            }
+            Self { config, symbol: KnownSymbol::generate(20, 17).unwrap(), tx_phase: 7, antennas: 3 }
         }
 
         fn tag(&self, a: usize, k: usize) -> Complex64 {
-            Complex64::from_polar(
-                0.02 * (1.0 + 0.3 * a as f64),
-                0.9 * a as f64 + 0.35 * k as f64,
-            )
+            Complex64::from_polar(0.02 * (1.0 + 0.3 * a as f64), 0.9 * a as f64 + 0.35 * k as f64)
         }
 
         fn leak(&self, a: usize, k: usize) -> Complex64 {
@@ -830,33 +701,18 @@ mod tests {
             let n = self.config.subcarriers;
             (0..n)
                 .map(|t| {
-                    (0..n)
-                        .map(|k| {
-                            self.symbol.frequency[k]
-                                * spectrum(k)
-                                * Complex64::from_polar(1.0, TAU * (k * t) as f64 / n as f64)
-                        })
-                        .sum::<Complex64>()
+                    (0..n).map(|k| self.symbol.frequency[k] * spectrum(k) * Complex64::from_polar(1.0, TAU * (k * t) as f64 / n as f64)).sum::<Complex64>()
                         / (n as f64).sqrt()
                 })
                 .collect()
         }
 
         fn windows(&self) -> Vec<Vec<Complex32>> {
-            let chips = reply_chips(
-                Encoding::Fm0,
-                false,
-                &[1, 0, 1, 1, 0, 0, 1, 0, 1, 1, 1, 0, 0, 1, 0, 1],
-            )
-            .unwrap();
+            let chips = reply_chips(Encoding::Fm0, false, &[1, 0, 1, 1, 0, 0, 1, 0, 1, 1, 1, 0, 0, 1, 0, 1]).unwrap();
             let (n, samples, chip, start) = (self.config.subcarriers, 30_000, 1250.0, 2500.0);
             let level = |i: usize| {
                 let c = ((i as f64 - start) / chip).floor();
-                if c < 0.0 || c >= chips.len() as f64 {
-                    0.0
-                } else {
-                    chips[c as usize] as f64
-                }
+                if c < 0.0 || c >= chips.len() as f64 { 0.0 } else { chips[c as usize] as f64 }
             };
             (0..self.antennas)
                 .map(|a| {
@@ -891,9 +747,7 @@ mod tests {
 
         fn truth(&self) -> Vec<Complex64> {
             let bins = self.config.active_bins();
-            (0..self.antennas)
-                .flat_map(|a| bins.iter().map(move |&k| self.tag(a, k)))
-                .collect()
+            (0..self.antennas).flat_map(|a| bins.iter().map(move |&k| self.tag(a, k))).collect()
         }
     }
 
@@ -905,36 +759,17 @@ mod tests {
     fn a_noiseless_reply_gives_its_tag_channel() {
         let s = Synthetic::new();
         let windows = s.windows();
-        let mut p =
-            ReplyProcessor::new(s.config.clone(), s.symbol.clone(), ReplyOptions::default())
-                .unwrap();
+        let mut p = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), ReplyOptions::default()).unwrap();
         let e = p.process(&refs(&windows), None).unwrap();
         assert_eq!((e.antennas, e.subcarriers), (3, s.config.active_count()));
-        assert!(
-            e.antenna_errors.iter().all(Option::is_none),
-            "{:?}",
-            e.antenna_errors
-        );
-        assert!(
-            (e.start_sample - 2500.0).abs() < 20.0,
-            "start {}",
-            e.start_sample
-        );
+        assert!(e.antenna_errors.iter().all(Option::is_none), "{:?}", e.antenna_errors);
+        assert!((e.start_sample - 2500.0).abs() < 20.0, "start {}", e.start_sample);
         assert!((e.blf_hz / 40e3 - 1.0).abs() < 0.01, "BLF {}", e.blf_hz);
-        let worst = s
-            .untimed(&e)
-            .iter()
-            .zip(s.truth())
-            .map(|(g, t)| (g - t).norm() / t.norm())
-            .fold(0.0, f64::max);
+        let worst = s.untimed(&e).iter().zip(s.truth()).map(|(g, t)| (g - t).norm() / t.norm()).fold(0.0, f64::max);
         // f32 samples with the leakage 34 dB above the tag.
         assert!(worst < 1e-3, "worst relative error {worst}");
         for (a, c) in e.counts.iter().enumerate() {
-            assert_eq!(
-                c.high + c.low + c.edge + c.outside + c.invalid,
-                e.symbols,
-                "antenna {a}"
-            );
+            assert_eq!(c.high + c.low + c.edge + c.outside + c.invalid, e.symbols, "antenna {a}");
             assert!(c.high > 0 && c.low > 0 && c.edge > 0, "antenna {a}: {c:?}");
         }
     }
@@ -946,15 +781,11 @@ mod tests {
         let s = Synthetic::new();
         let windows = s.windows();
         let options = ReplyOptions::default();
-        let mut whole =
-            ReplyProcessor::new(s.config.clone(), s.symbol.clone(), options.clone()).unwrap();
+        let mut whole = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), options.clone()).unwrap();
         let expected = whole.process(&refs(&windows), Some(s.tx_phase)).unwrap();
-        let mut joint =
-            ReplyProcessor::new(s.config.clone(), s.symbol.clone(), options.clone()).unwrap();
+        let mut joint = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), options.clone()).unwrap();
         let mut front = AntennaFront::new(&s.config, &s.symbol, &options).unwrap();
-        let mut antennas: Vec<AntennaSymbols> = (0..windows.len())
-            .map(|_| AntennaSymbols::default())
-            .collect();
+        let mut antennas: Vec<AntennaSymbols> = (0..windows.len()).map(|_| AntennaSymbols::default()).collect();
         for (a, (w, out)) in windows.iter().zip(antennas.iter_mut()).enumerate() {
             front.process(w, joint.first_sample(a, Some(s.tx_phase)), out);
         }
@@ -971,76 +802,32 @@ mod tests {
         let s = Synthetic::new();
         let windows = s.windows();
         let n = s.config.subcarriers;
-        let mut p =
-            ReplyProcessor::new(s.config.clone(), s.symbol.clone(), ReplyOptions::default())
-                .unwrap();
+        let mut p = ReplyProcessor::new(s.config.clone(), s.symbol.clone(), ReplyOptions::default()).unwrap();
         assert!(p.timing_reference().is_none());
         let first = p.process(&refs(&windows), Some(s.tx_phase)).unwrap();
-        let reference: Vec<usize> = first
-            .first_samples
-            .iter()
-            .map(|&m| (m + s.tx_phase) % n)
-            .collect();
+        let reference: Vec<usize> = first.first_samples.iter().map(|&m| (m + s.tx_phase) % n).collect();
         assert_eq!(p.timing_reference(), Some(reference.as_slice()));
         assert!(first.timings.iter().all(Option::is_some));
         let second = p.process(&refs(&windows), Some(s.tx_phase)).unwrap();
-        assert!(
-            second.timings.iter().all(Option::is_none),
-            "the reference replaces the correlation"
-        );
+        assert!(second.timings.iter().all(Option::is_none), "the reference replaces the correlation");
         assert_eq!(second.first_samples, first.first_samples);
         assert_eq!(second.tag_channel, first.tag_channel);
         assert!(p.set_timing_reference(Some(vec![n; 3])).is_err());
-        assert!(matches!(
-            p.process(&refs(&windows[..2]), Some(s.tx_phase)),
-            Err(Error::Shape(_))
-        ));
+        assert!(matches!(p.process(&refs(&windows[..2]), Some(s.tx_phase)), Err(Error::Shape(_))));
     }
 
     #[test]
     fn options_outside_their_domains_are_rejected() {
         let bad = [
-            ReplyOptions {
-                guard_symbols: -1.0,
-                ..Default::default()
-            },
-            ReplyOptions {
-                decision_margin: 1.0,
-                ..Default::default()
-            },
-            ReplyOptions {
-                detection: DetectionOptions {
-                    threshold: 0.0,
-                    ..Default::default()
-                },
-                ..Default::default()
-            },
+            ReplyOptions { guard_symbols: -1.0, ..Default::default() },
+            ReplyOptions { decision_margin: 1.0, ..Default::default() },
+            ReplyOptions { detection: DetectionOptions { threshold: 0.0, ..Default::default() }, ..Default::default() },
         ];
         for options in bad {
-            assert!(
-                matches!(options.validate(), Err(Error::BadConfig(_))),
-                "{options:?}"
-            );
+            assert!(matches!(options.validate(), Err(Error::BadConfig(_))), "{options:?}");
         }
         let s = Synthetic::new();
-        assert!(ReplyProcessor::new(
-            s.config,
-            s.symbol,
-            ReplyOptions {
-                guard_symbols: f64::NAN,
-                ..Default::default()
-            }
-        )
-        .is_err());
-        assert!(matches!(
-            ReplyProcessor::new(
-                Synthetic::new().config,
-                Synthetic::new().symbol,
-                ReplyOptions::default()
-            )
-            .unwrap()
-            .process(&[], None),
-            Err(Error::Shape(_))
-        ));
+        assert!(ReplyProcessor::new(s.config, s.symbol, ReplyOptions { guard_symbols: f64::NAN, ..Default::default() }).is_err());
+        assert!(matches!(ReplyProcessor::new(Synthetic::new().config, Synthetic::new().symbol, ReplyOptions::default()).unwrap().process(&[], None), Err(Error::Shape(_))));
     }
 }

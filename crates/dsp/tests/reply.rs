@@ -20,15 +20,7 @@ fn processor(reply: &Reply, options: ReplyOptions) -> ReplyProcessor {
 fn run(reply: &Reply, options: ReplyOptions) -> Result<ReplyEstimate, Error> {
     let windows = reply.windows();
     let refs: Vec<&[Complex32]> = windows.iter().map(|w| w.as_slice()).collect();
-    processor(
-        reply,
-        ReplyOptions {
-            encoding: reply.encoding,
-            trext: reply.trext,
-            ..options
-        },
-    )
-    .process(&refs, None)
+    processor(reply, ReplyOptions { encoding: reply.encoding, trext: reply.trext, ..options }).process(&refs, None)
 }
 
 /// The estimate with the timing's linear phase removed, to compare with
@@ -52,20 +44,11 @@ fn untimed(reply: &Reply, estimate: &ReplyEstimate) -> Vec<Complex64> {
 /// Mean of `|estimate − truth|² / reported variance`: about 1 when the
 /// estimate is unbiased and its reported variance right.
 fn normalised_error(estimate: &[Complex64], truth: &[Complex64], variance: &[f64]) -> f64 {
-    estimate
-        .iter()
-        .zip(truth)
-        .zip(variance)
-        .map(|((g, t), v)| (g - t).norm_sqr() / v)
-        .sum::<f64>()
-        / truth.len() as f64
+    estimate.iter().zip(truth).zip(variance).map(|((g, t), v)| (g - t).norm_sqr() / v).sum::<f64>() / truth.len() as f64
 }
 
 fn worst_relative_error(a: &[Complex64], b: &[Complex64]) -> f64 {
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| (x - y).norm() / y.norm())
-        .fold(0.0, f64::max)
+    a.iter().zip(b).map(|(x, y)| (x - y).norm() / y.norm()).fold(0.0, f64::max)
 }
 
 #[test]
@@ -75,11 +58,7 @@ fn noiseless_reply_recovers_the_tag_channel_exactly() {
     let estimate = run(&reply, ReplyOptions::default()).unwrap();
     // Below 1 only by the smoothing's smear of the transitions (an eighth of a chip).
     assert!(estimate.detection.score > 0.97, "{:?}", estimate.detection);
-    assert!(
-        (estimate.start_sample - 25e-6 * 100e6).abs() < 20.0,
-        "{}",
-        estimate.start_sample
-    );
+    assert!((estimate.start_sample - 25e-6 * 100e6).abs() < 20.0, "{}", estimate.start_sample);
     let error = worst_relative_error(&untimed(&reply, &estimate), &reply.raw_tag_channel());
     // f32 samples with the leakage 55 dB above the tag: ~1e-4 relative.
     assert!(error < 1e-3, "relative error {error}");
@@ -92,11 +71,7 @@ fn edge_elimination_counts_match_the_chip_grid() {
     let mut reply = Reply::paper(2);
     reply.snr_db = f64::INFINITY;
     reply.transition_samples = 0.0;
-    let options = ReplyOptions {
-        use_payload: false,
-        guard_symbols: 1.0,
-        ..Default::default()
-    };
+    let options = ReplyOptions { use_payload: false, guard_symbols: 1.0, ..Default::default() };
     let estimate = run(&reply, options).unwrap();
     // Independent count: symbols [m, m+1) of 20 samples each, wholly inside
     // a run of equal preamble chips shrunk by the guard (1 symbol) at each
@@ -105,15 +80,7 @@ fn edge_elimination_counts_match_the_chip_grid() {
     let first = estimate.first_samples[0] as f64;
     let start = (25e-6 * 100e6 - first) / 20.0; // reply start in symbols
     let guard = 1.0 + 62.5 * estimate.detection.scale_uncertainty * 6.0; // widest (chip 0 and 12)
-    let runs = [
-        (0, 2, 1),
-        (2, 3, 0),
-        (3, 4, 1),
-        (4, 6, 0),
-        (6, 7, 1),
-        (7, 10, 0),
-        (10, 12, 1),
-    ];
+    let runs = [(0, 2, 1), (2, 3, 0), (3, 4, 1), (4, 6, 0), (6, 7, 1), (7, 10, 0), (10, 12, 1)];
     let (mut high, mut low) = (0, 0);
     for (i, j, level) in runs {
         let a = start + i as f64 * 62.5;
@@ -127,23 +94,12 @@ fn edge_elimination_counts_match_the_chip_grid() {
         }
     }
     let c = estimate.counts[0];
-    assert!(
-        c.high >= high && c.high <= high + 14,
-        "high {} vs ≥ {high}",
-        c.high
-    );
-    assert!(
-        c.low >= low && c.low <= low + 14,
-        "low {} vs ≥ {low}",
-        c.low
-    );
+    assert!(c.high >= high && c.high <= high + 14, "high {} vs ≥ {high}", c.high);
+    assert!(c.low >= low && c.low <= low + 14, "low {} vs ≥ {low}", c.low);
     // Eight transitions inside the preamble plus its two ends, each
     // discarding about two guards' worth of symbols.
     assert!(c.edge >= 8 * 2 && c.edge <= 10 * 8, "edge {}", c.edge);
-    assert_eq!(
-        c.high + c.low + c.edge + c.outside + c.invalid,
-        estimate.symbols
-    );
+    assert_eq!(c.high + c.low + c.edge + c.outside + c.invalid, estimate.symbols);
     // No used symbol overlaps a transition of the true waveform.
     let states = &estimate.states[..estimate.symbols];
     let chips = reply.chips();
@@ -172,30 +128,15 @@ fn noisy_replies_are_accurate_within_the_predicted_variance() {
         // Normalised squared errors follow the reported variance: their mean
         // is about 1 (generous bounds: 76 values, χ² with 152 dof).
         let z = normalised_error(&got, &truth, &estimate.variance);
-        assert!(
-            z > 0.6 && z < 1.6,
-            "SNR {snr_db} dB: mean normalised error {z}"
-        );
+        assert!(z > 0.6 && z < 1.6, "SNR {snr_db} dB: mean normalised error {z}");
         // Each phase error within 4.5 sigma of its own (σ_φ = √(var/2)/|h|).
         for ((g, t), v) in got.iter().zip(&truth).zip(&estimate.variance) {
             let sigma = (v / 2.0).sqrt() / t.norm();
-            assert!(
-                (g * t.conj()).arg().abs() < 4.5 * sigma,
-                "SNR {snr_db} dB: phase error beyond 4.5 σ = {sigma}"
-            );
+            assert!((g * t.conj()).arg().abs() < 4.5 * sigma, "SNR {snr_db} dB: phase error beyond 4.5 σ = {sigma}");
         }
         // One reply of ~1000 clean symbols gains ~24 dB over the per-sample SNR.
-        let rms: f64 = (got
-            .iter()
-            .zip(&truth)
-            .map(|(g, t)| (g * t.conj()).arg().powi(2))
-            .sum::<f64>()
-            / 76.0)
-            .sqrt();
-        assert!(
-            rms < 0.1 * 10f64.powf(-snr_db / 20.0),
-            "SNR {snr_db} dB: rms phase error {rms} rad"
-        );
+        let rms: f64 = (got.iter().zip(&truth).map(|(g, t)| (g * t.conj()).arg().powi(2)).sum::<f64>() / 76.0).sqrt();
+        assert!(rms < 0.1 * 10f64.powf(-snr_db / 20.0), "SNR {snr_db} dB: rms phase error {rms} rad");
     }
 }
 
@@ -211,21 +152,9 @@ fn miller_with_pilot_and_blf_error_is_found() {
         reply.window_samples = 100_000;
         reply.reply_start_s = 30e-6;
         let estimate = run(&reply, ReplyOptions::default()).unwrap();
-        assert!(
-            (estimate.blf_hz / 320e3 - 0.97).abs() < 0.005,
-            "M={m}: BLF {}",
-            estimate.blf_hz
-        );
-        assert!(
-            (estimate.start_sample - 3000.0).abs() < 40.0,
-            "M={m}: start {}",
-            estimate.start_sample
-        );
-        let z = normalised_error(
-            &untimed(&reply, &estimate),
-            &reply.raw_tag_channel(),
-            &estimate.variance,
-        );
+        assert!((estimate.blf_hz / 320e3 - 0.97).abs() < 0.005, "M={m}: BLF {}", estimate.blf_hz);
+        assert!((estimate.start_sample - 3000.0).abs() < 40.0, "M={m}: start {}", estimate.start_sample);
+        let z = normalised_error(&untimed(&reply, &estimate), &reply.raw_tag_channel(), &estimate.variance);
         assert!(z > 0.6 && z < 1.6, "M={m}: mean normalised error {z}");
         assert!(estimate.payload_chips > 0, "M={m}: no payload chip read");
     }
@@ -235,16 +164,9 @@ fn miller_with_pilot_and_blf_error_is_found() {
 fn paper_magnitude_feature_also_detects() {
     let mut reply = Reply::paper(6);
     reply.snr_db = 10.0;
-    let options = ReplyOptions {
-        feature: Feature::CombinedMagnitude,
-        ..Default::default()
-    };
+    let options = ReplyOptions { feature: Feature::CombinedMagnitude, ..Default::default() };
     let estimate = run(&reply, options).unwrap();
-    assert!(
-        (estimate.start_sample - 2500.0).abs() < 40.0,
-        "start {}",
-        estimate.start_sample
-    );
+    assert!((estimate.start_sample - 2500.0).abs() < 40.0, "start {}", estimate.start_sample);
 }
 
 #[test]
@@ -255,9 +177,7 @@ fn a_window_without_reply_is_no_preamble() {
         let mut reply = Reply::paper(seed);
         reply.silent = true;
         match run(&reply, ReplyOptions::default()) {
-            Err(Error::NoPreamble { score, threshold }) => {
-                assert!(score < 0.6 * threshold, "seed {seed}: {score}")
-            }
+            Err(Error::NoPreamble { score, threshold }) => assert!(score < 0.6 * threshold, "seed {seed}: {score}"),
             other => panic!("expected NoPreamble, got {other:?}"),
         }
     }
@@ -267,17 +187,12 @@ fn a_window_without_reply_is_no_preamble() {
 fn non_finite_windows_fail_per_antenna_or_whole() {
     let reply = Reply::paper(8);
     let mut windows = reply.windows();
-    windows[1]
-        .iter_mut()
-        .for_each(|v| *v = Complex32::new(f32::NAN, f32::NAN));
+    windows[1].iter_mut().for_each(|v| *v = Complex32::new(f32::NAN, f32::NAN));
     windows[2][100] = Complex32::new(f32::INFINITY, 0.0);
     let refs: Vec<&[Complex32]> = windows.iter().map(|w| w.as_slice()).collect();
     let mut p = processor(&reply, ReplyOptions::default());
     let estimate = p.process(&refs, None).unwrap();
-    assert!(matches!(
-        estimate.antenna_errors[1],
-        Some(Error::NonFinite(_))
-    ));
+    assert!(matches!(estimate.antenna_errors[1], Some(Error::NonFinite(_))));
     let f = estimate.subcarriers;
     assert!(estimate.tag_channel[f..2 * f].iter().all(|v| v.re.is_nan()));
     assert!(estimate.tag_channel[2 * f..].iter().all(|v| v.is_finite()));
@@ -287,10 +202,7 @@ fn non_finite_windows_fail_per_antenna_or_whole() {
     assert!(matches!(p.process(&all, None), Err(Error::NonFinite(_))));
     assert!(matches!(p.process(&[], None), Err(Error::Shape(_))));
     let short = vec![Complex32::new(1.0, 0.0); 5000];
-    assert!(matches!(
-        p.process(&[&short], None),
-        Err(Error::TooShort { .. })
-    ));
+    assert!(matches!(p.process(&[&short], None), Err(Error::TooShort { .. })));
 }
 
 #[test]
@@ -324,10 +236,7 @@ fn calibration_at_a_known_position_gives_the_formats_convention() {
     let f = frequencies.len();
     let reference: Vec<Complex64> = (0..reply.rx.len())
         .flat_map(|a| {
-            let (d1, d2) = (
-                common::distance(&reply.tx, &reply.tag),
-                common::distance(&reply.tag, &reply.rx[a]),
-            );
+            let (d1, d2) = (common::distance(&reply.tx, &reply.tag), common::distance(&reply.tag, &reply.rx[a]));
             path_channel(&frequencies, d1 + d2, 1.0 / (d1 * d2))
         })
         .collect();
@@ -354,23 +263,15 @@ fn calibration_at_a_known_position_gives_the_formats_convention() {
     let mut h = measure(&mut p, &moved);
     calibration.apply(&mut h).unwrap();
     let truth = moved.true_tag_channel(&moved.tag);
-    let phase: f64 = h
-        .iter()
-        .zip(&truth)
-        .map(|(g, t)| (g * t.conj()).arg().abs())
-        .fold(0.0, f64::max);
+    let phase: f64 = h.iter().zip(&truth).map(|(g, t)| (g * t.conj()).arg().abs()).fold(0.0, f64::max);
     assert!(phase < 0.15, "worst calibrated phase error {phase} rad");
     // The path length implied by the phase slope across the band, per rx.
     for a in 0..moved.rx.len() {
         let row = &h[a * f..(a + 1) * f];
-        let slope: f64 = row
-            .windows(2)
-            .map(|w| (w[1] * w[0].conj()).arg())
-            .sum::<f64>()
-            / (frequencies[f - 1] - frequencies[0]);
+        let slope: f64 =
+            row.windows(2).map(|w| (w[1] * w[0].conj()).arg()).sum::<f64>() / (frequencies[f - 1] - frequencies[0]);
         let implied = -slope * scattertrack_dsp::SPEED_OF_LIGHT / std::f64::consts::TAU;
-        let d =
-            common::distance(&moved.tx, &moved.tag) + common::distance(&moved.tag, &moved.rx[a]);
+        let d = common::distance(&moved.tx, &moved.tag) + common::distance(&moved.tag, &moved.rx[a]);
         assert!((implied - d).abs() < 0.05, "rx {a}: {implied} m vs {d} m");
     }
 }
@@ -384,11 +285,7 @@ fn per_antenna_fronts_then_finish_equal_process() {
     let reply = Reply::paper(5);
     let windows = reply.windows();
     let refs: Vec<&[Complex32]> = windows.iter().map(|w| w.as_slice()).collect();
-    let options = ReplyOptions {
-        encoding: reply.encoding,
-        trext: reply.trext,
-        ..Default::default()
-    };
+    let options = ReplyOptions { encoding: reply.encoding, trext: reply.trext, ..Default::default() };
     let mut whole = processor(&reply, options.clone());
     let mut joint = processor(&reply, options.clone());
     let mut front = AntennaFront::new(&reply.config, &reply.symbol, &options).unwrap();

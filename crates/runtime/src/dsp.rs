@@ -42,10 +42,7 @@ impl DspSetup {
         self.options.validate()?;
         if let Some(r) = &self.timing_reference {
             if r.len() != antennas || r.iter().any(|&d| d >= self.config.subcarriers) {
-                return Err(Error::BadConfig(format!(
-                    "timing reference {r:?} for {antennas} rx, N = {}",
-                    self.config.subcarriers
-                )));
+                return Err(Error::BadConfig(format!("timing reference {r:?} for {antennas} rx, N = {}", self.config.subcarriers)));
             }
         }
         if let Some(c) = &self.correction {
@@ -76,11 +73,7 @@ impl DspSetup {
 
     /// The fusion stage, returning used buffers to `pool`.
     pub fn fusion(&self, pool: &BufferPool) -> Result<DspFusion> {
-        let mut processor = ReplyProcessor::new(
-            self.config.clone(),
-            self.symbol.clone(),
-            self.options.clone(),
-        )?;
+        let mut processor = ReplyProcessor::new(self.config.clone(), self.symbol.clone(), self.options.clone())?;
         processor.set_timing_reference(self.timing_reference.clone())?;
         Ok(DspFusion {
             pool: pool.clone(),
@@ -104,11 +97,7 @@ pub struct BufferPool(Arc<Mutex<Vec<AntennaSymbols>>>);
 
 impl BufferPool {
     fn take(&self) -> AntennaSymbols {
-        self.0
-            .lock()
-            .ok()
-            .and_then(|mut p| p.pop())
-            .unwrap_or_default()
+        self.0.lock().ok().and_then(|mut p| p.pop()).unwrap_or_default()
     }
 
     fn give(&self, used: Vec<AntennaSymbols>) {
@@ -137,17 +126,12 @@ impl AntennaWorker for DspWorker {
         // known: (D_r − tx_phase) mod N, no correlation timing.
         let n = self.n;
         let first_of = |phase: usize, d: usize| (d + n - phase % n) % n;
-        let first = match (
-            reply.tx_phase,
-            self.reference.as_ref().and_then(|r| r.get(slot)),
-        ) {
+        let first = match (reply.tx_phase, self.reference.as_ref().and_then(|r| r.get(slot))) {
             (Some(phase), Some(&d)) => Some(first_of(phase, d)),
             _ => None,
         };
         let mut window = reply.windows[slot].as_slice();
-        if let (Some(phase), Some(reference), Some(first)) =
-            (reply.tx_phase, &self.reference, first)
-        {
+        if let (Some(phase), Some(reference), Some(first)) = (reply.tx_phase, &self.reference, first) {
             // Every antenna's grid is known, so cut this window to the whole
             // symbols all antennas have: fusion then finds equal counts and
             // uses the workers' features and search shares as they are
@@ -180,19 +164,10 @@ pub struct DspFusion {
 }
 
 impl ReplyFusion<AntennaSymbols> for DspFusion {
-    fn fuse(
-        &mut self,
-        reply: &ReplyHeader,
-        mut antennas: Vec<AntennaSymbols>,
-    ) -> std::result::Result<Vec<Option<Vec<Complex64>>>, String> {
+    fn fuse(&mut self, reply: &ReplyHeader, mut antennas: Vec<AntennaSymbols>) -> std::result::Result<Vec<Option<Vec<Complex64>>>, String> {
         // The workers already placed the symbol grid; without a transmitter
         // phase the reference is neither used nor learnt.
-        let estimate = self.processor.finish(
-            &mut antennas,
-            reply
-                .tx_phase
-                .filter(|_| self.processor.timing_reference().is_some()),
-        );
+        let estimate = self.processor.finish(&mut antennas, reply.tx_phase.filter(|_| self.processor.timing_reference().is_some()));
         self.pool.give(antennas);
         let estimate = estimate.map_err(|e| e.kind().to_string())?;
         let mut h = estimate.tag_channel;
@@ -200,21 +175,12 @@ impl ReplyFusion<AntennaSymbols> for DspFusion {
             h.iter_mut().zip(c).for_each(|(v, c)| *v *= c);
         }
         if let Some(alpha) = self.ema_alpha {
-            let ema = self
-                .ema
-                .entry(reply.tag)
-                .or_insert_with(|| Ema::new(alpha).expect("validated"));
+            let ema = self.ema.entry(reply.tag).or_insert_with(|| Ema::new(alpha).expect("validated"));
             if let Ok(smoothed) = ema.update(&h) {
                 // Failed antennas stay NaN: the EMA only smooths what was measured.
-                h = h
-                    .iter()
-                    .zip(smoothed)
-                    .map(|(raw, s)| if raw.is_finite() { *s } else { *raw })
-                    .collect();
+                h = h.iter().zip(smoothed).map(|(raw, s)| if raw.is_finite() { *s } else { *raw }).collect();
             }
         }
-        Ok(h.chunks(self.subcarriers)
-            .map(|row| row.iter().all(|v| v.is_finite()).then(|| row.to_vec()))
-            .collect())
+        Ok(h.chunks(self.subcarriers).map(|row| row.iter().all(|v| v.is_finite()).then(|| row.to_vec())).collect())
     }
 }

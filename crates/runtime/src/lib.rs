@@ -35,7 +35,6 @@ mod pipeline;
 pub mod source;
 
 pub use pipeline::{
-    run, run_source, AntennaWorker, ChannelEstimator, InMemory, Output, Pacing, PassThroughFusion,
-    PerAntenna, Reply, ReplyFusion, ReplyHeader, ReplySource, RunReport, RuntimeConfig, Workers,
-    STAGES,
+    run, run_source, AntennaWorker, InMemory, ReplySource, ChannelEstimator, Output, Pacing, PassThroughFusion, PerAntenna, Reply, ReplyFusion, ReplyHeader,
+    RunReport, RuntimeConfig, Workers, STAGES,
 };

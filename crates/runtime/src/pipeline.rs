@@ -1,8 +1,8 @@
 //! The pipeline: threads, bounded queues, in-order fusion, latency.
 
 use std::collections::{BTreeMap, VecDeque};
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{channel, sync_channel, Receiver, Sender};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Condvar, Mutex};
 use std::time::{Duration, Instant};
 
@@ -41,11 +41,7 @@ pub trait AntennaWorker: Send {
 /// antenna at `RuntimeConfig::frequencies_hz` (None where it could not be
 /// estimated), or the reason the whole reply is declined (counted).
 pub trait ReplyFusion<T> {
-    fn fuse(
-        &mut self,
-        reply: &ReplyHeader,
-        antennas: Vec<T>,
-    ) -> Result<Vec<Option<Vec<Complex64>>>, String>;
+    fn fuse(&mut self, reply: &ReplyHeader, antennas: Vec<T>) -> Result<Vec<Option<Vec<Complex64>>>, String>;
 }
 
 /// What fusion knows of a reply besides its antennas' outputs.
@@ -77,11 +73,7 @@ impl<E: ChannelEstimator> AntennaWorker for PerAntenna<E> {
 pub struct PassThroughFusion;
 
 impl ReplyFusion<Option<Vec<Complex64>>> for PassThroughFusion {
-    fn fuse(
-        &mut self,
-        _reply: &ReplyHeader,
-        antennas: Vec<Option<Vec<Complex64>>>,
-    ) -> Result<Vec<Option<Vec<Complex64>>>, String> {
+    fn fuse(&mut self, _reply: &ReplyHeader, antennas: Vec<Option<Vec<Complex64>>>) -> Result<Vec<Option<Vec<Complex64>>>, String> {
         Ok(antennas)
     }
 }
@@ -245,13 +237,7 @@ impl RunReport {
 
     /// The `q`-quantile of stage `stage` (an index into [`STAGES`]), ns.
     pub fn stage_percentile_ns(&self, stage: usize, q: f64) -> f64 {
-        percentile(
-            self.stage_ns
-                .iter()
-                .map(|s| s[stage.min(STAGES.len() - 1)])
-                .collect(),
-            q,
-        )
+        percentile(self.stage_ns.iter().map(|s| s[stage.min(STAGES.len() - 1)]).collect(), q)
     }
 }
 
@@ -276,18 +262,9 @@ struct Job {
 
 enum Event<T> {
     /// Capture announces a reply (so fusion knows how many results to await).
-    Arrived {
-        header: ReplyHeader,
-        arrival: Instant,
-    },
+    Arrived { header: ReplyHeader, arrival: Instant },
     /// A worker's output for one antenna: when it started and finished.
-    Processed {
-        index: u64,
-        slot: usize,
-        output: T,
-        started: Instant,
-        finished: Instant,
-    },
+    Processed { index: u64, slot: usize, output: T, started: Instant, finished: Instant },
 }
 
 struct Pending<T> {
@@ -308,9 +285,7 @@ impl<T> Pending<T> {
         self.done += 1;
         self.last_start = Some(self.last_start.map_or(started, |t| t.max(started)));
         self.last_finish = Some(self.last_finish.map_or(finished, |t| t.max(finished)));
-        self.busy_ns = self
-            .busy_ns
-            .max(finished.duration_since(started).as_nanos() as u64);
+        self.busy_ns = self.busy_ns.max(finished.duration_since(started).as_nanos() as u64);
     }
 
     fn new(antennas: usize) -> Self {
@@ -330,13 +305,7 @@ impl<T> Pending<T> {
 /// `make_worker`, called with the thread's index; a worker must handle any
 /// antenna slot), `fusion` and the tracker(s) in `engine` on the calling
 /// thread; returns when every reply has an output.
-pub fn run<I, W, F, U>(
-    replies: I,
-    make_worker: F,
-    fusion: &mut U,
-    engine: &mut Engine,
-    config: &RuntimeConfig,
-) -> RunReport
+pub fn run<I, W, F, U>(replies: I, make_worker: F, fusion: &mut U, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
 where
     I: IntoIterator<Item = Reply>,
     I::IntoIter: Send,
@@ -348,13 +317,7 @@ where
 }
 
 /// [`run`] over any [`ReplySource`] (e.g. [`crate::source::IqFileReplies`]).
-pub fn run_source<S, W, F, U>(
-    replies: S,
-    make_worker: F,
-    fusion: &mut U,
-    engine: &mut Engine,
-    config: &RuntimeConfig,
-) -> RunReport
+pub fn run_source<S, W, F, U>(replies: S, make_worker: F, fusion: &mut U, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
 where
     S: ReplySource,
     W: AntennaWorker,
@@ -365,15 +328,7 @@ where
     let (queue_count, per_queue) = match config.workers {
         Workers::PerAntenna(k) => (antennas.max(1), k.max(1)),
         Workers::Shared(k) => (1, k.max(1)),
-        Workers::Team(k) => {
-            return run_team(
-                replies,
-                (0..k.max(1)).map(make_worker).collect(),
-                fusion,
-                engine,
-                config,
-            )
-        }
+        Workers::Team(k) => return run_team(replies, (0..k.max(1)).map(make_worker).collect(), fusion, engine, config),
     };
     let (events_tx, events_rx) = channel::<Event<W::Output>>();
     let mut queues: Vec<std::sync::mpsc::SyncSender<Job>> = Vec::with_capacity(queue_count);
@@ -385,13 +340,8 @@ where
         queues.push(q_tx);
         worker_inputs.push(Arc::new(Mutex::new(q_rx)));
     }
-    let pools: Vec<Vec<W>> = (0..queue_count)
-        .map(|q| {
-            (0..per_queue)
-                .map(|i| make_worker(q * per_queue + i))
-                .collect()
-        })
-        .collect();
+    let pools: Vec<Vec<W>> =
+        (0..queue_count).map(|q| (0..per_queue).map(|i| make_worker(q * per_queue + i)).collect()).collect();
     let pacing = config.pacing;
     std::thread::scope(|scope| {
         // Workers: each pulls jobs from its queue.
@@ -408,16 +358,7 @@ where
                     let started = Instant::now();
                     let output = worker.process(job.slot, &job.reply);
                     let finished = Instant::now();
-                    if events
-                        .send(Event::Processed {
-                            index: job.index,
-                            slot: job.slot,
-                            output,
-                            started,
-                            finished,
-                        })
-                        .is_err()
-                    {
+                    if events.send(Event::Processed { index: job.index, slot: job.slot, output, started, finished }).is_err() {
                         break;
                     }
                 });
@@ -443,23 +384,15 @@ struct ReplayClock {
 
 impl ReplayClock {
     fn new(pacing: Pacing) -> Self {
-        Self {
-            start: Instant::now(),
-            first: None,
-            pacing,
-        }
+        Self { start: Instant::now(), first: None, pacing }
     }
 
     /// Reply at recording time `time_s` (s) is due this long after `start`
     /// (None: as fast as possible).
     fn due(&mut self, time_s: f64) -> Option<Duration> {
-        let Pacing::Recorded { speed } = self.pacing else {
-            return None;
-        };
+        let Pacing::Recorded { speed } = self.pacing else { return None };
         let t0 = *self.first.get_or_insert(time_s);
-        Some(Duration::from_secs_f64(
-            ((time_s - t0) / speed.max(1e-9)).max(0.0),
-        ))
+        Some(Duration::from_secs_f64(((time_s - t0) / speed.max(1e-9)).max(0.0)))
     }
 }
 
@@ -479,30 +412,16 @@ fn capture<S: ReplySource, T>(
                 std::thread::sleep(due - elapsed);
             }
         }
-        let Some(reply) = replies.next_reply() else {
-            break;
-        };
+        let Some(reply) = replies.next_reply() else { break };
         let reply = Arc::new(reply);
         let arrival = Instant::now();
-        let header = ReplyHeader {
-            index,
-            tag: reply.tag,
-            time_s: reply.time_s,
-            tx_phase: reply.tx_phase,
-        };
+        let header = ReplyHeader { index, tag: reply.tag, time_s: reply.time_s, tx_phase: reply.tx_phase };
         if events.send(Event::Arrived { header, arrival }).is_err() {
             return;
         }
         for slot in 0..antennas {
             let queue = &queues[slot % queues.len()];
-            if queue
-                .send(Job {
-                    index,
-                    slot,
-                    reply: Arc::clone(&reply),
-                })
-                .is_err()
-            {
+            if queue.send(Job { index, slot, reply: Arc::clone(&reply) }).is_err() {
                 return;
             }
         }
@@ -533,9 +452,7 @@ struct Team<T> {
 
 impl<T> Team<T> {
     fn head_complete(&self, antennas: usize) -> bool {
-        self.replies
-            .front()
-            .is_some_and(|r| r.pending.done == antennas)
+        self.replies.front().is_some_and(|r| r.pending.done == antennas)
     }
 }
 
@@ -573,14 +490,8 @@ impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
                 return None;
             }
             let (generation, prewakes) = (state.generation, state.prewakes);
-            state = self
-                .work
-                .wait_while(state, |s| s.generation == generation && !s.closed)
-                .expect("pipeline state poisoned");
-            if state.prewakes != prewakes
-                && state.replies.iter().all(|r| r.claimed >= self.antennas)
-                && !state.closed
-            {
+            state = self.work.wait_while(state, |s| s.generation == generation && !s.closed).expect("pipeline state poisoned");
+            if state.prewakes != prewakes && state.replies.iter().all(|r| r.claimed >= self.antennas) && !state.closed {
                 // Pre-woken: poll, without the lock, for the reply.
                 let handed = self.handed.load(Ordering::Acquire);
                 drop(state);
@@ -604,11 +515,7 @@ impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
 
     /// Runs one claimed job on `worker`, records it and, when it completed
     /// the head reply, releases what is complete.
-    fn run<W: AntennaWorker<Output = T>>(
-        &self,
-        worker: &mut W,
-        (index, slot, reply): (u64, usize, Arc<Reply>),
-    ) {
+    fn run<W: AntennaWorker<Output = T>>(&self, worker: &mut W, (index, slot, reply): (u64, usize, Arc<Reply>)) {
         let started = Instant::now();
         let output = worker.process(slot, &reply);
         let finished = Instant::now();
@@ -616,9 +523,7 @@ impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
         let complete = {
             let mut state = lock(&self.state);
             let front = state.replies.front().map_or(index, |r| r.index);
-            state.replies[(index - front) as usize]
-                .pending
-                .record(slot, output, started, finished);
+            state.replies[(index - front) as usize].pending.record(slot, output, started, finished);
             state.head_complete(self.antennas)
         };
         if complete {
@@ -656,13 +561,7 @@ impl<T, U: ReplyFusion<T>> TeamShared<'_, T, U> {
 /// wake-up), and `workers − 1` threads; every thread claims antenna jobs
 /// oldest reply first, and the one completing the head reply releases it
 /// (fusion, tracker) and any complete ones behind it.
-fn run_team<S, W, U>(
-    mut replies: S,
-    mut workers: Vec<W>,
-    fusion: &mut U,
-    engine: &mut Engine,
-    config: &RuntimeConfig,
-) -> RunReport
+fn run_team<S, W, U>(mut replies: S, mut workers: Vec<W>, fusion: &mut U, engine: &mut Engine, config: &RuntimeConfig) -> RunReport
 where
     S: ReplySource,
     W: AntennaWorker,
@@ -672,12 +571,7 @@ where
     let depth = config.queue_depth.max(1);
     let shared = TeamShared {
         antennas,
-        state: Mutex::new(Team {
-            replies: VecDeque::new(),
-            generation: 0,
-            prewakes: 0,
-            closed: false,
-        }),
+        state: Mutex::new(Team { replies: VecDeque::new(), generation: 0, prewakes: 0, closed: false }),
         work: Condvar::new(),
         space: Condvar::new(),
         release: Mutex::new(Release::new(fusion, engine, config)),
@@ -721,17 +615,10 @@ where
                 state = shared.space.wait(state).expect("pipeline state poisoned");
             }
             drop(state);
-            let Some(reply) = replies.next_reply() else {
-                break;
-            };
+            let Some(reply) = replies.next_reply() else { break };
             let arrival = Instant::now();
             let mut pending = Pending::new(antennas);
-            pending.header = Some(ReplyHeader {
-                index,
-                tag: reply.tag,
-                time_s: reply.time_s,
-                tx_phase: reply.tx_phase,
-            });
+            pending.header = Some(ReplyHeader { index, tag: reply.tag, time_s: reply.time_s, tx_phase: reply.tx_phase });
             pending.arrival = Some(arrival);
             if antennas == 0 {
                 // Complete on arrival, and no worker would release it.
@@ -739,12 +626,7 @@ where
             } else {
                 {
                     let mut state = lock(&shared.state);
-                    state.replies.push_back(InFlight {
-                        index,
-                        reply: Arc::new(reply),
-                        claimed: 0,
-                        pending,
-                    });
+                    state.replies.push_back(InFlight { index, reply: Arc::new(reply), claimed: 0, pending });
                     state.generation += 1;
                 }
                 shared.handed.fetch_add(1, Ordering::Release);
@@ -763,11 +645,7 @@ where
             shared.run(&mut own, job);
         }
     });
-    shared
-        .release
-        .into_inner()
-        .expect("release poisoned")
-        .finish()
+    shared.release.into_inner().expect("release poisoned").finish()
 }
 
 /// Collects every antenna's output of a reply, releases replies in
@@ -786,30 +664,16 @@ fn fuse_and_track<T, U: ReplyFusion<T>>(
         match event {
             Event::Arrived { header, arrival } => {
                 release.first_arrival.get_or_insert(arrival);
-                let p = pending
-                    .entry(header.index)
-                    .or_insert_with(|| Pending::new(antennas));
+                let p = pending.entry(header.index).or_insert_with(|| Pending::new(antennas));
                 p.header = Some(header);
                 p.arrival = Some(arrival);
             }
-            Event::Processed {
-                index,
-                slot,
-                output,
-                started,
-                finished,
-            } => {
-                pending
-                    .entry(index)
-                    .or_insert_with(|| Pending::new(antennas))
-                    .record(slot, output, started, finished);
+            Event::Processed { index, slot, output, started, finished } => {
+                pending.entry(index).or_insert_with(|| Pending::new(antennas)).record(slot, output, started, finished);
             }
         }
         // Release every complete reply at the head, in order.
-        while pending
-            .get(&release.next)
-            .is_some_and(|p| p.done == antennas && p.arrival.is_some())
-        {
+        while pending.get(&release.next).is_some_and(|p| p.done == antennas && p.arrival.is_some()) {
             let p = pending.remove(&release.next).expect("present");
             release.release(p);
         }
@@ -830,14 +694,7 @@ struct Release<'a, U> {
 
 impl<'a, U> Release<'a, U> {
     fn new(fusion: &'a mut U, engine: &'a mut Engine, config: &'a RuntimeConfig) -> Self {
-        Self {
-            fusion,
-            engine,
-            config,
-            next: 0,
-            first_arrival: None,
-            report: RunReport::default(),
-        }
+        Self { fusion, engine, config, next: 0, first_arrival: None, report: RunReport::default() }
     }
 
     /// Fuses reply `self.next` (complete: every antenna done, arrived),
@@ -850,20 +707,12 @@ impl<'a, U> Release<'a, U> {
         let antennas = config.rx.len();
         let f_count = config.frequencies_hz.len();
         let header = p.header.expect("arrived");
-        let outputs: Vec<T> = p
-            .outputs
-            .into_iter()
-            .map(|o| o.expect("every slot done"))
-            .collect();
+        let outputs: Vec<T> = p.outputs.into_iter().map(|o| o.expect("every slot done")).collect();
         let fusion_start = Instant::now();
         let arrival = p.arrival.expect("checked");
         self.first_arrival.get_or_insert(arrival);
-        let dispatch_ns = p.last_start.map_or(0, |t| {
-            t.saturating_duration_since(arrival).as_nanos() as u64
-        });
-        let handoff_ns = p.last_finish.map_or(0, |t| {
-            fusion_start.saturating_duration_since(t).as_nanos() as u64
-        });
+        let dispatch_ns = p.last_start.map_or(0, |t| t.saturating_duration_since(arrival).as_nanos() as u64);
+        let handoff_ns = p.last_finish.map_or(0, |t| fusion_start.saturating_duration_since(t).as_nanos() as u64);
         let fused = self.fusion.fuse(&header, outputs);
         let fusion_ns = fusion_start.elapsed().as_nanos() as u64;
         let mut rx = Vec::with_capacity(antennas);
@@ -887,13 +736,7 @@ impl<'a, U> Release<'a, U> {
             self.report.no_channel += 1;
             None
         } else {
-            let frame = WidebandFrame {
-                time_s: header.time_s,
-                tx: config.tx,
-                rx,
-                frequencies_hz: config.frequencies_hz.clone(),
-                h,
-            };
+            let frame = WidebandFrame { time_s: header.time_s, tx: config.tx, rx, frequencies_hz: config.frequencies_hz.clone(), h };
             self.engine.step(header.tag, &Measurement::Wideband(frame))
         };
         let track_ns = track_start.elapsed().as_nanos() as u64;
@@ -905,16 +748,12 @@ impl<'a, U> Release<'a, U> {
             receivers,
             latency_ns: arrival.elapsed().as_nanos() as u64,
         });
-        self.report
-            .stage_ns
-            .push([dispatch_ns, p.busy_ns, handoff_ns, fusion_ns, track_ns]);
+        self.report.stage_ns.push([dispatch_ns, p.busy_ns, handoff_ns, fusion_ns, track_ns]);
         self.next += 1;
     }
 
     fn finish(mut self) -> RunReport {
-        self.report.wall_s = self
-            .first_arrival
-            .map_or(0.0, |t| t.elapsed().as_secs_f64());
+        self.report.wall_s = self.first_arrival.map_or(0.0, |t| t.elapsed().as_secs_f64());
         self.report
     }
 }
@@ -941,28 +780,19 @@ mod tests {
     fn replies(n: usize) -> Vec<Reply> {
         let s = scene();
         let p = Vector3::new(0.5, 1.2, 0.7);
-        let d =
-            |a: usize| (p - s.antennas[0].position).norm() + (p - s.antennas[a].position).norm();
+        let d = |a: usize| (p - s.antennas[0].position).norm() + (p - s.antennas[a].position).norm();
         let windows: Vec<Vec<Complex32>> = (1..5)
             .map(|a| {
                 frequencies()
                     .iter()
                     .map(|f| {
-                        let (sn, cs) =
-                            (std::f64::consts::TAU * f * d(a) / SPEED_OF_LIGHT).sin_cos();
+                        let (sn, cs) = (std::f64::consts::TAU * f * d(a) / SPEED_OF_LIGHT).sin_cos();
                         Complex32::new(cs as f32, -sn as f32)
                     })
                     .collect()
             })
             .collect();
-        (0..n)
-            .map(|k| Reply {
-                tag: k % 2,
-                time_s: k as f64 * 1e-3,
-                tx_phase: None,
-                windows: windows.clone(),
-            })
-            .collect()
+        (0..n).map(|k| Reply { tag: k % 2, time_s: k as f64 * 1e-3, tx_phase: None, windows: windows.clone() }).collect()
     }
 
     /// Tags its output with the slot and reply it processed.
@@ -971,10 +801,7 @@ mod tests {
     impl AntennaWorker for Slotted {
         type Output = (usize, f64, Vec<Complex64>);
         fn process(&mut self, slot: usize, reply: &Reply) -> Self::Output {
-            let channel = reply.windows[slot]
-                .iter()
-                .map(|v| Complex64::new(v.re as f64, v.im as f64))
-                .collect();
+            let channel = reply.windows[slot].iter().map(|v| Complex64::new(v.re as f64, v.im as f64)).collect();
             (slot, reply.time_s, channel)
         }
     }
@@ -986,11 +813,7 @@ mod tests {
     }
 
     impl ReplyFusion<(usize, f64, Vec<Complex64>)> for Checking {
-        fn fuse(
-            &mut self,
-            reply: &ReplyHeader,
-            antennas: Vec<(usize, f64, Vec<Complex64>)>,
-        ) -> std::result::Result<Vec<Option<Vec<Complex64>>>, String> {
+        fn fuse(&mut self, reply: &ReplyHeader, antennas: Vec<(usize, f64, Vec<Complex64>)>) -> std::result::Result<Vec<Option<Vec<Complex64>>>, String> {
             assert_eq!(antennas.len(), 4);
             for (i, (slot, time_s, _)) in antennas.iter().enumerate() {
                 assert_eq!((*slot, *time_s), (i, reply.time_s), "reply {}", reply.index);
@@ -1004,28 +827,14 @@ mod tests {
     }
 
     fn config(workers: Workers) -> RuntimeConfig {
-        RuntimeConfig {
-            workers,
-            queue_depth: 4,
-            tx: 0,
-            rx: vec![1, 2, 3, 4],
-            frequencies_hz: frequencies(),
-            ..Default::default()
-        }
+        RuntimeConfig { workers, queue_depth: 4, tx: 0, rx: vec![1, 2, 3, 4], frequencies_hz: frequencies(), ..Default::default() }
     }
 
     #[test]
     fn every_layout_processes_n_replies_in_order_with_n_latencies() {
         let n = 60;
-        for workers in [
-            Workers::PerAntenna(1),
-            Workers::PerAntenna(2),
-            Workers::Shared(2),
-            Workers::Team(2),
-            Workers::Team(1),
-        ] {
-            let mut engine =
-                Engine::new(scene(), "ellipse-intersection", Params::default()).unwrap();
+        for workers in [Workers::PerAntenna(1), Workers::PerAntenna(2), Workers::Shared(2), Workers::Team(2), Workers::Team(1)] {
+            let mut engine = Engine::new(scene(), "ellipse-intersection", Params::default()).unwrap();
             let mut fusion = Checking { seen: Vec::new() };
             let made = AtomicUsize::new(0);
             let report = run(
@@ -1038,62 +847,29 @@ mod tests {
                 &mut engine,
                 &config(workers),
             );
-            assert_eq!(
-                fusion.seen,
-                (0..n as u64).collect::<Vec<_>>(),
-                "{workers:?}: fusion order"
-            );
+            assert_eq!(fusion.seen, (0..n as u64).collect::<Vec<_>>(), "{workers:?}: fusion order");
             assert_eq!(report.outputs.len(), n, "{workers:?}");
-            assert!(
-                report
-                    .outputs
-                    .iter()
-                    .enumerate()
-                    .all(|(i, o)| o.index == i as u64 && o.tag == i % 2),
-                "{workers:?}: output order"
-            );
-            assert!(
-                report.outputs.iter().all(|o| o.latency_ns > 0),
-                "{workers:?}"
-            );
+            assert!(report.outputs.iter().enumerate().all(|(i, o)| o.index == i as u64 && o.tag == i % 2), "{workers:?}: output order");
+            assert!(report.outputs.iter().all(|o| o.latency_ns > 0), "{workers:?}");
             assert_eq!(report.stage_ns.len(), n, "{workers:?}");
             let declined = (0..n).filter(|i| i % 7 == 3).count() as u64;
-            assert_eq!(
-                report.declined.get("test decline"),
-                Some(&declined),
-                "{workers:?}"
-            );
+            assert_eq!(report.declined.get("test decline"), Some(&declined), "{workers:?}");
             assert_eq!(report.no_channel, declined, "{workers:?}");
             for o in &report.outputs {
                 if o.index % 7 == 3 {
-                    assert!(
-                        o.estimate.is_none() && o.receivers == 0,
-                        "{workers:?}: declined reply {} tracked",
-                        o.index
-                    );
+                    assert!(o.estimate.is_none() && o.receivers == 0, "{workers:?}: declined reply {} tracked", o.index);
                 } else {
                     assert_eq!(o.receivers, 4, "{workers:?}");
-                    let e = o
-                        .estimate
-                        .as_ref()
-                        .expect("ellipse intersection answers every frame");
+                    let e = o.estimate.as_ref().expect("ellipse intersection answers every frame");
                     let error = (Vector3::from(e.position) - Vector3::new(0.5, 1.2, 0.7)).norm();
-                    assert!(
-                        error < 0.01,
-                        "{workers:?}: reply {} off by {error} m",
-                        o.index
-                    );
+                    assert!(error < 0.01, "{workers:?}: reply {} off by {error} m", o.index);
                 }
             }
             let expected_workers = match workers {
                 Workers::PerAntenna(k) => 4 * k,
                 Workers::Shared(k) | Workers::Team(k) => k,
             };
-            assert_eq!(
-                made.load(Ordering::Relaxed),
-                expected_workers,
-                "{workers:?}"
-            );
+            assert_eq!(made.load(Ordering::Relaxed), expected_workers, "{workers:?}");
             assert!(report.latency_percentile_ns(0.5) <= report.latency_percentile_ns(1.0));
         }
     }
@@ -1103,25 +879,11 @@ mod tests {
     #[test]
     fn recorded_pacing_follows_the_replies_timing() {
         for (speed, at_least_s) in [(1.0, 0.029), (2.0, 0.0145)] {
-            let mut engine =
-                Engine::new(scene(), "ellipse-intersection", Params::default()).unwrap();
-            let config = RuntimeConfig {
-                pacing: Pacing::Recorded { speed },
-                ..config(Workers::PerAntenna(1))
-            };
-            let report = run(
-                replies(30),
-                |_| Slotted,
-                &mut Checking { seen: Vec::new() },
-                &mut engine,
-                &config,
-            );
+            let mut engine = Engine::new(scene(), "ellipse-intersection", Params::default()).unwrap();
+            let config = RuntimeConfig { pacing: Pacing::Recorded { speed }, ..config(Workers::PerAntenna(1)) };
+            let report = run(replies(30), |_| Slotted, &mut Checking { seen: Vec::new() }, &mut engine, &config);
             assert_eq!(report.outputs.len(), 30);
-            assert!(
-                report.wall_s >= at_least_s,
-                "speed {speed}: {} s",
-                report.wall_s
-            );
+            assert!(report.wall_s >= at_least_s, "speed {speed}: {} s", report.wall_s);
         }
     }
 
@@ -1131,11 +893,7 @@ mod tests {
         assert_eq!(percentile(vec![5, 1, 3, 2, 4], 0.5), 3.0);
         assert_eq!(percentile(vec![5, 1, 3, 2, 4], 0.0), 1.0);
         assert_eq!(percentile(vec![5, 1, 3, 2, 4], 1.0), 5.0);
-        let report = RunReport {
-            wall_s: 0.5,
-            outputs: Vec::new(),
-            ..Default::default()
-        };
+        let report = RunReport { wall_s: 0.5, outputs: Vec::new(), ..Default::default() };
         assert_eq!(report.frames_per_s(), 0.0);
     }
 }

@@ -132,17 +132,11 @@ impl Iterator for IqFileReplies {
         let windows = match self.read(&spec) {
             Ok(w) => w,
             Err(_) => {
-                self.unreadable
-                    .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                self.unreadable.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 vec![Vec::new(); self.channels]
             }
         };
-        Some(Reply {
-            tag: spec.tag,
-            time_s: spec.time_s,
-            tx_phase: spec.tx_phase,
-            windows,
-        })
+        Some(Reply { tag: spec.tag, time_s: spec.time_s, tx_phase: spec.tx_phase, windows })
     }
 }
 
@@ -168,35 +162,22 @@ mod tests {
                 f32_bytes.extend(im.to_le_bytes());
             }
         }
-        for (name, bytes, format) in [
-            ("a.ci16", &i16_bytes, SampleFormat::ComplexI16),
-            ("a.cf32", &f32_bytes, SampleFormat::ComplexF32),
-        ] {
+        for (name, bytes, format) in
+            [("a.ci16", &i16_bytes, SampleFormat::ComplexI16), ("a.cf32", &f32_bytes, SampleFormat::ComplexF32)]
+        {
             let path = dir.join(name);
             std::fs::write(&path, bytes).unwrap();
             let specs = vec![
-                WindowSpec {
-                    start_sample: 2,
-                    tag: 1,
-                    time_s: 0.5,
-                    tx_phase: Some(3),
-                },
-                WindowSpec {
-                    start_sample: 8,
-                    tag: 0,
-                    time_s: 0.6,
-                    tx_phase: None,
-                }, // runs past the end
+                WindowSpec { start_sample: 2, tag: 1, time_s: 0.5, tx_phase: Some(3) },
+                WindowSpec { start_sample: 8, tag: 0, time_s: 0.6, tx_phase: None }, // runs past the end
             ];
             let mut replies = IqFileReplies::open(&path, format, channels, 2.0, 4, specs).unwrap();
             let unreadable = replies.unreadable.clone();
             let first = replies.next().unwrap();
             assert_eq!((first.tag, first.time_s, first.tx_phase), (1, 0.5, Some(3)));
             for c in 0..channels {
-                let expected: Vec<Complex32> = (2..6)
-                    .map(|s| value(s, c))
-                    .map(|(re, im)| Complex32::new(re / 2.0, im / 2.0))
-                    .collect();
+                let expected: Vec<Complex32> =
+                    (2..6).map(|s| value(s, c)).map(|(re, im)| Complex32::new(re / 2.0, im / 2.0)).collect();
                 assert_eq!(first.windows[c], expected);
             }
             let second = replies.next().unwrap();

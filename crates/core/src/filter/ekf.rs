@@ -20,22 +20,10 @@ pub struct ScalarUpdate {
 /// The innovation of a scalar measurement without applying it: lets a
 /// tracker gate first (GLAC's 3σ recovery) and update only if accepted.
 #[inline]
-pub fn innovation(
-    p: &StateMatrix,
-    z: f64,
-    h: f64,
-    jacobian: &StateVector,
-    r: f64,
-) -> (ScalarUpdate, StateVector) {
+pub fn innovation(p: &StateMatrix, z: f64, h: f64, jacobian: &StateVector, r: f64) -> (ScalarUpdate, StateVector) {
     let b = p * jacobian;
     let s = jacobian.dot(&b) + r;
-    (
-        ScalarUpdate {
-            innovation: z - h,
-            variance: s,
-        },
-        b,
-    )
+    (ScalarUpdate { innovation: z - h, variance: s }, b)
 }
 
 /// Scalar EKF update (GLAC eqs. 7–8) with measurement `z`, prediction
@@ -107,10 +95,7 @@ mod tests {
     fn is_psd(p: &StateMatrix) -> bool {
         let sym = (p - p.transpose()).norm() <= 1e-12 * p.norm().max(1.0);
         let scale = p.symmetric_eigenvalues().amax();
-        sym && p
-            .symmetric_eigenvalues()
-            .iter()
-            .all(|&e| e > -1e-10 * scale)
+        sym && p.symmetric_eigenvalues().iter().all(|&e| e > -1e-10 * scale)
     }
 
     /// Property: many random predict/update cycles keep P symmetric PSD.
@@ -123,11 +108,7 @@ mod tests {
             seed ^= seed << 17;
             (seed % 10_000) as f64 / 10_000.0
         };
-        let anchors = [
-            Vector3::new(0.0, 0.0, 0.0),
-            Vector3::new(0.0, 0.8, 0.0),
-            Vector3::new(0.8, 0.8, 0.0),
-        ];
+        let anchors = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.0, 0.8, 0.0), Vector3::new(0.8, 0.8, 0.0)];
         let model = MotionModel::ConstantVelocity { q: 0.5 };
         let mut x = StateVector::from_iterator([0.4, 0.4, 0.6, 0.1, 0.0, 0.0]);
         let mut p = StateMatrix::identity() * 1e-4;
@@ -135,19 +116,8 @@ mod tests {
             predict(&mut x, &mut p, &model.transition(0.01 + 0.05 * rnd(), 3));
             let a = anchors[k % 3];
             let (h, jac) = range(&x, &a, 3, true);
-            update_scalar(
-                &mut x,
-                &mut p,
-                h + 0.003 * (rnd() - 0.5),
-                h,
-                &jac.unwrap(),
-                1e-6 + 1e-5 * rnd(),
-            );
-            assert!(
-                is_psd(&p),
-                "step {k}: eigenvalues {:?}",
-                p.symmetric_eigenvalues()
-            );
+            update_scalar(&mut x, &mut p, h + 0.003 * (rnd() - 0.5), h, &jac.unwrap(), 1e-6 + 1e-5 * rnd());
+            assert!(is_psd(&p), "step {k}: eigenvalues {:?}", p.symmetric_eigenvalues());
         }
     }
 

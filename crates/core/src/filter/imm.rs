@@ -13,12 +13,7 @@ use crate::model::{StateMatrix, StateVector};
 /// weights μ_{i|j} = Π_ij μ_i / c_j; each model restarts from
 /// x0_j = Σ_i μ_{i|j} x_i, P0_j = Σ_i μ_{i|j} (P_i + (x_i − x0_j)(x_i − x0_j)ᵀ).
 /// Returns c.
-pub fn mix(
-    x: &mut [StateVector; 2],
-    p: &mut [StateMatrix; 2],
-    mu: &[f64; 2],
-    switch: f64,
-) -> [f64; 2] {
+pub fn mix(x: &mut [StateVector; 2], p: &mut [StateMatrix; 2], mu: &[f64; 2], switch: f64) -> [f64; 2] {
     let stay = 1.0 - switch;
     let c = [stay * mu[0] + switch * mu[1], switch * mu[0] + stay * mu[1]];
     let (x_in, p_in) = (*x, *p);
@@ -26,10 +21,7 @@ pub fn mix(
         if c[j] <= 0.0 {
             continue;
         }
-        let w = [
-            if j == 0 { stay } else { switch } * mu[0] / c[j],
-            if j == 1 { stay } else { switch } * mu[1] / c[j],
-        ];
+        let w = [if j == 0 { stay } else { switch } * mu[0] / c[j], if j == 1 { stay } else { switch } * mu[1] / c[j]];
         let x0 = x_in[0] * w[0] + x_in[1] * w[1];
         let mut p0 = StateMatrix::zeros();
         for i in 0..2 {
@@ -43,11 +35,7 @@ pub fn mix(
 }
 
 /// Combination (IMM output): x = Σ μ_j x_j, P = Σ μ_j (P_j + (x_j − x)(x_j − x)ᵀ).
-pub fn combine(
-    x: &[StateVector; 2],
-    p: &[StateMatrix; 2],
-    mu: &[f64; 2],
-) -> (StateVector, StateMatrix) {
+pub fn combine(x: &[StateVector; 2], p: &[StateMatrix; 2], mu: &[f64; 2]) -> (StateVector, StateMatrix) {
     let xc = x[0] * mu[0] + x[1] * mu[1];
     let mut pc = StateMatrix::zeros();
     for j in 0..2 {
@@ -63,14 +51,8 @@ mod tests {
 
     #[test]
     fn mixing_preserves_the_combined_moments() {
-        let mut x = [
-            StateVector::from_element(0.1),
-            StateVector::from_element(0.3),
-        ];
-        let mut p = [
-            StateMatrix::identity() * 1e-3,
-            StateMatrix::identity() * 4e-3,
-        ];
+        let mut x = [StateVector::from_element(0.1), StateVector::from_element(0.3)];
+        let mut p = [StateMatrix::identity() * 1e-3, StateMatrix::identity() * 4e-3];
         let mu = [0.7, 0.3];
         let (x_before, p_before) = combine(&x, &p, &mu);
         let c = mix(&mut x, &mut p, &mu, 0.05);
@@ -80,10 +62,7 @@ mod tests {
         assert!((x_after - x_before).norm() < 1e-12);
         assert!((p_after - p_before).norm() < 1e-12);
         // With no switching, each model keeps its own state.
-        let mut x2 = [
-            StateVector::from_element(0.1),
-            StateVector::from_element(0.3),
-        ];
+        let mut x2 = [StateVector::from_element(0.1), StateVector::from_element(0.3)];
         let mut p2 = [StateMatrix::identity(), StateMatrix::identity()];
         mix(&mut x2, &mut p2, &mu, 0.0);
         assert!((x2[1] - StateVector::from_element(0.3)).norm() < 1e-12);

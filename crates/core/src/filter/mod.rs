@@ -11,7 +11,5 @@ pub mod imm;
 mod packed;
 pub mod particle;
 
-pub use ekf::{
-    apply_scalar, innovation, log_gaussian, predict, update_position, update_scalar, ScalarUpdate,
-};
 pub use packed::{pack_pair, unpack_pair, PackedCovariance};
+pub use ekf::{apply_scalar, innovation, log_gaussian, predict, update_position, update_scalar, ScalarUpdate};

@@ -36,11 +36,7 @@ const PACKED_INDEX: [usize; STATE * STATE] = {
     while column < STATE {
         let mut row = 0;
         while row < STATE {
-            let (i, j) = if row <= column {
-                (row, column)
-            } else {
-                (column, row)
-            };
+            let (i, j) = if row <= column { (row, column) } else { (column, row) };
             // Row i of the upper triangle starts after i rows of STATE, STATE − 1, … values.
             table[column * STATE + row] = i * STATE - i * (i.saturating_sub(1)) / 2 - i + j;
             row += 1;
@@ -109,8 +105,7 @@ mod tests {
 
     fn symmetric(seed: u64) -> StateMatrix {
         // A deterministic SPD matrix: A Aᵀ + I.
-        let a =
-            StateMatrix::from_fn(|i, j| (((i * 7 + j * 3) as u64 + seed) % 11) as f64 * 0.1 - 0.5);
+        let a = StateMatrix::from_fn(|i, j| (((i * 7 + j * 3) as u64 + seed) % 11) as f64 * 0.1 - 0.5);
         a * a.transpose() + StateMatrix::identity()
     }
 

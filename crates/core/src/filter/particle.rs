@@ -6,10 +6,7 @@
 /// particle impossible) returns −∞ and leaves uniform weights, so the
 /// caller can detect the collapse and recover.
 pub fn normalise_log_weights(log_weights: &mut [f64]) -> f64 {
-    let max = log_weights
-        .iter()
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
+    let max = log_weights.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     if !max.is_finite() {
         let uniform = -(log_weights.len() as f64).ln();
         log_weights.iter_mut().for_each(|w| *w = uniform);
@@ -83,10 +80,7 @@ mod tests {
 
     #[test]
     fn systematic_resampling_follows_weights() {
-        let mut w: Vec<f64> = [0.5f64, 0.25, 0.125, 0.125]
-            .iter()
-            .map(|v| v.ln())
-            .collect();
+        let mut w: Vec<f64> = [0.5f64, 0.25, 0.125, 0.125].iter().map(|v| v.ln()).collect();
         normalise_log_weights(&mut w);
         let mut a = Vec::new();
         systematic_resample(&w, 0.5, &mut a);
@@ -98,10 +92,7 @@ mod tests {
         assert_eq!(counts.iter().sum::<usize>(), 4);
         // Every particle's expected count is n·w ± 1 for systematic resampling.
         for k in 0..4 {
-            assert!(
-                (counts[k] as f64 - 4.0 * w[k].exp()).abs() < 1.0 + 1e-9,
-                "{counts:?}"
-            );
+            assert!((counts[k] as f64 - 4.0 * w[k].exp()).abs() < 1.0 + 1e-9, "{counts:?}");
         }
     }
 }

@@ -203,38 +203,21 @@ pub struct AmbiguityReport {
 /// not combine coherently across channels, so they cannot be relied on to
 /// break a shift.
 pub fn joint_frequencies(scene: &Scene, read_frequencies_hz: &[f64]) -> Vec<f64> {
-    let calibrated = |f: f64| {
-        scene
-            .channel_offsets
-            .iter()
-            .any(|c| (c.frequency_hz - f).abs() <= 1e3)
-    };
+    let calibrated = |f: f64| scene.channel_offsets.iter().any(|c| (c.frequency_hz - f).abs() <= 1e3);
     let mut distinct: Vec<f64> = Vec::new();
-    for &f in read_frequencies_hz
-        .iter()
-        .filter(|f| f.is_finite() && **f > 0.0)
-    {
+    for &f in read_frequencies_hz.iter().filter(|f| f.is_finite() && **f > 0.0) {
         if !distinct.iter().any(|d| (d - f).abs() <= 1e3) {
             distinct.push(f);
         }
     }
-    let joint: Vec<f64> = distinct
-        .iter()
-        .copied()
-        .filter(|&f| calibrated(f))
-        .collect();
+    let joint: Vec<f64> = distinct.iter().copied().filter(|&f| calibrated(f)).collect();
     if joint.len() >= 2 {
         return joint;
     }
     if let Some(&first) = distinct.first() {
         return vec![first];
     }
-    let channels: Vec<f64> = scene
-        .channel_offsets
-        .iter()
-        .map(|c| c.frequency_hz)
-        .filter(|f| *f > 0.0)
-        .collect();
+    let channels: Vec<f64> = scene.channel_offsets.iter().map(|c| c.frequency_hz).filter(|f| *f > 0.0).collect();
     if channels.len() >= 2 {
         channels
     } else {
@@ -257,20 +240,14 @@ fn principal_axes(points: &[Vector3<f64>]) -> (Vector3<f64>, SymmetricEigen<f64,
 fn best_line(points: &[Vector3<f64>]) -> Line {
     let (centroid, eigen) = principal_axes(points);
     let i = eigen.eigenvalues.imax();
-    Line {
-        point: centroid,
-        direction: eigen.eigenvectors.column(i).into_owned().normalize(),
-    }
+    Line { point: centroid, direction: eigen.eigenvectors.column(i).into_owned().normalize() }
 }
 
 /// Best-fit plane of `points`: centroid and unit normal (least spread).
 fn best_plane(points: &[Vector3<f64>]) -> (Vector3<f64>, Vector3<f64>) {
     let (centroid, eigen) = principal_axes(points);
     let i = eigen.eigenvalues.imin();
-    (
-        centroid,
-        eigen.eigenvectors.column(i).into_owned().normalize(),
-    )
+    (centroid, eigen.eigenvectors.column(i).into_owned().normalize())
 }
 
 fn line_distance(line: &Line, p: &Vector3<f64>) -> f64 {
@@ -289,22 +266,11 @@ pub fn layout_findings(scene: &Scene, tolerance_m: f64) -> Vec<LayoutFinding> {
         if grouped[i] {
             continue;
         }
-        let group: Vec<usize> = (i..n)
-            .filter(|&j| (points[j] - points[i]).norm() <= tolerance_m)
-            .collect();
+        let group: Vec<usize> = (i..n).filter(|&j| (points[j] - points[i]).norm() <= tolerance_m).collect();
         if group.len() > 1 {
-            let deviation = group
-                .iter()
-                .map(|&j| (points[j] - points[i]).norm())
-                .fold(0.0, f64::max);
+            let deviation = group.iter().map(|&j| (points[j] - points[i]).norm()).fold(0.0, f64::max);
             group.iter().for_each(|&j| grouped[j] = true);
-            findings.push(LayoutFinding {
-                kind: LayoutKind::Coincident,
-                antennas: group,
-                deviation_m: deviation,
-                line: None,
-                plane: None,
-            });
+            findings.push(LayoutFinding { kind: LayoutKind::Coincident, antennas: group, deviation_m: deviation, line: None, plane: None });
         }
     }
     let mut lines: Vec<Vec<usize>> = Vec::new();
@@ -313,13 +279,8 @@ pub fn layout_findings(scene: &Scene, tolerance_m: f64) -> Vec<LayoutFinding> {
             if (points[j] - points[i]).norm() <= tolerance_m {
                 continue;
             }
-            let line = Line {
-                point: points[i],
-                direction: (points[j] - points[i]).normalize(),
-            };
-            let set: Vec<usize> = (0..n)
-                .filter(|&k| line_distance(&line, &points[k]) <= tolerance_m)
-                .collect();
+            let line = Line { point: points[i], direction: (points[j] - points[i]).normalize() };
+            let set: Vec<usize> = (0..n).filter(|&k| line_distance(&line, &points[k]) <= tolerance_m).collect();
             if set.len() >= 3 && !lines.iter().any(|l| set.iter().all(|k| l.contains(k))) {
                 lines.retain(|l| !l.iter().all(|k| set.contains(k)));
                 lines.push(set);
@@ -329,35 +290,15 @@ pub fn layout_findings(scene: &Scene, tolerance_m: f64) -> Vec<LayoutFinding> {
     for set in lines {
         let members: Vec<Vector3<f64>> = set.iter().map(|&k| points[k]).collect();
         let line = best_line(&members);
-        let deviation = members
-            .iter()
-            .map(|p| line_distance(&line, p))
-            .fold(0.0, f64::max);
-        findings.push(LayoutFinding {
-            kind: LayoutKind::Collinear,
-            antennas: set,
-            deviation_m: deviation,
-            line: Some(line),
-            plane: None,
-        });
+        let deviation = members.iter().map(|p| line_distance(&line, p)).fold(0.0, f64::max);
+        findings.push(LayoutFinding { kind: LayoutKind::Collinear, antennas: set, deviation_m: deviation, line: Some(line), plane: None });
     }
     if n >= 4 {
         let (point, normal) = best_plane(&points);
-        let deviation = points
-            .iter()
-            .map(|p| (p - point).dot(&normal).abs())
-            .fold(0.0, f64::max);
-        let all_on_line = findings
-            .iter()
-            .any(|f| f.kind == LayoutKind::Collinear && f.antennas.len() == n);
+        let deviation = points.iter().map(|p| (p - point).dot(&normal).abs()).fold(0.0, f64::max);
+        let all_on_line = findings.iter().any(|f| f.kind == LayoutKind::Collinear && f.antennas.len() == n);
         if deviation <= tolerance_m && !all_on_line {
-            findings.push(LayoutFinding {
-                kind: LayoutKind::Coplanar,
-                antennas: (0..n).collect(),
-                deviation_m: deviation,
-                line: None,
-                plane: Some((point, normal)),
-            });
+            findings.push(LayoutFinding { kind: LayoutKind::Coplanar, antennas: (0..n).collect(), deviation_m: deviation, line: None, plane: Some((point, normal)) });
         }
     }
     findings
@@ -398,14 +339,9 @@ fn grid(scene: &Scene, bounds: &(Vector3<f64>, Vector3<f64>), count: usize) -> V
         for axis in 0..dims {
             let i = c % per_axis;
             c /= per_axis;
-            p[axis] = bounds.0[axis]
-                + (i as f64 + 0.5) * (bounds.1[axis] - bounds.0[axis]) / per_axis as f64;
+            p[axis] = bounds.0[axis] + (i as f64 + 0.5) * (bounds.1[axis] - bounds.0[axis]) / per_axis as f64;
         }
-        if scene
-            .antennas
-            .iter()
-            .all(|a| (a.position - p).norm() > 0.05)
-        {
+        if scene.antennas.iter().all(|a| (a.position - p).norm() > 0.05) {
             out.push(p);
         }
     }
@@ -416,11 +352,7 @@ fn grid(scene: &Scene, bounds: &(Vector3<f64>, Vector3<f64>), count: usize) -> V
 /// Rotation lines: the antennas' best-fit line and every collinear set's;
 /// mirror: the best-fit plane (3D) or the vertical plane through the
 /// best-fit line of the antennas' projections (2D).
-pub fn twin_search(
-    scene: &Scene,
-    frequencies_hz: &[f64],
-    options: &AmbiguityOptions,
-) -> Result<TwinSearch> {
+pub fn twin_search(scene: &Scene, frequencies_hz: &[f64], options: &AmbiguityOptions) -> Result<TwinSearch> {
     let points: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
     let layout = layout_findings(scene, options.layout_tolerance_m);
     let mut lines = vec![best_line(&points)];
@@ -438,15 +370,7 @@ pub fn twin_search(
     };
     let bounds = search_bounds(scene, options.no_region_margin_m);
     let shifts = shift_vectors(points.len(), options.max_single_shift);
-    TwinSearch::new(
-        scene,
-        frequencies_hz,
-        bounds,
-        shifts,
-        lines,
-        mirror,
-        options.tolerance,
-    )
+    TwinSearch::new(scene, frequencies_hz, bounds, shifts, lines, mirror, options.tolerance)
 }
 
 /// Every twin of the tag position `position` (m) in the region, nearest
@@ -455,12 +379,7 @@ pub fn twin_search(
 /// should build [`twin_search`] once and restrict it with
 /// [`TwinSearch::with_shifts`] to the shifts [`analyse_scene`] found
 /// (about 75 µs per call on the paper layout).
-pub fn twin_positions(
-    scene: &Scene,
-    position: &Vector3<f64>,
-    frequencies_hz: &[f64],
-    options: &AmbiguityOptions,
-) -> Result<Vec<Twin>> {
+pub fn twin_positions(scene: &Scene, position: &Vector3<f64>, frequencies_hz: &[f64], options: &AmbiguityOptions) -> Result<Vec<Twin>> {
     Ok(twin_search(scene, frequencies_hz, options)?.twins(position))
 }
 
@@ -510,39 +429,22 @@ struct Occurrence {
 
 /// Runs `search` over `samples`, keeping persistent twins, grouped by the
 /// free antennas (sorted indices) in a deterministic order.
-fn families(
-    search: &TwinSearch,
-    samples: &[Vector3<f64>],
-    options: &AmbiguityOptions,
-    dims: usize,
-) -> Vec<(Vec<usize>, Occurrence)> {
+fn families(search: &TwinSearch, samples: &[Vector3<f64>], options: &AmbiguityOptions, dims: usize) -> Vec<(Vec<usize>, Occurrence)> {
     let mut groups: Vec<(Vec<usize>, Occurrence)> = Vec::new();
     for (index, p) in samples.iter().enumerate() {
         let mut nearest: Vec<(Vec<usize>, f64)> = Vec::new();
         for twin in search.twins(p) {
-            let free: Vec<usize> = (0..twin.shift.len())
-                .filter(|&a| twin.shift[a] != 0)
-                .collect();
+            let free: Vec<usize> = (0..twin.shift.len()).filter(|&a| twin.shift[a] != 0).collect();
             let slot = groups.iter().position(|(f, _)| *f == free);
             let known_shift = slot.is_some_and(|i| groups[i].1.shifts.contains(&twin.shift));
             let seen_here = nearest.iter().any(|(f, _)| *f == free);
             // Twins come nearest first: the first persistent one of a family
             // at this sample gives its distance; later ones only add shifts.
-            if (seen_here && known_shift)
-                || !persists(search, p, &twin, options.persistence_step_m, dims)
-            {
+            if (seen_here && known_shift) || !persists(search, p, &twin, options.persistence_step_m, dims) {
                 continue;
             }
             let slot = slot.unwrap_or_else(|| {
-                groups.push((
-                    free.clone(),
-                    Occurrence {
-                        shifts: Vec::new(),
-                        samples: Vec::new(),
-                        nearest_m: Vec::new(),
-                        residual_sigma: Vec::new(),
-                    },
-                ));
+                groups.push((free.clone(), Occurrence { shifts: Vec::new(), samples: Vec::new(), nearest_m: Vec::new(), residual_sigma: Vec::new() }));
                 groups.len() - 1
             });
             let group = &mut groups[slot].1;
@@ -565,35 +467,15 @@ fn families(
 
 /// Share (0–1) of `samples` where `shifts` still have a persistent twin
 /// in `scene` on `frequencies_hz`.
-fn remaining_share(
-    scene: &Scene,
-    frequencies_hz: &[f64],
-    shifts: &[Vec<i32>],
-    samples: &[Vector3<f64>],
-    options: &AmbiguityOptions,
-) -> Result<f64> {
-    let search = twin_search(scene, frequencies_hz, options)?
-        .exploring(true)
-        .with_shifts(shifts.to_vec());
-    let hit = families(&search, samples, options, scene.dimensions)
-        .iter()
-        .map(|(_, o)| o.samples.len())
-        .max()
-        .unwrap_or(0);
+fn remaining_share(scene: &Scene, frequencies_hz: &[f64], shifts: &[Vec<i32>], samples: &[Vector3<f64>], options: &AmbiguityOptions) -> Result<f64> {
+    let search = twin_search(scene, frequencies_hz, options)?.exploring(true).with_shifts(shifts.to_vec());
+    let hit = families(&search, samples, options, scene.dimensions).iter().map(|(_, o)| o.samples.len()).max().unwrap_or(0);
     Ok(hit as f64 / samples.len().max(1) as f64)
 }
 
 /// Smallest of [`REMEDY_OFFSETS_M`] (m) at which moving `antenna` along
 /// `direction` leaves no sample with a twin of the family.
-fn remedy_offset(
-    scene: &Scene,
-    frequencies_hz: &[f64],
-    antenna: usize,
-    direction: &Vector3<f64>,
-    shifts: &[Vec<i32>],
-    samples: &[Vector3<f64>],
-    options: &AmbiguityOptions,
-) -> Result<Option<f64>> {
+fn remedy_offset(scene: &Scene, frequencies_hz: &[f64], antenna: usize, direction: &Vector3<f64>, shifts: &[Vec<i32>], samples: &[Vector3<f64>], options: &AmbiguityOptions) -> Result<Option<f64>> {
     for offset in REMEDY_OFFSETS_M {
         let mut moved = scene.clone();
         moved.antennas[antenna].position += offset * direction;
@@ -623,11 +505,7 @@ fn perpendicular(axis: &Vector3<f64>, towards: &Vector3<f64>) -> Vector3<f64> {
     if v.norm() > 1e-6 {
         return v.normalize();
     }
-    let helper = if axis.x.abs() < 0.9 {
-        Vector3::x()
-    } else {
-        Vector3::y()
-    };
+    let helper = if axis.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
     axis.cross(&helper).normalize()
 }
 
@@ -635,48 +513,26 @@ fn perpendicular(axis: &Vector3<f64>, towards: &Vector3<f64>) -> Vector3<f64> {
 /// `frequencies_hz` (Hz, see [`joint_frequencies`]; empty: the default
 /// channel). Pure and deterministic; about 1–1.5 s for 4 antennas with the
 /// remedies (they re-run the search for moved antennas and for hopping).
-pub fn analyse_scene(
-    scene: &Scene,
-    frequencies_hz: &[f64],
-    options: &AmbiguityOptions,
-) -> Result<AmbiguityReport> {
-    if options.grid_points == 0
-        || !(options.layout_tolerance_m >= 0.0)
-        || !(options.persistence_step_m > 0.0)
-    {
-        return Err(Error::Parameter {
-            name: "options".into(),
-            reason: "grid_points and persistence_step_m must be positive".into(),
-        });
+pub fn analyse_scene(scene: &Scene, frequencies_hz: &[f64], options: &AmbiguityOptions) -> Result<AmbiguityReport> {
+    if options.grid_points == 0 || !(options.layout_tolerance_m >= 0.0) || !(options.persistence_step_m > 0.0) {
+        return Err(Error::Parameter { name: "options".into(), reason: "grid_points and persistence_step_m must be positive".into() });
     }
-    let frequencies: Vec<f64> = if frequencies_hz.is_empty() {
-        vec![DEFAULT_FREQUENCY_HZ]
-    } else {
-        frequencies_hz.to_vec()
-    };
+    let frequencies: Vec<f64> = if frequencies_hz.is_empty() { vec![DEFAULT_FREQUENCY_HZ] } else { frequencies_hz.to_vec() };
     let dims = scene.dimensions;
     let layout = layout_findings(scene, options.layout_tolerance_m);
     let search = twin_search(scene, &frequencies, options)?.exploring(true);
     let bounds = search_bounds(scene, options.no_region_margin_m);
     let samples = grid(scene, &bounds, options.grid_points);
     let points: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
-    let coplanar = layout
-        .iter()
-        .find(|f| f.kind == LayoutKind::Coplanar)
-        .and_then(|f| f.plane);
+    let coplanar = layout.iter().find(|f| f.kind == LayoutKind::Coplanar).and_then(|f| f.plane);
     let mut out = Vec::new();
     for (free, mut occurrence) in families(&search, &samples, options, dims) {
         let all = points.len();
-        let uniform = occurrence
-            .shifts
-            .iter()
-            .all(|s| s.iter().all(|&n| n == s[0]));
+        let uniform = occurrence.shifts.iter().all(|s| s.iter().all(|&n| n == s[0]));
         let others: Vec<usize> = (0..all).filter(|a| !free.contains(a)).collect();
         let line_of_others = dims == 3
             && others.len() >= 3
-            && layout.iter().any(|f| {
-                f.kind == LayoutKind::Collinear && others.iter().all(|a| f.antennas.contains(a))
-            });
+            && layout.iter().any(|f| f.kind == LayoutKind::Collinear && others.iter().all(|a| f.antennas.contains(a)));
         let (kind, line) = if free.is_empty() {
             (FamilyKind::Mirror, (0..all).collect())
         } else if line_of_others {
@@ -688,49 +544,23 @@ pub fn analyse_scene(
         } else {
             (FamilyKind::Other, vec![])
         };
-        let family_samples: Vec<Vector3<f64>> =
-            occurrence.samples.iter().map(|&i| samples[i]).collect();
-        let mut remedy = Remedy {
-            move_antenna: None,
-            away_from: vec![],
-            direction: Vector3::zeros(),
-            offset_m: None,
-            hopping_breaks: None,
-            region_plane: None,
-        };
+        let family_samples: Vec<Vector3<f64>> = occurrence.samples.iter().map(|&i| samples[i]).collect();
+        let mut remedy = Remedy { move_antenna: None, away_from: vec![], direction: Vector3::zeros(), offset_m: None, hopping_breaks: None, region_plane: None };
         match kind {
             FamilyKind::Line => {
                 let members: Vec<Vector3<f64>> = line.iter().map(|&a| points[a]).collect();
                 let fit = best_line(&members);
-                let middle = *line
-                    .iter()
-                    .min_by(|&&a, &&b| {
-                        (points[a] - fit.point)
-                            .norm()
-                            .total_cmp(&(points[b] - fit.point).norm())
-                    })
-                    .unwrap_or(&line[0]);
-                let free_centroid =
-                    free.iter().map(|&a| points[a]).sum::<Vector3<f64>>() / free.len() as f64;
+                let middle = *line.iter().min_by(|&&a, &&b| (points[a] - fit.point).norm().total_cmp(&(points[b] - fit.point).norm())).unwrap_or(&line[0]);
+                let free_centroid = free.iter().map(|&a| points[a]).sum::<Vector3<f64>>() / free.len() as f64;
                 remedy.move_antenna = Some(middle);
                 remedy.away_from = line.clone();
                 remedy.direction = perpendicular(&fit.direction, &(free_centroid - fit.point));
             }
             FamilyKind::Mirror => {
-                remedy.region_plane = if dims == 3 {
-                    coplanar
-                } else {
-                    search_mirror(scene)
-                };
+                remedy.region_plane = if dims == 3 { coplanar } else { search_mirror(scene) };
                 if dims == 3 {
                     if let Some((point, normal)) = coplanar {
-                        let far = (0..all)
-                            .max_by(|&a, &b| {
-                                (points[a] - point)
-                                    .norm()
-                                    .total_cmp(&(points[b] - point).norm())
-                            })
-                            .unwrap_or(0);
+                        let far = (0..all).max_by(|&a, &b| (points[a] - point).norm().total_cmp(&(points[b] - point).norm())).unwrap_or(0);
                         remedy.move_antenna = Some(far);
                         remedy.away_from = (0..all).collect();
                         remedy.direction = normal;
@@ -739,51 +569,25 @@ pub fn analyse_scene(
             }
             FamilyKind::AllAntennas => {
                 if let Some((point, normal)) = coplanar {
-                    let near = (0..all)
-                        .min_by(|&a, &b| {
-                            (points[a] - point)
-                                .norm()
-                                .total_cmp(&(points[b] - point).norm())
-                        })
-                        .unwrap_or(0);
+                    let near = (0..all).min_by(|&a, &b| (points[a] - point).norm().total_cmp(&(points[b] - point).norm())).unwrap_or(0);
                     remedy.move_antenna = Some(near);
                     remedy.away_from = (0..all).collect();
                     let inside = 0.5 * (bounds.0 + bounds.1) - point;
-                    remedy.direction = if inside.dot(&normal) >= 0.0 {
-                        -normal
-                    } else {
-                        normal
-                    };
+                    remedy.direction = if inside.dot(&normal) >= 0.0 { -normal } else { normal };
                 }
             }
             _ => {}
         }
         if options.remedies {
             if let Some(antenna) = remedy.move_antenna {
-                remedy.offset_m = remedy_offset(
-                    scene,
-                    &frequencies,
-                    antenna,
-                    &remedy.direction,
-                    &occurrence.shifts,
-                    &family_samples,
-                    options,
-                )?;
+                remedy.offset_m = remedy_offset(scene, &frequencies, antenna, &remedy.direction, &occurrence.shifts, &family_samples, options)?;
                 if kind != FamilyKind::Line {
                     // Off a plane any antenna may be the one to move; the
                     // first choice can fail (antenna 4 of the paper layout
                     // keeps a mirror plane with the line 1-2-3): keep the
                     // smallest offset over all antennas.
                     for other in (0..all).filter(|&a| a != antenna) {
-                        let offset = remedy_offset(
-                            scene,
-                            &frequencies,
-                            other,
-                            &remedy.direction,
-                            &occurrence.shifts,
-                            &family_samples,
-                            options,
-                        )?;
+                        let offset = remedy_offset(scene, &frequencies, other, &remedy.direction, &occurrence.shifts, &family_samples, options)?;
                         if let Some(x) = offset {
                             if remedy.offset_m.is_none_or(|best| x < best) {
                                 remedy.offset_m = Some(x);
@@ -794,22 +598,10 @@ pub fn analyse_scene(
                 }
             }
             if kind != FamilyKind::Mirror && frequencies.len() < 2 {
-                remedy.hopping_breaks = Some(
-                    remaining_share(
-                        scene,
-                        &us_channels_hz(),
-                        &occurrence.shifts,
-                        &family_samples,
-                        options,
-                    )? == 0.0,
-                );
+                remedy.hopping_breaks = Some(remaining_share(scene, &us_channels_hz(), &occurrence.shifts, &family_samples, options)? == 0.0);
             }
         }
-        let min_m = occurrence
-            .nearest_m
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
+        let min_m = occurrence.nearest_m.iter().copied().fold(f64::INFINITY, f64::min);
         let max_m = occurrence.nearest_m.iter().copied().fold(0.0, f64::max);
         out.push(TwinFamily {
             kind,
@@ -825,9 +617,7 @@ pub fn analyse_scene(
             remedy,
         });
     }
-    let inconclusive = samples
-        .is_empty()
-        .then(|| "no region sample lies 5 cm or more from every antenna".to_string());
+    let inconclusive = samples.is_empty().then(|| "no region sample lies 5 cm or more from every antenna".to_string());
     Ok(AmbiguityReport {
         layout,
         families: out,
@@ -842,19 +632,10 @@ pub fn analyse_scene(
 
 /// The 2D mirror line as a (point, in-plane unit normal) pair.
 fn search_mirror(scene: &Scene) -> Option<(Vector3<f64>, Vector3<f64>)> {
-    let flat: Vec<Vector3<f64>> = scene
-        .antennas
-        .iter()
-        .map(|a| Vector3::new(a.position.x, a.position.y, 0.0))
-        .collect();
+    let flat: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| Vector3::new(a.position.x, a.position.y, 0.0)).collect();
     let line = best_line(&flat);
     let normal = Vector3::new(-line.direction.y, line.direction.x, 0.0);
-    (normal.norm() > 1e-9).then(|| {
-        (
-            Vector3::new(line.point.x, line.point.y, scene.plane_z),
-            normal.normalize(),
-        )
-    })
+    (normal.norm() > 1e-9).then(|| (Vector3::new(line.point.x, line.point.y, scene.plane_z), normal.normalize()))
 }
 
 #[cfg(test)]

@@ -21,11 +21,7 @@ use nalgebra::{Matrix3, Vector3, Vector4};
 /// Bistatic path length `|p − tx| + |p − rx|` (m) and, on request, its
 /// gradient with respect to `p`: the sum of the two unit vectors pointing
 /// from the antennas to `p` (the normal of the ellipsoid through `p`).
-pub fn bistatic_distance(
-    p: &Vector3<f64>,
-    tx: &Vector3<f64>,
-    rx: &Vector3<f64>,
-) -> (f64, Vector3<f64>) {
+pub fn bistatic_distance(p: &Vector3<f64>, tx: &Vector3<f64>, rx: &Vector3<f64>) -> (f64, Vector3<f64>) {
     let (a, b) = (p - tx, p - rx);
     let (na, nb) = (a.norm(), b.norm());
     let mut gradient = Vector3::zeros();
@@ -78,9 +74,7 @@ pub fn bistatic_intersections(
         a[2] = [0.0, 0.0, 1.0, 0.0];
         b[2] = uz;
     }
-    let Some((s0, n)) = line_of_solutions(&a, &b) else {
-        return Vec::new();
-    };
+    let Some((s0, n)) = line_of_solutions(&a, &b) else { return Vec::new() };
     // |u₀ + t n_u|² − (r₀ + t n_r)² = 0.
     let (u0, nu) = (s0.xyz(), n.xyz());
     let (r0, nr) = (s0.w, n.w);
@@ -155,16 +149,8 @@ fn line_of_solutions(a: &[[f64; 4]; 3], b: &[f64; 3]) -> Option<(Vector4<f64>, V
         m
     };
     let dets: Vec<f64> = (0..4).map(|k| minor(k).determinant()).collect();
-    let scale: f64 = a
-        .iter()
-        .flatten()
-        .map(|v| v.abs())
-        .fold(0.0, f64::max)
-        .max(1e-300);
-    let (skip, &best) = dets
-        .iter()
-        .enumerate()
-        .max_by(|x, y| x.1.abs().total_cmp(&y.1.abs()))?;
+    let scale: f64 = a.iter().flatten().map(|v| v.abs()).fold(0.0, f64::max).max(1e-300);
+    let (skip, &best) = dets.iter().enumerate().max_by(|x, y| x.1.abs().total_cmp(&y.1.abs()))?;
     if best.abs() < 1e-10 * scale.powi(3) {
         return None;
     }
@@ -211,24 +197,14 @@ mod tests {
     #[test]
     fn recovers_a_point_and_its_mirror_for_planar_antennas() {
         let (tx, rx) = plus_layout();
-        for p in [
-            Vector3::new(0.3, 0.9, 1.1),
-            Vector3::new(-0.5, 1.7, 0.4),
-            Vector3::new(1.2, -0.3, 2.5),
-        ] {
+        for p in [Vector3::new(0.3, 0.9, 1.1), Vector3::new(-0.5, 1.7, 0.4), Vector3::new(1.2, -0.3, 2.5)] {
             for triple in [[0, 1, 2], [0, 2, 3], [1, 2, 3], [0, 1, 3]] {
                 let r: Vec<_> = triple.iter().map(|&i| rx[i]).collect();
                 let d = lengths(&p, &tx, &r);
                 let pts = bistatic_intersections(&tx, &r, &d, None, 1e-6);
-                assert!(
-                    pts.iter().any(|q| (q - p).norm() < 1e-7),
-                    "{p:?} not in {pts:?}"
-                );
+                assert!(pts.iter().any(|q| (q - p).norm() < 1e-7), "{p:?} not in {pts:?}");
                 let mirror = Vector3::new(p.x, p.y, -p.z);
-                assert!(
-                    pts.iter().any(|q| (q - mirror).norm() < 1e-7),
-                    "mirror of {p:?} not in {pts:?}"
-                );
+                assert!(pts.iter().any(|q| (q - mirror).norm() < 1e-7), "mirror of {p:?} not in {pts:?}");
             }
         }
     }
@@ -236,11 +212,7 @@ mod tests {
     #[test]
     fn recovers_a_point_for_non_planar_antennas() {
         let tx = Vector3::new(0.0, 0.0, 0.3);
-        let rx = vec![
-            Vector3::new(0.5, 0.0, 0.0),
-            Vector3::new(0.0, 0.6, 0.1),
-            Vector3::new(-0.4, 0.2, 0.5),
-        ];
+        let rx = vec![Vector3::new(0.5, 0.0, 0.0), Vector3::new(0.0, 0.6, 0.1), Vector3::new(-0.4, 0.2, 0.5)];
         let p = Vector3::new(0.7, 1.3, 0.9);
         let pts = bistatic_intersections(&tx, &rx, &lengths(&p, &tx, &rx), None, 1e-6);
         assert!(pts.iter().any(|q| (q - p).norm() < 1e-7), "{pts:?}");
@@ -264,19 +236,12 @@ mod tests {
     #[test]
     fn degenerate_and_impossible_give_nothing() {
         let tx = Vector3::zeros();
-        let collinear = vec![
-            Vector3::new(0.2, 0.0, 0.0),
-            Vector3::new(0.4, 0.0, 0.0),
-            Vector3::new(0.6, 0.0, 0.0),
-        ];
+        let collinear = vec![Vector3::new(0.2, 0.0, 0.0), Vector3::new(0.4, 0.0, 0.0), Vector3::new(0.6, 0.0, 0.0)];
         assert!(bistatic_intersections(&tx, &collinear, &[2.0, 2.0, 2.0], None, 1e-6).is_empty());
         let (tx, rx) = plus_layout();
         // Path lengths shorter than the baselines: no tag can produce them.
         assert!(bistatic_intersections(&tx, &rx[..3], &[0.1, 0.1, 0.1], None, 1e-6).is_empty());
-        assert!(
-            bistatic_intersections(&tx, &rx[..2], &[3.0, 3.0, 3.0], None, 1e-6).is_empty(),
-            "wrong count"
-        );
+        assert!(bistatic_intersections(&tx, &rx[..2], &[3.0, 3.0, 3.0], None, 1e-6).is_empty(), "wrong count");
     }
 
     #[test]
@@ -289,9 +254,7 @@ mod tests {
         for k in 0..3 {
             let mut e = Vector3::zeros();
             e[k] = h;
-            let fd = (bistatic_distance(&(p + e), &tx, &rx).0
-                - bistatic_distance(&(p - e), &tx, &rx).0)
-                / (2.0 * h);
+            let fd = (bistatic_distance(&(p + e), &tx, &rx).0 - bistatic_distance(&(p - e), &tx, &rx).0) / (2.0 * h);
             assert!((fd - g[k]).abs() < 1e-8, "axis {k}: {fd} vs {}", g[k]);
         }
     }

@@ -14,10 +14,7 @@ mod multilateration;
 mod sphere;
 pub mod twins;
 
-pub use ambiguity::{
-    analyse_scene, joint_frequencies, twin_positions, twin_search, AmbiguityOptions,
-    AmbiguityReport, TwinFamily,
-};
+pub use ambiguity::{analyse_scene, joint_frequencies, twin_positions, twin_search, AmbiguityOptions, AmbiguityReport, TwinFamily};
 pub use circle::circle_intersections;
 pub use ellipsoid::{bistatic_distance, bistatic_intersections};
 pub use multilateration::{multilaterate, Multilateration};

@@ -52,16 +52,8 @@ pub fn multilaterate(
             break;
         }
     }
-    let sum: f64 = anchors
-        .iter()
-        .zip(distances)
-        .map(|(a, d)| ((p - a).norm() - d).powi(2))
-        .sum();
-    Some(Multilateration {
-        position: p,
-        rms_residual: (sum / anchors.len() as f64).sqrt(),
-        normal,
-    })
+    let sum: f64 = anchors.iter().zip(distances).map(|(a, d)| ((p - a).norm() - d).powi(2)).sum();
+    Some(Multilateration { position: p, rms_residual: (sum / anchors.len() as f64).sqrt(), normal })
 }
 
 #[cfg(test)]
@@ -78,8 +70,7 @@ mod tests {
         ];
         let truth = Vector3::new(0.36, 0.5, 0.71);
         let d: Vec<f64> = anchors.iter().map(|a| (truth - a).norm()).collect();
-        let fix =
-            multilaterate(&anchors, &d, truth + Vector3::new(0.03, -0.02, 0.04), 3, 10).unwrap();
+        let fix = multilaterate(&anchors, &d, truth + Vector3::new(0.03, -0.02, 0.04), 3, 10).unwrap();
         assert!((fix.position - truth).norm() < 1e-7);
         assert!(fix.rms_residual < 1e-7);
         let truth2 = Vector3::new(0.6, 0.3, 0.0);

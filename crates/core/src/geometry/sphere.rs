@@ -55,11 +55,7 @@ mod tests {
 
     #[test]
     fn recovers_a_point_and_its_mirror() {
-        let c = [
-            Vector3::new(0.0, 0.0, 0.0),
-            Vector3::new(0.0, 0.8, 0.0),
-            Vector3::new(0.8, 0.8, 0.0),
-        ];
+        let c = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.0, 0.8, 0.0), Vector3::new(0.8, 0.8, 0.0)];
         let p = Vector3::new(0.36, 0.5, 0.71);
         let r: Vec<f64> = c.iter().map(|ci| (p - ci).norm()).collect();
         let [a, b] = sphere_intersections(&c[0], r[0], &c[1], r[1], &c[2], r[2], 1e-3).unwrap();
@@ -71,11 +67,7 @@ mod tests {
 
     #[test]
     fn collinear_centres_have_no_point_pair() {
-        let c = [
-            Vector3::new(0.0, 0.0, 0.0),
-            Vector3::new(0.0, 0.3, 0.0),
-            Vector3::new(0.0, 0.8, 0.0),
-        ];
+        let c = [Vector3::new(0.0, 0.0, 0.0), Vector3::new(0.0, 0.3, 0.0), Vector3::new(0.0, 0.8, 0.0)];
         assert!(sphere_intersections(&c[0], 1.0, &c[1], 1.0, &c[2], 1.0, 1e-3).is_none());
     }
 }

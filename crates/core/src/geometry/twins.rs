@@ -99,11 +99,7 @@ pub struct TwinTolerance {
 
 impl Default for TwinTolerance {
     fn default() -> Self {
-        Self {
-            sigma_multiple: 3.0,
-            evidence_reads: DEFAULT_EVIDENCE_READS,
-            min_separation_m: 0.01,
-        }
+        Self { sigma_multiple: 3.0, evidence_reads: DEFAULT_EVIDENCE_READS, min_separation_m: 0.01 }
     }
 }
 
@@ -190,38 +186,19 @@ impl TwinSearch {
         mirror: Option<(Vector3<f64>, Vector3<f64>)>,
         tolerance: TwinTolerance,
     ) -> Result<Self> {
-        let frequencies: Vec<f64> = if frequencies_hz.is_empty() {
-            vec![DEFAULT_FREQUENCY_HZ]
-        } else {
-            frequencies_hz.to_vec()
-        };
+        let frequencies: Vec<f64> = if frequencies_hz.is_empty() { vec![DEFAULT_FREQUENCY_HZ] } else { frequencies_hz.to_vec() };
         if frequencies.iter().any(|f| !(f.is_finite() && *f > 0.0)) {
-            return Err(Error::Parameter {
-                name: "frequencies_hz".into(),
-                reason: "must be positive".into(),
-            });
+            return Err(Error::Parameter { name: "frequencies_hz".into(), reason: "must be positive".into() });
         }
         let antennas: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
         if shifts.iter().any(|s| s.len() != antennas.len()) {
-            return Err(Error::Parameter {
-                name: "shifts".into(),
-                reason: "one entry per antenna".into(),
-            });
+            return Err(Error::Parameter { name: "shifts".into(), reason: "one entry per antenna".into() });
         }
         let ok = |x: f64| x.is_finite() && x > 0.0;
-        if !ok(tolerance.sigma_multiple)
-            || !ok(tolerance.evidence_reads)
-            || !(tolerance.min_separation_m >= 0.0)
-        {
-            return Err(Error::Parameter {
-                name: "tolerance".into(),
-                reason: "sigma_multiple and evidence_reads must be positive".into(),
-            });
+        if !ok(tolerance.sigma_multiple) || !ok(tolerance.evidence_reads) || !(tolerance.min_separation_m >= 0.0) {
+            return Err(Error::Parameter { name: "tolerance".into(), reason: "sigma_multiple and evidence_reads must be positive".into() });
         }
-        let wavenumbers: Vec<f64> = frequencies
-            .iter()
-            .map(|f| 4.0 * std::f64::consts::PI * f / SPEED_OF_LIGHT)
-            .collect();
+        let wavenumbers: Vec<f64> = frequencies.iter().map(|f| 4.0 * std::f64::consts::PI * f / SPEED_OF_LIGHT).collect();
         let sum: f64 = wavenumbers.iter().sum();
         let sum_sq: f64 = wavenumbers.iter().map(|k| k * k).sum();
         Ok(Self {
@@ -252,18 +229,13 @@ impl TwinSearch {
     /// The same search restricted to `shifts` (e.g. the families a scene
     /// analysis found), which is what makes per-step calls cheap.
     pub fn with_shifts(mut self, shifts: Vec<Vec<i32>>) -> Self {
-        self.shifts = shifts
-            .into_iter()
-            .filter(|s| s.len() == self.antennas.len())
-            .collect();
+        self.shifts = shifts.into_iter().filter(|s| s.len() == self.antennas.len()).collect();
         self
     }
 
     /// Per-read RMS phase mismatch of `twin`, in σ: `√(χ² / (N A F))`.
     pub fn residual_sigma(&self, twin: &Twin) -> f64 {
-        (twin.chi_square
-            / (self.evidence_reads * (self.antennas.len() * self.wavenumbers.len()) as f64))
-            .sqrt()
+        (twin.chi_square / (self.evidence_reads * (self.antennas.len() * self.wavenumbers.len()) as f64)).sqrt()
     }
 
     /// The χ² threshold `k²` (unitless).
@@ -313,8 +285,7 @@ impl TwinSearch {
         }
         let ranges: Vec<f64> = self.antennas.iter().map(|a| (p - a).norm()).collect();
         let mut targets = vec![0.0; self.antennas.len()];
-        let range_slack =
-            self.chi_square_max.sqrt() * self.phase_noise_rad / self.wavenumbers[0] + 1e-6;
+        let range_slack = self.chi_square_max.sqrt() * self.phase_noise_rad / self.wavenumbers[0] + 1e-6;
         for shift in &self.shifts {
             for (t, (r, n)) in targets.iter_mut().zip(ranges.iter().zip(shift)) {
                 *t = r + *n as f64 * self.spacing;
@@ -323,25 +294,16 @@ impl TwinSearch {
                 continue;
             }
             for start in self.starts(&p, shift) {
-                let Some(x) = self.solve(&targets, start) else {
-                    continue;
-                };
+                let Some(x) = self.solve(&targets, start) else { continue };
                 if !self.in_bounds(&x) || (x - p).norm() < self.min_separation_m {
                     continue;
                 }
-                if found
-                    .iter()
-                    .any(|t| (t.position - x).norm() < self.min_separation_m)
-                {
+                if found.iter().any(|t| (t.position - x).norm() < self.min_separation_m) {
                     continue;
                 }
                 let chi_square = self.chi_square(&p, &x);
                 if chi_square <= self.chi_square_max && self.separated(&p, &x) {
-                    found.push(Twin {
-                        position: x,
-                        shift: shift.clone(),
-                        chi_square,
-                    });
+                    found.push(Twin { position: x, shift: shift.clone(), chi_square });
                 }
             }
         }
@@ -354,9 +316,7 @@ impl TwinSearch {
     /// covariance already shows): some point on the segment between them
     /// must be rejected by the χ² test.
     fn separated(&self, p: &Vector3<f64>, candidate: &Vector3<f64>) -> bool {
-        [0.25, 0.5, 0.75]
-            .iter()
-            .any(|&t: &f64| self.chi_square(p, &(p + (candidate - p) * t)) > self.chi_square_max)
+        [0.25, 0.5, 0.75].iter().any(|&t: &f64| self.chi_square(p, &(p + (candidate - p) * t)) > self.chi_square_max)
     }
 
     /// Triangle inequality on the targets: `|t_a − t_b| ≤ |a − b|` and
@@ -367,9 +327,7 @@ impl TwinSearch {
         }
         for i in 0..targets.len() {
             for j in i + 1..targets.len() {
-                if (targets[i] - targets[j]).abs()
-                    > (self.antennas[i] - self.antennas[j]).norm() + 2.0 * slack
-                {
+                if (targets[i] - targets[j]).abs() > (self.antennas[i] - self.antennas[j]).norm() + 2.0 * slack {
                     return false;
                 }
             }
@@ -384,8 +342,7 @@ impl TwinSearch {
             starts.push(*p);
             let first = shift[0];
             if shift.iter().all(|&n| n == first) {
-                let centroid =
-                    self.antennas.iter().sum::<Vector3<f64>>() / self.antennas.len() as f64;
+                let centroid = self.antennas.iter().sum::<Vector3<f64>>() / self.antennas.len() as f64;
                 let mut radial = p - centroid;
                 if self.dimensions == 2 {
                     radial.z = 0.0;
@@ -429,13 +386,7 @@ impl TwinSearch {
         if self.dimensions == 2 {
             x.z = self.plane_z;
         }
-        let cost = |x: &Vector3<f64>| -> f64 {
-            self.antennas
-                .iter()
-                .zip(targets)
-                .map(|(a, t)| ((x - a).norm() - t).powi(2))
-                .sum()
-        };
+        let cost = |x: &Vector3<f64>| -> f64 { self.antennas.iter().zip(targets).map(|(a, t)| ((x - a).norm() - t).powi(2)).sum() };
         let mut current = cost(&x);
         let mut damping = 1e-3;
         for _ in 0..40 {
@@ -463,10 +414,7 @@ impl TwinSearch {
                 for i in 0..3 {
                     lhs[(i, i)] += damping * (jtj[(i, i)] + 1e-9);
                 }
-                let Some(chol) = lhs.cholesky() else {
-                    damping *= 10.0;
-                    continue;
-                };
+                let Some(chol) = lhs.cholesky() else { damping *= 10.0; continue };
                 let step = -chol.solve(&jtr);
                 let trial = x + step;
                 let trial_cost = cost(&trial);

@@ -25,12 +25,7 @@ pub struct TagBatch<'a> {
 /// (at least one); tag t's candidates at index t, whatever the thread
 /// schedule (tags are claimed one at a time from a shared counter, so a
 /// slow tag does not hold up a whole share).
-pub fn locate_batch(
-    batch: &TagBatch,
-    axes: usize,
-    settings: &Settings,
-    threads: usize,
-) -> Vec<Vec<Candidate>> {
+pub fn locate_batch(batch: &TagBatch, axes: usize, settings: &Settings, threads: usize) -> Vec<Vec<Candidate>> {
     let tags = batch.bounds.len().saturating_sub(1);
     let results: Vec<Mutex<Vec<Candidate>>> = (0..tags).map(|_| Mutex::new(Vec::new())).collect();
     let next = AtomicUsize::new(0);
@@ -40,23 +35,9 @@ pub fn locate_batch(
             break;
         }
         let rows = batch.bounds[t]..batch.bounds[t + 1];
-        let reads = PhaseReads::new(
-            &batch.z[rows.clone()],
-            &batch.k[rows.clone()],
-            &batch.antenna[rows.clone()],
-            batch.anchors,
-        );
-        let found = phase_candidates(
-            &reads,
-            &batch.time_s[rows],
-            batch.low[t],
-            batch.high[t],
-            axes,
-            settings,
-        );
-        *results[t]
-            .lock()
-            .unwrap_or_else(|poisoned| poisoned.into_inner()) = found;
+        let reads = PhaseReads::new(&batch.z[rows.clone()], &batch.k[rows.clone()], &batch.antenna[rows.clone()], batch.anchors);
+        let found = phase_candidates(&reads, &batch.time_s[rows], batch.low[t], batch.high[t], axes, settings);
+        *results[t].lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = found;
     };
     let threads = threads.clamp(1, tags.max(1));
     if threads == 1 {
@@ -68,13 +49,7 @@ pub fn locate_batch(
             }
         });
     }
-    results
-        .into_iter()
-        .map(|r| {
-            r.into_inner()
-                .unwrap_or_else(|poisoned| poisoned.into_inner())
-        })
-        .collect()
+    results.into_iter().map(|r| r.into_inner().unwrap_or_else(|poisoned| poisoned.into_inner())).collect()
 }
 
 #[cfg(test)]
@@ -85,11 +60,7 @@ mod tests {
     #[test]
     fn threads_do_not_change_the_results_or_their_order() {
         let anchors = layout();
-        let truths = [
-            Vector3::new(0.5, 0.6, 0.7),
-            Vector3::new(0.2, 0.9, 0.4),
-            Vector3::new(0.8, 0.3, 0.9),
-        ];
+        let truths = [Vector3::new(0.5, 0.6, 0.7), Vector3::new(0.2, 0.9, 0.4), Vector3::new(0.8, 0.3, 0.9)];
         let (mut z, mut k, mut antenna, mut bounds) = (Vec::new(), Vec::new(), Vec::new(), vec![0]);
         for truth in truths {
             let (zt, kt, at) = reads_at(truth, &anchors, &us_band());
@@ -100,25 +71,8 @@ mod tests {
         }
         let time: Vec<f64> = (0..z.len()).map(|i| (i % 200) as f64 * 0.03).collect();
         let (low, high) = (vec![Vector3::zeros(); 3], vec![Vector3::repeat(1.5); 3]);
-        let batch = TagBatch {
-            z: &z,
-            k: &k,
-            time_s: &time,
-            antenna: &antenna,
-            anchors: &anchors,
-            bounds: &bounds,
-            low: &low,
-            high: &high,
-        };
-        let settings = Settings {
-            temperature: 1.0,
-            bias_sigma_rad: 0.07,
-            correlation_s: 0.5,
-            max_candidates: 5,
-            min_weight: 1e-3,
-            hopping_spread_hz: 2e6,
-            max_points: 100_000,
-        };
+        let batch = TagBatch { z: &z, k: &k, time_s: &time, antenna: &antenna, anchors: &anchors, bounds: &bounds, low: &low, high: &high };
+        let settings = Settings { temperature: 1.0, bias_sigma_rad: 0.07, correlation_s: 0.5, max_candidates: 5, min_weight: 1e-3, hopping_spread_hz: 2e6, max_points: 100_000 };
         let one = locate_batch(&batch, 3, &settings, 1);
         let two = locate_batch(&batch, 3, &settings, 2);
         for (t, truth) in truths.iter().enumerate() {

@@ -58,14 +58,7 @@ pub struct Candidate {
 ///
 /// Every step but the count of independent reads runs on the reads
 /// summed per antenna and channel ([`PhaseReads::grouped`]).
-pub fn phase_candidates(
-    single: &PhaseReads,
-    time_s: &[f64],
-    low: Vector3<f64>,
-    high: Vector3<f64>,
-    axes: usize,
-    settings: &Settings,
-) -> Vec<Candidate> {
+pub fn phase_candidates(single: &PhaseReads, time_s: &[f64], low: Vector3<f64>, high: Vector3<f64>, axes: usize, settings: &Settings) -> Vec<Candidate> {
     if single.z.is_empty() {
         return Vec::new();
     }
@@ -73,33 +66,17 @@ pub fn phase_candidates(
     let grouped = single.grouped();
     let reads = &grouped.reads(single.anchors);
     let n = reads.total();
-    let mean_k = (0..reads.z.len())
-        .map(|i| reads.count(i) * reads.k[i].abs())
-        .sum::<f64>()
-        / n;
+    let mean_k = (0..reads.z.len()).map(|i| reads.count(i) * reads.k[i].abs()).sum::<f64>() / n;
     let spacing = 2.0 * std::f64::consts::PI / mean_k;
-    let spread_hz = ((0..reads.z.len())
-        .map(|i| reads.count(i) * (reads.k[i].abs() - mean_k).powi(2))
-        .sum::<f64>()
-        / n)
-        .sqrt()
-        / FOUR_PI_OVER_C;
-    let mut channels: Vec<i64> = reads
-        .k
-        .iter()
-        .map(|k| (k.abs() * 1e6).round() as i64)
-        .collect();
+    let spread_hz = ((0..reads.z.len()).map(|i| reads.count(i) * (reads.k[i].abs() - mean_k).powi(2)).sum::<f64>() / n).sqrt() / FOUR_PI_OVER_C;
+    let mut channels: Vec<i64> = reads.k.iter().map(|k| (k.abs() * 1e6).round() as i64).collect();
     channels.sort_unstable();
     channels.dedup();
     let (mut box_low, mut box_high) = (low, high);
     if spread_hz >= settings.hopping_spread_hz && channels.len() >= 4 {
-        if let Some((centre, coarse)) =
-            hop_centre(reads, &low, &high, axes).filter(|(_, c)| c.iter().all(|v| v.is_finite()))
-        {
+        if let Some((centre, coarse)) = hop_centre(reads, &low, &high, axes).filter(|(_, c)| c.iter().all(|v| v.is_finite())) {
             for axis in 0..axes {
-                let half = (3.0 * coarse[(axis, axis)].max(0.0).sqrt())
-                    .max(0.5 * spacing)
-                    .min(0.5);
+                let half = (3.0 * coarse[(axis, axis)].max(0.0).sqrt()).max(0.5 * spacing).min(0.5);
                 box_low[axis] = (centre[axis] - half).max(low[axis] - 0.05);
                 box_high[axis] = (centre[axis] + half).min(high[axis] + 0.05);
             }
@@ -114,26 +91,12 @@ pub fn phase_candidates(
     // Seeds whose weight would be below min_weight e⁻⁵ are not refined
     // (a 2·10⁻⁴ coherence margin covers the tables' error, ≤ 10⁻⁴, and the last climb).
     let cut = (1.0 / settings.min_weight).ln() + 5.0;
-    let polish =
-        |best: f64, r: f64| kappa_n(best) * (best - r - 2e-4) / settings.temperature <= cut;
-    let found = search(
-        reads,
-        box_low,
-        box_high,
-        axes,
-        settings.max_points,
-        4 * settings.max_candidates,
-        &polish,
-    );
-    let Some(&(_, best_r)) = found.first() else {
-        return Vec::new();
-    };
+    let polish = |best: f64, r: f64| kappa_n(best) * (best - r - 2e-4) / settings.temperature <= cut;
+    let found = search(reads, box_low, box_high, axes, settings.max_points, 4 * settings.max_candidates, &polish);
+    let Some(&(_, best_r)) = found.first() else { return Vec::new() };
     let sigma = (-2.0 * best_r.max(1e-6).ln()).max(1e-6).sqrt();
     let kappa_n = kappa_n(best_r);
-    let weights: Vec<f64> = found
-        .iter()
-        .map(|(_, r)| (kappa_n * (r - best_r) / settings.temperature).exp())
-        .collect();
+    let weights: Vec<f64> = found.iter().map(|(_, r)| (kappa_n * (r - best_r) / settings.temperature).exp()).collect();
     let total: f64 = weights.iter().sum();
     let correlation_scale = n / independent.max(1) as f64;
     let mut candidates: Vec<Candidate> = found
@@ -141,14 +104,8 @@ pub fn phase_candidates(
         .zip(&weights)
         .filter(|(_, w)| *w / total >= settings.min_weight)
         .map(|(&(position, coherence), w)| {
-            let covariance = fisher_covariance(reads, &position, sigma, axes) * correlation_scale
-                + bias_covariance(reads, &position, mean_k, settings.bias_sigma_rad, axes);
-            Candidate {
-                position,
-                covariance,
-                weight: *w,
-                coherence,
-            }
+            let covariance = fisher_covariance(reads, &position, sigma, axes) * correlation_scale + bias_covariance(reads, &position, mean_k, settings.bias_sigma_rad, axes);
+            Candidate { position, covariance, weight: *w, coherence }
         })
         .collect();
     let kept: f64 = candidates.iter().map(|c| c.weight).sum();
@@ -160,64 +117,35 @@ pub fn phase_candidates(
 
 /// Reads that carry independent errors: per antenna and channel, one per `correlation_s`.
 fn independent_reads(reads: &PhaseReads, time_s: &[f64], correlation_s: f64) -> usize {
-    let mut keys: Vec<(usize, i64, i64)> = (0..reads.z.len())
-        .map(|i| {
-            (
-                reads.antenna[i],
-                (reads.k[i] * 1e6).round() as i64,
-                (time_s[i] / correlation_s).floor() as i64,
-            )
-        })
-        .collect();
+    let mut keys: Vec<(usize, i64, i64)> =
+        (0..reads.z.len()).map(|i| (reads.antenna[i], (reads.k[i] * 1e6).round() as i64, (time_s[i] / correlation_s).floor() as i64)).collect();
     keys.sort_unstable();
     keys.dedup();
     keys.len()
 }
 
 /// σ² (J̃ᵀJ̃)⁻¹, J̃ᵢ = kᵢ uᵢ centred over the reads (candidates' docs).
-fn fisher_covariance(
-    reads: &PhaseReads,
-    p: &Vector3<f64>,
-    sigma_rad: f64,
-    axes: usize,
-) -> Matrix3<f64> {
+fn fisher_covariance(reads: &PhaseReads, p: &Vector3<f64>, sigma_rad: f64, axes: usize) -> Matrix3<f64> {
     let rows: Vec<Vector3<f64>> = (0..reads.z.len())
         .map(|i| {
             let offset = p - reads.anchors[reads.antenna[i]];
             offset * (reads.k[i] / offset.norm())
         })
         .collect();
-    let mean: Vector3<f64> = rows
-        .iter()
-        .enumerate()
-        .map(|(i, j)| j * reads.count(i))
-        .sum::<Vector3<f64>>()
-        / reads.total();
-    let information: Matrix3<f64> = rows
-        .iter()
-        .enumerate()
-        .map(|(i, j)| reads.count(i) * (j - mean) * (j - mean).transpose())
-        .sum::<Matrix3<f64>>()
-        / (sigma_rad * sigma_rad);
+    let mean: Vector3<f64> = rows.iter().enumerate().map(|(i, j)| j * reads.count(i)).sum::<Vector3<f64>>() / reads.total();
+    let information: Matrix3<f64> =
+        rows.iter().enumerate().map(|(i, j)| reads.count(i) * (j - mean) * (j - mean).transpose()).sum::<Matrix3<f64>>() / (sigma_rad * sigma_rad);
     invert(&information, axes).unwrap_or_else(|| infinite(axes))
 }
 
 /// σ_b² / k̄² (UᵀU)⁻¹ over the antennas that read the tag.
-fn bias_covariance(
-    reads: &PhaseReads,
-    p: &Vector3<f64>,
-    mean_k: f64,
-    bias_sigma_rad: f64,
-    axes: usize,
-) -> Matrix3<f64> {
+fn bias_covariance(reads: &PhaseReads, p: &Vector3<f64>, mean_k: f64, bias_sigma_rad: f64, axes: usize) -> Matrix3<f64> {
     let mut normal = Matrix3::zeros();
     for a in reads.used_anchors() {
         let u = (p - reads.anchors[a]).normalize();
         normal += u * u.transpose();
     }
-    invert(&normal, axes)
-        .map(|inverse| inverse * (bias_sigma_rad / mean_k).powi(2))
-        .unwrap_or_else(|| infinite(axes))
+    invert(&normal, axes).map(|inverse| inverse * (bias_sigma_rad / mean_k).powi(2)).unwrap_or_else(|| infinite(axes))
 }
 
 #[cfg(test)]
@@ -226,15 +154,7 @@ mod tests {
     use super::*;
 
     pub(crate) fn settings() -> Settings {
-        Settings {
-            temperature: 1.0,
-            bias_sigma_rad: 0.07,
-            correlation_s: 0.5,
-            max_candidates: 5,
-            min_weight: 1e-3,
-            hopping_spread_hz: 2e6,
-            max_points: 100_000,
-        }
+        Settings { temperature: 1.0, bias_sigma_rad: 0.07, correlation_s: 0.5, max_candidates: 5, min_weight: 1e-3, hopping_spread_hz: 2e6, max_points: 100_000 }
     }
 
     #[test]
@@ -244,14 +164,7 @@ mod tests {
         let (z, k, antenna) = reads_at(truth, &anchors, &us_band());
         let time: Vec<f64> = (0..z.len()).map(|i| i as f64 * 0.03).collect();
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let found = phase_candidates(
-            &reads,
-            &time,
-            Vector3::zeros(),
-            Vector3::repeat(1.5),
-            3,
-            &settings(),
-        );
+        let found = phase_candidates(&reads, &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
         assert!((found[0].position - truth).norm() < 1e-5, "{:?}", found[0]);
         assert!(found[0].weight > 0.99);
         // The bias term alone: (0.07 / 19 rad/m)² times a geometry factor, so mm-scale sigmas.
@@ -267,14 +180,7 @@ mod tests {
         // Repeat the reads so the fit has some noise-free evidence.
         let time: Vec<f64> = (0..z.len()).map(|i| i as f64).collect();
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let found = phase_candidates(
-            &reads,
-            &time,
-            Vector3::zeros(),
-            Vector3::repeat(1.2),
-            3,
-            &settings(),
-        );
+        let found = phase_candidates(&reads, &time, Vector3::zeros(), Vector3::repeat(1.2), 3, &settings());
         assert!(found.len() > 1, "{}", found.len());
     }
 

@@ -69,66 +69,33 @@ impl Envelopes {
     /// Tables covering every range from the antennas to the box [low, high].
     pub fn new(reads: &PhaseReads, low: &Vector3<f64>, high: &Vector3<f64>) -> Self {
         let n = reads.z.len();
-        let mean_k =
-            (0..n).map(|i| reads.count(i) * reads.k[i]).sum::<f64>() / reads.total().max(1.0);
+        let mean_k = (0..n).map(|i| reads.count(i) * reads.k[i]).sum::<f64>() / reads.total().max(1.0);
         let mut tables = Vec::new();
         for a in reads.used_anchors() {
             let anchor = reads.anchors[a];
             let rows: Vec<usize> = (0..n).filter(|&i| reads.antenna[i] == a).collect();
             // (max then min, not clamp: an empty box, low > high, is legal and searches low.)
-            let nearest = Vector3::from_fn(|axis, _| {
-                anchor[axis].max(low[axis]).min(high[axis].max(low[axis]))
-            });
+            let nearest = Vector3::from_fn(|axis, _| anchor[axis].max(low[axis]).min(high[axis].max(low[axis])));
             let start = ((nearest - anchor).norm() - RANGE_MARGIN_M).max(0.0);
             let end = (0..8)
-                .map(|corner| {
-                    Vector3::from_fn(|axis, _| {
-                        if corner >> axis & 1 == 1 {
-                            high[axis]
-                        } else {
-                            low[axis]
-                        }
-                    })
-                })
+                .map(|corner| Vector3::from_fn(|axis, _| if corner >> axis & 1 == 1 { high[axis] } else { low[axis] }))
                 .map(|q| (q - anchor).norm())
                 .fold(start, f64::max)
                 + RANGE_MARGIN_M;
-            let widest = rows
-                .iter()
-                .map(|&i| (reads.k[i] - mean_k).abs())
-                .fold(0.0, f64::max);
+            let widest = rows.iter().map(|&i| (reads.k[i] - mean_k).abs()).fold(0.0, f64::max);
             // An envelope that turns by less than a micro-radian over the box is constant.
             let turns = widest * (end - start) > 1e-6;
-            let spacing = if turns {
-                (MAX_PHASE_STEP_RAD / widest).max(MIN_SPACING_M)
-            } else {
-                1.0
-            };
-            let samples = if turns {
-                ((end - start) / spacing).ceil() as usize + 2
-            } else {
-                1
-            };
+            let spacing = if turns { (MAX_PHASE_STEP_RAD / widest).max(MIN_SPACING_M) } else { 1.0 };
+            let samples = if turns { ((end - start) / spacing).ceil() as usize + 2 } else { 1 };
             let values = (0..samples)
                 .map(|s| {
                     let d = start + s as f64 * spacing;
-                    rows.iter()
-                        .map(|&i| reads.z[i] * rotation((reads.k[i] - mean_k) * d))
-                        .sum()
+                    rows.iter().map(|&i| reads.z[i] * rotation((reads.k[i] - mean_k) * d)).sum()
                 })
                 .collect();
-            tables.push(Table {
-                anchor,
-                start_m: start,
-                spacing_m: spacing,
-                values,
-            });
+            tables.push(Table { anchor, start_m: start, spacing_m: spacing, values });
         }
-        Envelopes {
-            mean_k,
-            tables,
-            n: reads.total().max(1.0),
-        }
+        Envelopes { mean_k, tables, n: reads.total().max(1.0) }
     }
 
     /// R(p), p inside the box the tables were built for.
@@ -156,17 +123,9 @@ mod tests {
         let envelopes = Envelopes::new(&reads, &low, &high);
         for i in 0..200 {
             let t = i as f64 / 200.0;
-            let p = low
-                + (high - low).component_mul(&Vector3::new(
-                    t,
-                    (7.0 * t).fract(),
-                    (13.0 * t).fract(),
-                ));
+            let p = low + (high - low).component_mul(&Vector3::new(t, (7.0 * t).fract(), (13.0 * t).fract()));
             let (direct, tabled) = (coherence(&reads, &p), envelopes.coherence(&p));
-            assert!(
-                (direct - tabled).abs() < 1e-4,
-                "{p:?}: {direct} vs {tabled}"
-            );
+            assert!((direct - tabled).abs() < 1e-4, "{p:?}: {direct} vs {tabled}");
         }
     }
 
@@ -178,11 +137,6 @@ mod tests {
         let envelopes = Envelopes::new(&reads, &Vector3::zeros(), &Vector3::repeat(1.0));
         assert!(envelopes.tables.iter().all(|t| t.values.len() == 1));
         let p = Vector3::new(0.3, 0.2, 0.9);
-        assert!(
-            (coherence(&reads, &p) - envelopes.coherence(&p)).abs() < 1e-12,
-            "{} {}",
-            coherence(&reads, &p),
-            envelopes.coherence(&p)
-        );
+        assert!((coherence(&reads, &p) - envelopes.coherence(&p)).abs() < 1e-12, "{} {}", coherence(&reads, &p), envelopes.coherence(&p));
     }
 }

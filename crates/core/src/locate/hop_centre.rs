@@ -10,28 +10,16 @@ use super::{hop_range, PhaseReads};
 /// carrier's own constant is the tag's offset, common to all antennas, so
 /// one antenna alone has no lattice: only the slopes range. `None` with
 /// fewer ranges than axes.
-pub fn hop_centre(
-    reads: &PhaseReads,
-    low: &Vector3<f64>,
-    high: &Vector3<f64>,
-    axes: usize,
-) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+pub fn hop_centre(reads: &PhaseReads, low: &Vector3<f64>, high: &Vector3<f64>, axes: usize) -> Option<(Vector3<f64>, Matrix3<f64>)> {
     let used = reads.used_anchors();
     let max_range = used
         .iter()
-        .flat_map(|&a| {
-            [
-                (low - reads.anchors[a]).norm(),
-                (high - reads.anchors[a]).norm(),
-            ]
-        })
+        .flat_map(|&a| [(low - reads.anchors[a]).norm(), (high - reads.anchors[a]).norm()])
         .fold(0.0, f64::max)
         + 1.0;
     let (mut anchors, mut ranges, mut weights) = (Vec::new(), Vec::new(), Vec::new());
     for a in used {
-        let rows: Vec<usize> = (0..reads.z.len())
-            .filter(|&i| reads.antenna[i] == a)
-            .collect();
+        let rows: Vec<usize> = (0..reads.z.len()).filter(|&i| reads.antenna[i] == a).collect();
         let z: Vec<Complex<f64>> = rows.iter().map(|&i| reads.z[i]).collect();
         let k: Vec<f64> = rows.iter().map(|&i| reads.k[i]).collect();
         let count: Vec<f64> = rows.iter().map(|&i| reads.count(i)).collect();
@@ -53,13 +41,7 @@ pub fn hop_centre(
 /// returns p and (Σ wᵢ uᵢuᵢᵀ)⁻¹ at the last step, the covariance for
 /// range variances 1/wᵢ (infinite when singular). A singular normal
 /// matrix takes the minimum-norm step (the pseudo-inverse).
-fn weighted_multilateration(
-    anchors: &[Vector3<f64>],
-    ranges: &[f64],
-    weights: &[f64],
-    start: Vector3<f64>,
-    axes: usize,
-) -> Option<(Vector3<f64>, Matrix3<f64>)> {
+fn weighted_multilateration(anchors: &[Vector3<f64>], ranges: &[f64], weights: &[f64], start: Vector3<f64>, axes: usize) -> Option<(Vector3<f64>, Matrix3<f64>)> {
     let mut p = start;
     let mut normal = Matrix3::zeros();
     for _ in 0..20 {
@@ -87,13 +69,7 @@ fn weighted_multilateration(
 
 /// Infinite over the first `axes` (a singular fit), zero beyond.
 pub(super) fn infinite(axes: usize) -> Matrix3<f64> {
-    Matrix3::from_fn(|r, c| {
-        if r < axes && c < axes {
-            f64::INFINITY
-        } else {
-            0.0
-        }
-    })
+    Matrix3::from_fn(|r, c| if r < axes && c < axes { f64::INFINITY } else { 0.0 })
 }
 
 /// (H restricted to the first `axes`)⁻¹, zero-padded; `None` if singular.
@@ -139,13 +115,9 @@ mod tests {
         let truth = Vector3::new(0.5, 0.6, 0.7);
         let (z, k, antenna) = reads_at(truth, &anchors, &us_band());
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let (p, covariance) =
-            hop_centre(&reads, &Vector3::zeros(), &Vector3::repeat(1.5), 3).unwrap();
+        let (p, covariance) = hop_centre(&reads, &Vector3::zeros(), &Vector3::repeat(1.5), 3).unwrap();
         assert!((p - truth).norm() < 1e-4, "{p:?}");
-        assert!(covariance
-            .diagonal()
-            .iter()
-            .all(|v| v.is_finite() && *v > 0.0));
+        assert!(covariance.diagonal().iter().all(|v| v.is_finite() && *v > 0.0));
         assert!(hop_centre(&reads, &Vector3::zeros(), &Vector3::repeat(1.5), 3).is_some());
         let one = PhaseReads::new(&z[..50], &k[..50], &antenna[..50], &anchors);
         assert!(hop_centre(&one, &Vector3::zeros(), &Vector3::repeat(1.5), 3).is_none());

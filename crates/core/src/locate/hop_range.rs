@@ -9,12 +9,7 @@ use super::rotation;
 /// phase slope; σ = σ_φ / (std(k) √n) with σ_φ from the peak's coherence.
 /// `count`: reads per entry (groups, [`super::PhaseReads::grouped`]), `None`
 /// for single reads. `None` when the reads do not spread in k.
-pub fn hop_range(
-    z: &[Complex<f64>],
-    k: &[f64],
-    count: Option<&[f64]>,
-    max_range_m: f64,
-) -> Option<(f64, f64)> {
+pub fn hop_range(z: &[Complex<f64>], k: &[f64], count: Option<&[f64]>, max_range_m: f64) -> Option<(f64, f64)> {
     let m = z.len();
     let w = |i: usize| count.map_or(1.0, |c| c[i]);
     let n: f64 = (0..m).map(w).sum();
@@ -26,13 +21,7 @@ pub fn hop_range(
     if spread <= 0.0 {
         return None;
     }
-    let spectrum = |d: f64| {
-        (0..m)
-            .map(|i| z[i] * rotation(k[i] * d))
-            .sum::<Complex<f64>>()
-            .norm()
-            / n
-    };
+    let spectrum = |d: f64| (0..m).map(|i| z[i] * rotation(k[i] * d)).sum::<Complex<f64>>().norm() / n;
     let step = 0.1 / spread;
     let (mut best, mut best_value) = (0.0, f64::NEG_INFINITY);
     let mut d = 0.0;

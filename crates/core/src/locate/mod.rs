@@ -70,48 +70,23 @@ pub struct Grouped {
 
 impl Grouped {
     pub fn reads<'a>(&'a self, anchors: &'a [Vector3<f64>]) -> PhaseReads<'a> {
-        PhaseReads {
-            z: &self.z,
-            k: &self.k,
-            antenna: &self.antenna,
-            anchors,
-            count: Some(&self.count),
-        }
+        PhaseReads { z: &self.z, k: &self.k, antenna: &self.antenna, anchors, count: Some(&self.count) }
     }
 }
 
 impl<'a> PhaseReads<'a> {
     /// Single reads (a count of one each).
-    pub fn new(
-        z: &'a [Complex<f64>],
-        k: &'a [f64],
-        antenna: &'a [usize],
-        anchors: &'a [Vector3<f64>],
-    ) -> Self {
-        PhaseReads {
-            z,
-            k,
-            antenna,
-            anchors,
-            count: None,
-        }
+    pub fn new(z: &'a [Complex<f64>], k: &'a [f64], antenna: &'a [usize], anchors: &'a [Vector3<f64>]) -> Self {
+        PhaseReads { z, k, antenna, anchors, count: None }
     }
 
     /// The entries summed per (antenna, k).
     pub fn grouped(&self) -> Grouped {
         let mut order: Vec<usize> = (0..self.z.len()).collect();
-        order.sort_unstable_by(|&a, &b| {
-            (self.antenna[a], self.k[a].to_bits()).cmp(&(self.antenna[b], self.k[b].to_bits()))
-        });
-        let mut grouped = Grouped {
-            z: Vec::new(),
-            k: Vec::new(),
-            antenna: Vec::new(),
-            count: Vec::new(),
-        };
+        order.sort_unstable_by(|&a, &b| (self.antenna[a], self.k[a].to_bits()).cmp(&(self.antenna[b], self.k[b].to_bits())));
+        let mut grouped = Grouped { z: Vec::new(), k: Vec::new(), antenna: Vec::new(), count: Vec::new() };
         for i in order {
-            let same = grouped.antenna.last() == Some(&self.antenna[i])
-                && grouped.k.last().map(|k| k.to_bits()) == Some(self.k[i].to_bits());
+            let same = grouped.antenna.last() == Some(&self.antenna[i]) && grouped.k.last().map(|k| k.to_bits()) == Some(self.k[i].to_bits());
             if same {
                 *grouped.z.last_mut().expect("a group") += self.z[i];
                 *grouped.count.last_mut().expect("a group") += self.count(i);
@@ -162,11 +137,7 @@ pub(crate) mod fixtures {
     pub const C: f64 = 299_792_458.0;
 
     /// Noise-free reads of a tag at `truth`, every antenna on every frequency.
-    pub fn reads_at(
-        truth: Vector3<f64>,
-        anchors: &[Vector3<f64>],
-        frequencies: &[f64],
-    ) -> (Vec<Complex<f64>>, Vec<f64>, Vec<usize>) {
+    pub fn reads_at(truth: Vector3<f64>, anchors: &[Vector3<f64>], frequencies: &[f64]) -> (Vec<Complex<f64>>, Vec<f64>, Vec<usize>) {
         let (mut z, mut k, mut antenna) = (Vec::new(), Vec::new(), Vec::new());
         for (a, anchor) in anchors.iter().enumerate() {
             for f in frequencies {
@@ -181,12 +152,7 @@ pub(crate) mod fixtures {
     }
 
     pub fn layout() -> Vec<Vector3<f64>> {
-        vec![
-            Vector3::new(0.0, 0.3, 0.2),
-            Vector3::new(0.0, 0.9, 1.1),
-            Vector3::new(0.4, 0.0, 1.2),
-            Vector3::new(1.0, 0.0, 0.2),
-        ]
+        vec![Vector3::new(0.0, 0.3, 0.2), Vector3::new(0.0, 0.9, 1.1), Vector3::new(0.4, 0.0, 1.2), Vector3::new(1.0, 0.0, 0.2)]
     }
 
     pub fn us_band() -> Vec<f64> {

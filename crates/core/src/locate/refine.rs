@@ -10,12 +10,7 @@ use super::{coherence, rotation, PhaseReads};
 /// Jacobian centred over reads (θ is a nuisance). `axes` = 2 keeps z.
 /// A group's residual is its summed phasor's, weighted by its reads.
 /// Returns the position and its coherence.
-pub fn refine(
-    reads: &PhaseReads,
-    start: Vector3<f64>,
-    axes: usize,
-    iterations: usize,
-) -> (Vector3<f64>, f64) {
+pub fn refine(reads: &PhaseReads, start: Vector3<f64>, axes: usize, iterations: usize) -> (Vector3<f64>, f64) {
     let n = reads.z.len();
     let mut p = start;
     let mut rotated = vec![Complex::new(0.0, 0.0); n];
@@ -30,10 +25,7 @@ pub fn refine(
             jacobian[i] = offset * (reads.k[i] / d.max(1e-9));
         }
         let theta = Complex::new(0.0, -sum.arg()).exp();
-        let mean: Vector3<f64> = (0..n)
-            .map(|i| jacobian[i] * reads.count(i))
-            .sum::<Vector3<f64>>()
-            / reads.total();
+        let mean: Vector3<f64> = (0..n).map(|i| jacobian[i] * reads.count(i)).sum::<Vector3<f64>>() / reads.total();
         let mut normal = Matrix3::zeros();
         let mut gradient = Vector3::zeros();
         for i in 0..n {
@@ -48,9 +40,7 @@ pub fn refine(
         if axes == 2 {
             normal[(2, 2)] = 1.0;
         }
-        let Some(inverse) = normal.try_inverse() else {
-            break;
-        };
+        let Some(inverse) = normal.try_inverse() else { break };
         let step = inverse * gradient;
         p += step;
         if step.norm() < 1e-7 {
@@ -67,12 +57,7 @@ pub fn refine(
 /// Within an antenna the channels' envelope is taken as flat, which moves
 /// the point by about (|E|′/|E|) / k̄² (a fraction of a millimetre):
 /// [`refine`] on the reads finishes from there.
-pub fn refine_on_envelopes(
-    envelopes: &Envelopes,
-    start: Vector3<f64>,
-    axes: usize,
-    iterations: usize,
-) -> Vector3<f64> {
+pub fn refine_on_envelopes(envelopes: &Envelopes, start: Vector3<f64>, axes: usize, iterations: usize) -> Vector3<f64> {
     let mut p = start;
     let tables = &envelopes.tables;
     for _ in 0..iterations {
@@ -94,12 +79,9 @@ pub fn refine_on_envelopes(
             break;
         }
         // j_a = −κ_a u_a: the residual's derivative is −j_a, as for single reads (j = k u).
-        let rows: Vec<(Vector3<f64>, f64, f64)> = parts
-            .iter()
-            .map(|(v, dv, u)| (-(dv / v).im * u, (v * theta).arg(), v.norm()))
-            .collect();
-        let mean: Vector3<f64> =
-            rows.iter().map(|(j, _, w)| j * *w).sum::<Vector3<f64>>() / weight_total;
+        let rows: Vec<(Vector3<f64>, f64, f64)> =
+            parts.iter().map(|(v, dv, u)| (-(dv / v).im * u, (v * theta).arg(), v.norm())).collect();
+        let mean: Vector3<f64> = rows.iter().map(|(j, _, w)| j * *w).sum::<Vector3<f64>>() / weight_total;
         let mut normal = Matrix3::zeros();
         let mut gradient = Vector3::zeros();
         for (j, r, w) in &rows {
@@ -114,12 +96,7 @@ pub fn refine_on_envelopes(
             normal[(axis, axis)] = 1.0;
         }
         // Fewer antennas than unknowns (+ θ): the minimum-norm step.
-        let Some(inverse) = normal
-            .try_inverse()
-            .or_else(|| normal.pseudo_inverse(1e-9 * normal.norm()).ok())
-        else {
-            break;
-        };
+        let Some(inverse) = normal.try_inverse().or_else(|| normal.pseudo_inverse(1e-9 * normal.norm()).ok()) else { break };
         let step = inverse * gradient;
         if !step.iter().all(|v| v.is_finite()) {
             break;
@@ -154,11 +131,7 @@ mod tests {
         let truth = Vector3::new(0.5, 0.6, 0.7);
         let (z, k, antenna) = reads_at(truth, &anchors, &us_band());
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let envelopes = Envelopes::new(
-            &reads,
-            &(truth - Vector3::repeat(0.1)),
-            &(truth + Vector3::repeat(0.1)),
-        );
+        let envelopes = Envelopes::new(&reads, &(truth - Vector3::repeat(0.1)), &(truth + Vector3::repeat(0.1)));
         let p = refine_on_envelopes(&envelopes, truth + Vector3::new(0.012, -0.01, 0.008), 3, 10);
         assert!((p - truth).norm() < 5e-4, "{:?}", p - truth);
     }

@@ -33,23 +33,12 @@ pub fn search(
     max_seeds: usize,
     polish: &dyn Fn(f64, f64) -> bool,
 ) -> Vec<(Vector3<f64>, f64)> {
-    let mean_k = (0..reads.z.len())
-        .map(|i| reads.count(i) * reads.k[i].abs())
-        .sum::<f64>()
-        / reads.total().max(1.0);
+    let mean_k = (0..reads.z.len()).map(|i| reads.count(i) * reads.k[i].abs()).sum::<f64>() / reads.total().max(1.0);
     if mean_k <= 0.0 {
         return Vec::new();
     }
     let spacing = 2.0 * std::f64::consts::PI / mean_k;
-    let sizes = |step: f64| -> [usize; 3] {
-        std::array::from_fn(|a| {
-            if high[a] > low[a] {
-                ((high[a] - low[a]) / step).floor() as usize + 1
-            } else {
-                1
-            }
-        })
-    };
+    let sizes = |step: f64| -> [usize; 3] { std::array::from_fn(|a| if high[a] > low[a] { ((high[a] - low[a]) / step).floor() as usize + 1 } else { 1 }) };
     let mut step = spacing / 4.0;
     while sizes(step).iter().product::<usize>() > max_points {
         step *= 1.25;
@@ -97,10 +86,7 @@ pub fn search(
     for (start, _) in climbed.into_iter().filter(|(_, r)| polish(best, *r)) {
         let (p, r) = refine(reads, start, axes, REFINE_ITERATIONS);
         let inside = (0..3).all(|a| p[a] >= low[a] - MARGIN_M && p[a] <= high[a] + MARGIN_M);
-        if inside
-            && p.iter().all(|v| v.is_finite())
-            && refined.iter().all(|(q, _)| (q - p).norm() > MERGE_M)
-        {
+        if inside && p.iter().all(|v| v.is_finite()) && refined.iter().all(|(q, _)| (q - p).norm() > MERGE_M) {
             refined.push((p, r));
         }
     }
@@ -119,15 +105,7 @@ mod tests {
         let truth = Vector3::new(0.5, 0.6, 0.7);
         let (z, k, antenna) = reads_at(truth, &anchors, &us_band());
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let found = search(
-            &reads,
-            truth - Vector3::repeat(0.1),
-            truth + Vector3::repeat(0.1),
-            3,
-            100_000,
-            20,
-            &|_, _| true,
-        );
+        let found = search(&reads, truth - Vector3::repeat(0.1), truth + Vector3::repeat(0.1), 3, 100_000, 20, &|_, _| true);
         assert!((found[0].0 - truth).norm() < 1e-5, "{:?}", found[0]);
         assert!(found.windows(2).all(|w| w[0].1 >= w[1].1));
     }
@@ -137,15 +115,7 @@ mod tests {
         let anchors = layout();
         let (z, k, antenna) = reads_at(Vector3::new(0.5, 0.6, 0.7), &anchors, &us_band());
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let found = search(
-            &reads,
-            Vector3::repeat(0.8),
-            Vector3::repeat(0.7),
-            3,
-            100_000,
-            20,
-            &|_, _| true,
-        );
+        let found = search(&reads, Vector3::repeat(0.8), Vector3::repeat(0.7), 3, 100_000, 20, &|_, _| true);
         assert!(found.len() <= 1);
     }
 }

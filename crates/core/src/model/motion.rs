@@ -42,12 +42,7 @@ impl MotionModel {
                 q_blocks: [q * dt * dt * dt / 3.0, q * dt * dt / 2.0, q * dt],
                 axes,
             },
-            MotionModel::RandomWalk { q } => Transition {
-                dt,
-                with_velocity: false,
-                q_blocks: [q * dt, 0.0, 0.0],
-                axes,
-            },
+            MotionModel::RandomWalk { q } => Transition { dt, with_velocity: false, q_blocks: [q * dt, 0.0, 0.0], axes },
         }
     }
 

@@ -9,12 +9,7 @@ use super::StateVector;
 /// single range (GLAC's C_k). `axes == 2` zeroes the z entry (the tag is
 /// held on its plane).
 #[inline]
-pub fn range(
-    x: &StateVector,
-    a: &Vector3<f64>,
-    axes: usize,
-    jacobian: bool,
-) -> (f64, Option<StateVector>) {
+pub fn range(x: &StateVector, a: &Vector3<f64>, axes: usize, jacobian: bool) -> (f64, Option<StateVector>) {
     let diff = Vector3::new(x[0] - a.x, x[1] - a.y, x[2] - a.z);
     let r = diff.norm();
     if !jacobian {
@@ -55,11 +50,7 @@ mod tests {
                 xp[i] += eps;
                 xm[i] -= eps;
                 let num = (range(&xp, &a, 3, false).0 - range(&xm, &a, 3, false).0) / (2.0 * eps);
-                assert!(
-                    (num - h[i]).abs() < 1e-7,
-                    "component {i}: {num} vs {}",
-                    h[i]
-                );
+                assert!((num - h[i]).abs() < 1e-7, "component {i}: {num} vs {}", h[i]);
             }
         }
     }

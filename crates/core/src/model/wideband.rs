@@ -138,18 +138,11 @@ pub fn steering(frequencies_hz: &[f64], d: f64, out: &mut [Complex<f64>]) {
             let rotation = exact(spacing);
             let mut current = Complex::new(1.0, 0.0);
             for (k, (o, &f)) in out.iter_mut().zip(frequencies_hz).enumerate() {
-                current = if k % STEERING_ANCHOR == 0 {
-                    exact(f)
-                } else {
-                    current * rotation
-                };
+                current = if k % STEERING_ANCHOR == 0 { exact(f) } else { current * rotation };
                 *o = current;
             }
         }
-        None => out
-            .iter_mut()
-            .zip(frequencies_hz)
-            .for_each(|(o, &f)| *o = exact(f)),
+        None => out.iter_mut().zip(frequencies_hz).for_each(|(o, &f)| *o = exact(f)),
     }
 }
 
@@ -158,33 +151,19 @@ pub fn steering(frequencies_hz: &[f64], d: f64, out: &mut [Complex<f64>]) {
 fn even_spacing_hz(frequencies_hz: &[f64]) -> Option<f64> {
     let spacing = frequencies_hz.get(1)? - frequencies_hz[0];
     let tolerance = 1e-6 * spacing.abs();
-    (spacing != 0.0
-        && frequencies_hz
-            .windows(2)
-            .all(|w| ((w[1] - w[0]) - spacing).abs() <= tolerance))
-    .then_some(spacing)
+    (spacing != 0.0 && frequencies_hz.windows(2).all(|w| ((w[1] - w[0]) - spacing).abs() <= tolerance)).then_some(spacing)
 }
 
 /// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m), with
 /// `phasors` as scratch space (length of `frequencies_hz`).
-fn beamform_with(
-    frequencies_hz: &[f64],
-    h: &[Complex<f64>],
-    d: f64,
-    phasors: &mut [Complex<f64>],
-) -> Complex<f64> {
+fn beamform_with(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64, phasors: &mut [Complex<f64>]) -> Complex<f64> {
     steering(frequencies_hz, d, phasors);
     h.iter().zip(phasors.iter()).map(|(hk, e)| hk * e).sum()
 }
 
 /// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m).
 pub fn beamform(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64) -> Complex<f64> {
-    beamform_with(
-        frequencies_hz,
-        h,
-        d,
-        &mut vec![Complex::new(0.0, 0.0); frequencies_hz.len()],
-    )
+    beamform_with(frequencies_hz, h, d, &mut vec![Complex::new(0.0, 0.0); frequencies_hz.len()])
 }
 
 /// Distance candidates of one receive antenna from its channel `h` at
@@ -208,9 +187,7 @@ pub fn distance_candidates(
     if k == 0 || h.len() != k || !(d_max > d_min) {
         return None;
     }
-    if h.iter().any(|v| !(v.re.is_finite() && v.im.is_finite()))
-        || frequencies_hz.iter().any(|f| !(*f > 0.0))
-    {
+    if h.iter().any(|v| !(v.re.is_finite() && v.im.is_finite())) || frequencies_hz.iter().any(|f| !(*f > 0.0)) {
         return None;
     }
     let energy: f64 = h.iter().map(|v| v.norm_sqr()).sum();
@@ -270,10 +247,7 @@ pub fn distance_candidates(
         loop {
             n += direction;
             let d = d_peak + n * lambda;
-            if d < d_min - lambda / 2.0
-                || d > d_max + lambda / 2.0
-                || teeth.len() > 4 * params.max_candidates
-            {
+            if d < d_min - lambda / 2.0 || d > d_max + lambda / 2.0 || teeth.len() > 4 * params.max_candidates {
                 break;
             }
             for (gk, r) in g.iter_mut().zip(&tooth) {
@@ -304,30 +278,18 @@ pub fn distance_candidates(
     let residual: f64 = base.iter().map(|g| (g - a).norm_sqr()).sum::<f64>() / k as f64;
     let sigma_phase = (residual / (2.0 * k as f64 * a * a)).sqrt();
     let mut weights: Vec<f64> = match params.weighting {
-        CandidateWeighting::Amplitude => teeth
-            .iter()
-            .map(|t| t.1.powf(params.weight_exponent))
-            .collect(),
+        CandidateWeighting::Amplitude => teeth.iter().map(|t| t.1.powf(params.weight_exponent)).collect(),
         CandidateWeighting::Likelihood => {
             // Residual variance with K − 2 degrees of freedom used (a, d);
             // never below 1e-6 of the signal so a noiseless channel stays finite.
             let noise = (residual * k as f64 / (k as f64 - 2.0).max(1.0)).max(1e-6 * a * a);
             let top = teeth.iter().map(|t| t.1).fold(0.0, f64::max);
-            teeth
-                .iter()
-                .map(|t| {
-                    (params.likelihood_temper * (t.1 * t.1 - top * top) / (k as f64 * noise)).exp()
-                })
-                .collect()
+            teeth.iter().map(|t| (params.likelihood_temper * (t.1 * t.1 - top * top) / (k as f64 * noise)).exp()).collect()
         }
     };
     let total: f64 = weights.iter().sum();
     weights.iter_mut().for_each(|w| *w /= total);
-    let best = weights
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .map_or(0, |(i, _)| i);
+    let best = weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i);
     let sigma_m = (sigma_phase / slope).clamp(params.min_sigma_m, params.max_sigma_m);
     Some(Candidates {
         distances_m: teeth.iter().map(|t| t.0).collect(),
@@ -381,20 +343,9 @@ mod tests {
     fn noiseless_channel_puts_a_candidate_on_the_truth() {
         let f = subcarriers();
         for d in [1.234, 2.5, 4.71, 7.9] {
-            let c = distance_candidates(
-                &f,
-                &channel(&f, d, 0.3),
-                0.5,
-                12.0,
-                &CandidateParams::default(),
-            )
-            .unwrap();
+            let c = distance_candidates(&f, &channel(&f, d, 0.3), 0.5, 12.0, &CandidateParams::default()).unwrap();
             let n = c.nearest_index(d);
-            assert!(
-                (c.distance(n) - d).abs() < 1e-6,
-                "d={d}: {:?}",
-                c.distances_m
-            );
+            assert!((c.distance(n) - d).abs() < 1e-6, "d={d}: {:?}", c.distances_m);
             assert!(n >= 0 && (n as usize) < c.distances_m.len());
             assert!((c.weights.iter().sum::<f64>() - 1.0).abs() < 1e-12);
             assert!(c.sigma_m <= CandidateParams::default().min_sigma_m + 1e-12);
@@ -402,11 +353,7 @@ mod tests {
             assert!(c.weights[n as usize] > 0.99, "{:?}", c.weights);
             // 100 MHz: the main lobe spans several wavelengths (thesis: ~9).
             assert!(c.distances_m.len() >= 5, "{}", c.distances_m.len());
-            let spacing = c
-                .distances_m
-                .windows(2)
-                .map(|w| w[1] - w[0])
-                .fold(0.0, f64::max);
+            let spacing = c.distances_m.windows(2).map(|w| w[1] - w[0]).fold(0.0, f64::max);
             assert!((spacing - c.spacing_m).abs() < 1e-3);
         }
     }
@@ -420,32 +367,12 @@ mod tests {
             let t = k as f64 * 1.7;
             *v += Complex::new(t.sin(), (2.3 * t).cos()) * 0.2;
         }
-        let c = distance_candidates(
-            &f,
-            &h,
-            0.5,
-            12.0,
-            &CandidateParams {
-                min_sigma_m: 0.0,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let c = distance_candidates(&f, &h, 0.5, 12.0, &CandidateParams { min_sigma_m: 0.0, ..Default::default() }).unwrap();
         // Amplitude (thesis) weights are nearly flat over 100 MHz; likelihood weights are not.
-        let amplitude = distance_candidates(
-            &f,
-            &h,
-            0.5,
-            12.0,
-            &CandidateParams {
-                weighting: CandidateWeighting::Amplitude,
-                ..Default::default()
-            },
-        )
-        .unwrap();
-        let spread = |w: &[f64]| {
-            w.iter().cloned().fold(0.0, f64::max) / w.iter().cloned().fold(1.0, f64::min)
-        };
+        let amplitude =
+            distance_candidates(&f, &h, 0.5, 12.0, &CandidateParams { weighting: CandidateWeighting::Amplitude, ..Default::default() })
+                .unwrap();
+        let spread = |w: &[f64]| w.iter().cloned().fold(0.0, f64::max) / w.iter().cloned().fold(1.0, f64::min);
         assert!(spread(&amplitude.weights) < 2.5, "{:?}", amplitude.weights);
         assert!(spread(&c.weights) > 100.0, "{:?}", c.weights);
         // σφ ≈ 0.2/√(2·20) rad → σ_d ≈ 0.032 · λ/2π ≈ 1.7 mm.
@@ -456,19 +383,9 @@ mod tests {
     fn rejects_empty_and_non_finite() {
         let f = subcarriers();
         let mut h = channel(&f, 2.0, 1.0);
-        assert!(distance_candidates(
-            &f,
-            &vec![Complex::new(0.0, 0.0); 20],
-            0.5,
-            12.0,
-            &Default::default()
-        )
-        .is_none());
+        assert!(distance_candidates(&f, &vec![Complex::new(0.0, 0.0); 20], 0.5, 12.0, &Default::default()).is_none());
         h[3] = Complex::new(f64::NAN, 0.0);
         assert!(distance_candidates(&f, &h, 0.5, 12.0, &Default::default()).is_none());
-        assert!(
-            distance_candidates(&f, &channel(&f, 2.0, 1.0), 3.0, 1.0, &Default::default())
-                .is_none()
-        );
+        assert!(distance_candidates(&f, &channel(&f, 2.0, 1.0), 3.0, 1.0, &Default::default()).is_none());
     }
 }

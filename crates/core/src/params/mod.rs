@@ -36,16 +36,7 @@ pub struct Parameter<P> {
 }
 
 #[allow(clippy::too_many_arguments)] // one per column of a table row
-fn row<P>(
-    name: &str,
-    kind: Kind,
-    optional: bool,
-    range: Range,
-    unit: &str,
-    description: &str,
-    get: Getter<P>,
-    set: Setter<P>,
-) -> Parameter<P> {
+fn row<P>(name: &str, kind: Kind, optional: bool, range: Range, unit: &str, description: &str, get: Getter<P>, set: Setter<P>) -> Parameter<P> {
     let schema = Schema {
         name: name.to_string(),
         kind,
@@ -63,14 +54,7 @@ fn mismatch(value: &Value) -> String {
 }
 
 /// A float field (finite unless `range` allows infinity).
-pub fn float<P: 'static>(
-    name: &str,
-    range: Range,
-    unit: &str,
-    description: &str,
-    get: fn(&P) -> f64,
-    set: fn(&mut P, f64),
-) -> Parameter<P> {
+pub fn float<P: 'static>(name: &str, range: Range, unit: &str, description: &str, get: fn(&P) -> f64, set: fn(&mut P, f64)) -> Parameter<P> {
     row(
         name,
         Kind::Float,
@@ -122,22 +106,11 @@ pub fn optional_float<P: 'static>(
 
 /// An integer field of any integer type `T`; an unsigned `T` raises the
 /// range's floor to 0, so negatives are refused with the range shown.
-pub fn integer<P: 'static, T>(
-    name: &str,
-    range: Range,
-    unit: &str,
-    description: &str,
-    get: fn(&P) -> T,
-    set: fn(&mut P, T),
-) -> Parameter<P>
+pub fn integer<P: 'static, T>(name: &str, range: Range, unit: &str, description: &str, get: fn(&P) -> T, set: fn(&mut P, T)) -> Parameter<P>
 where
     T: TryFrom<i64> + TryInto<i64> + Copy + 'static,
 {
-    let range = if T::try_from(-1).is_err() {
-        range.with_floor(0.0)
-    } else {
-        range
-    };
+    let range = if T::try_from(-1).is_err() { range.with_floor(0.0) } else { range };
     row(
         name,
         Kind::Integer,
@@ -147,21 +120,14 @@ where
         description,
         Box::new(move |p| Value::Integer(get(p).try_into().unwrap_or(i64::MAX))),
         Box::new(move |p, v| match v {
-            Value::Integer(i) => T::try_from(*i)
-                .map(|t| set(p, t))
-                .map_err(|_| format!("{i} does not fit the field's type")),
+            Value::Integer(i) => T::try_from(*i).map(|t| set(p, t)).map_err(|_| format!("{i} does not fit the field's type")),
             other => Err(mismatch(other)),
         }),
     )
 }
 
 /// A bool field.
-pub fn boolean<P: 'static>(
-    name: &str,
-    description: &str,
-    get: fn(&P) -> bool,
-    set: fn(&mut P, bool),
-) -> Parameter<P> {
+pub fn boolean<P: 'static>(name: &str, description: &str, get: fn(&P) -> bool, set: fn(&mut P, bool)) -> Parameter<P> {
     row(
         name,
         Kind::Bool,
@@ -182,13 +148,7 @@ pub fn boolean<P: 'static>(
 
 /// A field of an enum-like type `T`, one name per variant: `choices` is
 /// the one list of (name, variant), read both ways.
-pub fn choice<P: 'static, T>(
-    name: &str,
-    description: &str,
-    choices: &'static [(&'static str, T)],
-    get: fn(&P) -> T,
-    set: fn(&mut P, T),
-) -> Parameter<P>
+pub fn choice<P: 'static, T>(name: &str, description: &str, choices: &'static [(&'static str, T)], get: fn(&P) -> T, set: fn(&mut P, T)) -> Parameter<P>
 where
     T: Copy + PartialEq + Send + Sync + 'static,
 {
@@ -202,17 +162,14 @@ where
         description,
         Box::new(move |p| {
             let current = get(p);
-            choices
-                .iter()
-                .find(|(_, t)| *t == current)
-                .map_or(Value::None, |(n, _)| Value::Text(n.to_string()))
+            choices.iter().find(|(_, t)| *t == current).map_or(Value::None, |(n, _)| Value::Text(n.to_string()))
         }),
         Box::new(move |p, v| match v {
             Value::Text(text) => match choices.iter().find(|(n, _)| n == text) {
                 Some((_, t)) => {
-                    set(p, *t);
-                    Ok(())
-                }
+                set(p, *t);
+                Ok(())
+            }
                 None => Err(mismatch(v)),
             },
             other => Err(mismatch(other)),
@@ -229,10 +186,7 @@ pub struct Table<P> {
 
 impl<P: Default> Table<P> {
     pub fn new(label: &str, rows: Vec<Parameter<P>>) -> Self {
-        Self {
-            label: label.to_string(),
-            rows,
-        }
+        Self { label: label.to_string(), rows }
     }
 
     /// The same table, its messages naming `label` (the method asked for).
@@ -242,33 +196,16 @@ impl<P: Default> Table<P> {
     }
 
     fn find(&self, name: &str) -> Result<&Parameter<P>> {
-        self.rows
-            .iter()
-            .find(|r| r.schema.name == name)
-            .ok_or_else(|| {
-                unknown_parameter(
-                    &self.label,
-                    name,
-                    self.rows.iter().map(|r| r.schema.name.as_str()),
-                )
-            })
+        self.rows.iter().find(|r| r.schema.name == name).ok_or_else(|| {
+            unknown_parameter(&self.label, name, self.rows.iter().map(|r| r.schema.name.as_str()))
+        })
     }
 
     /// The rows with their defaults (read from `P::default()`).
     pub fn schemas(&self) -> Schemas {
         let defaults = P::default();
-        let rows = self
-            .rows
-            .iter()
-            .map(|r| Schema {
-                default: (r.get)(&defaults),
-                ..r.schema.clone()
-            })
-            .collect();
-        Schemas {
-            label: self.label.clone(),
-            rows,
-        }
+        let rows = self.rows.iter().map(|r| Schema { default: (r.get)(&defaults), ..r.schema.clone() }).collect();
+        Schemas { label: self.label.clone(), rows }
     }
 
     /// The current value of parameter `name` in `params`.
@@ -280,10 +217,7 @@ impl<P: Default> Table<P> {
     pub fn set(&self, params: &mut P, name: &str, value: &Value) -> Result<()> {
         let row = self.find(name)?;
         let value = row.schema.convert(value)?;
-        (row.set)(params, &value).map_err(|reason| Error::Parameter {
-            name: name.to_string(),
-            reason,
-        })
+        (row.set)(params, &value).map_err(|reason| Error::Parameter { name: name.to_string(), reason })
     }
 
     /// Sets parameter `name` from text (the command line's `NAME=TEXT`).
@@ -327,43 +261,32 @@ impl Schemas {
     pub fn from_rows(label: &str, rows: Vec<Schema>) -> Result<Self> {
         for (i, row) in rows.iter().enumerate() {
             if rows[..i].iter().any(|r| r.name == row.name) {
-                return Err(Error::Parameter {
-                    name: row.name.clone(),
-                    reason: "appears twice in the table".into(),
-                });
+                return Err(Error::Parameter { name: row.name.clone(), reason: "appears twice in the table".into() });
             }
             row.convert(&row.default).map_err(|e| Error::Parameter {
                 name: row.name.clone(),
                 reason: format!("the table's default is not allowed: {e}"),
             })?;
         }
-        Ok(Self {
-            label: label.to_string(),
-            rows,
-        })
+        Ok(Self { label: label.to_string(), rows })
     }
 
     /// The row of parameter `name`.
     pub fn find(&self, name: &str) -> Result<&Schema> {
-        self.rows.iter().find(|r| r.name == name).ok_or_else(|| {
-            unknown_parameter(&self.label, name, self.rows.iter().map(|r| r.name.as_str()))
-        })
+        self.rows
+            .iter()
+            .find(|r| r.name == name)
+            .ok_or_else(|| unknown_parameter(&self.label, name, self.rows.iter().map(|r| r.name.as_str())))
     }
 
     /// `values` checked and converted, in order.
     pub fn convert_all(&self, values: &[(String, Value)]) -> Result<Vec<(String, Value)>> {
-        values
-            .iter()
-            .map(|(n, v)| Ok((n.clone(), self.find(n)?.convert(v)?)))
-            .collect()
+        values.iter().map(|(n, v)| Ok((n.clone(), self.find(n)?.convert(v)?))).collect()
     }
 
     /// `NAME=TEXT` pairs read into typed values, in order.
     pub fn parse_all(&self, pairs: &[(String, String)]) -> Result<Vec<(String, Value)>> {
-        pairs
-            .iter()
-            .map(|(n, t)| Ok((n.clone(), self.find(n)?.parse(t)?)))
-            .collect()
+        pairs.iter().map(|(n, t)| Ok((n.clone(), self.find(n)?.parse(t)?))).collect()
     }
 }
 
@@ -389,14 +312,7 @@ mod tests {
 
     impl Default for Example {
         fn default() -> Self {
-            Self {
-                gain: 0.5,
-                count: 3,
-                offset: -2,
-                cap: None,
-                on: true,
-                mode: Mode::Fast,
-            }
+            Self { gain: 0.5, count: 3, offset: -2, cap: None, on: true, mode: Mode::Fast }
         }
     }
 
@@ -404,46 +320,12 @@ mod tests {
         Table::new(
             "example",
             vec![
-                float(
-                    "gain",
-                    Range::UNIT,
-                    "",
-                    "a fraction",
-                    |p| p.gain,
-                    |p, v| p.gain = v,
-                ),
-                integer(
-                    "count",
-                    Range::at_least(1.0),
-                    "",
-                    "how many",
-                    |p| p.count,
-                    |p, v| p.count = v,
-                ),
-                integer(
-                    "offset",
-                    Range::ANY,
-                    "",
-                    "signed",
-                    |p| p.offset,
-                    |p, v| p.offset = v,
-                ),
-                optional_float(
-                    "cap",
-                    Range::POSITIVE,
-                    "m",
-                    "a cap",
-                    |p| p.cap,
-                    |p, v| p.cap = v,
-                ),
+                float("gain", Range::UNIT, "", "a fraction", |p| p.gain, |p, v| p.gain = v),
+                integer("count", Range::at_least(1.0), "", "how many", |p| p.count, |p, v| p.count = v),
+                integer("offset", Range::ANY, "", "signed", |p| p.offset, |p, v| p.offset = v),
+                optional_float("cap", Range::POSITIVE, "m", "a cap", |p| p.cap, |p, v| p.cap = v),
                 boolean("on", "a switch", |p| p.on, |p, v| p.on = v),
-                choice(
-                    "mode",
-                    "a mode",
-                    &[("fast", Mode::Fast), ("slow", Mode::Slow)],
-                    |p| p.mode,
-                    |p, v| p.mode = v,
-                ),
+                choice("mode", "a mode", &[("fast", Mode::Fast), ("slow", Mode::Slow)], |p| p.mode, |p, v| p.mode = v),
             ],
         )
     }
@@ -471,17 +353,7 @@ mod tests {
                 ("offset".into(), Value::Integer(-5)),
             ])
             .unwrap();
-        assert_eq!(
-            p,
-            Example {
-                gain: 1.0,
-                count: 7,
-                offset: -5,
-                cap: Some(2.0),
-                on: false,
-                mode: Mode::Slow
-            }
-        );
+        assert_eq!(p, Example { gain: 1.0, count: 7, offset: -5, cap: Some(2.0), on: false, mode: Mode::Slow });
         let mut q = p.clone();
         t.set_text(&mut q, "cap", "none").unwrap();
         assert_eq!(q.cap, None);
@@ -491,38 +363,19 @@ mod tests {
     #[test]
     fn unsigned_fields_refuse_negatives() {
         let t = table();
-        assert_eq!(
-            t.schemas().find("count").unwrap().range,
-            Range::at_least(1.0)
-        );
+        assert_eq!(t.schemas().find("count").unwrap().range, Range::at_least(1.0));
         match t.build(&[("count".into(), Value::Integer(-1))]) {
-            Err(Error::Parameter { name, reason }) => {
-                assert!(name == "count" && reason.contains(">= 1") && reason.contains("-1"))
-            }
+            Err(Error::Parameter { name, reason }) => assert!(name == "count" && reason.contains(">= 1") && reason.contains("-1")),
             other => panic!("{other:?}"),
         }
     }
 
     #[test]
     fn unknown_names_list_close_matches() {
-        let message = table()
-            .build(&[("gian".into(), Value::Float(0.1))])
-            .unwrap_err()
-            .to_string();
-        assert!(
-            message.contains("unknown parameter 'gian' for method 'example'")
-                && message.contains("gain"),
-            "{message}"
-        );
-        let message = table()
-            .labelled("other")
-            .build(&[("zzzzzz".into(), Value::Float(0.1))])
-            .unwrap_err()
-            .to_string();
-        assert!(
-            message.contains("'other'") && message.contains("known: gain, count"),
-            "{message}"
-        );
+        let message = table().build(&[("gian".into(), Value::Float(0.1))]).unwrap_err().to_string();
+        assert!(message.contains("unknown parameter 'gian' for method 'example'") && message.contains("gain"), "{message}");
+        let message = table().labelled("other").build(&[("zzzzzz".into(), Value::Float(0.1))]).unwrap_err().to_string();
+        assert!(message.contains("'other'") && message.contains("known: gain, count"), "{message}");
     }
 
     #[test]
@@ -530,14 +383,8 @@ mod tests {
         let mut rows = table().schemas().rows;
         assert!(Schemas::from_rows("x", rows.clone()).is_ok());
         rows[0].default = Value::Float(2.0);
-        assert!(Schemas::from_rows("x", rows.clone())
-            .unwrap_err()
-            .to_string()
-            .contains("'gain'"));
+        assert!(Schemas::from_rows("x", rows.clone()).unwrap_err().to_string().contains("'gain'"));
         rows[0] = rows[1].clone();
-        assert!(Schemas::from_rows("x", rows)
-            .unwrap_err()
-            .to_string()
-            .contains("twice"));
+        assert!(Schemas::from_rows("x", rows).unwrap_err().to_string().contains("twice"));
     }
 }

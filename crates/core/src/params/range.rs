@@ -28,40 +28,22 @@ pub struct Range {
 
 impl Range {
     /// Every finite value.
-    pub const ANY: Range = Range {
-        low: Bound::Unbounded,
-        high: Bound::Unbounded,
-    };
+    pub const ANY: Range = Range { low: Bound::Unbounded, high: Bound::Unbounded };
     /// `> 0`, finite.
-    pub const POSITIVE: Range = Range {
-        low: Bound::Exclusive(0.0),
-        high: Bound::Unbounded,
-    };
+    pub const POSITIVE: Range = Range { low: Bound::Exclusive(0.0), high: Bound::Unbounded };
     /// `>= 0`, finite.
-    pub const NON_NEGATIVE: Range = Range {
-        low: Bound::Inclusive(0.0),
-        high: Bound::Unbounded,
-    };
+    pub const NON_NEGATIVE: Range = Range { low: Bound::Inclusive(0.0), high: Bound::Unbounded };
     /// `[0, 1]`: a probability or a fraction.
-    pub const UNIT: Range = Range {
-        low: Bound::Inclusive(0.0),
-        high: Bound::Inclusive(1.0),
-    };
+    pub const UNIT: Range = Range { low: Bound::Inclusive(0.0), high: Bound::Inclusive(1.0) };
 
     /// `>= low`, finite.
     pub const fn at_least(low: f64) -> Range {
-        Range {
-            low: Bound::Inclusive(low),
-            high: Bound::Unbounded,
-        }
+        Range { low: Bound::Inclusive(low), high: Bound::Unbounded }
     }
 
     /// `[low, high]`.
     pub const fn closed(low: f64, high: f64) -> Range {
-        Range {
-            low: Bound::Inclusive(low),
-            high: Bound::Inclusive(high),
-        }
+        Range { low: Bound::Inclusive(low), high: Bound::Inclusive(high) }
     }
 
     /// Whether `x` is allowed.
@@ -90,10 +72,7 @@ impl Range {
             Bound::Exclusive(a) => a < low,
         };
         if raised {
-            Range {
-                low: Bound::Inclusive(low),
-                ..self
-            }
+            Range { low: Bound::Inclusive(low), ..self }
         } else {
             self
         }
@@ -152,10 +131,7 @@ impl FromStr for Range {
     fn from_str(text: &str) -> Result<Self, Self::Err> {
         let text = text.trim();
         let number = |s: &str| -> Result<f64, String> {
-            let x: f64 = s
-                .trim()
-                .parse()
-                .map_err(|_| format!("range {text:?}: {s:?} is not a number"))?;
+            let x: f64 = s.trim().parse().map_err(|_| format!("range {text:?}: {s:?} is not a number"))?;
             if x.is_nan() {
                 return Err(format!("range {text:?}: NaN is not a bound"));
             }
@@ -165,40 +141,21 @@ impl FromStr for Range {
             return Ok(Range::ANY);
         }
         for (prefix, make) in [
-            (
-                ">=",
-                (|x| Range {
-                    low: Bound::Inclusive(x),
-                    high: Bound::Unbounded,
-                }) as fn(f64) -> Range,
-            ),
-            ("<=", |x| Range {
-                low: Bound::Unbounded,
-                high: Bound::Inclusive(x),
-            }),
-            (">", |x| Range {
-                low: Bound::Exclusive(x),
-                high: Bound::Unbounded,
-            }),
-            ("<", |x| Range {
-                low: Bound::Unbounded,
-                high: Bound::Exclusive(x),
-            }),
+            (">=", (|x| Range { low: Bound::Inclusive(x), high: Bound::Unbounded }) as fn(f64) -> Range),
+            ("<=", |x| Range { low: Bound::Unbounded, high: Bound::Inclusive(x) }),
+            (">", |x| Range { low: Bound::Exclusive(x), high: Bound::Unbounded }),
+            ("<", |x| Range { low: Bound::Unbounded, high: Bound::Exclusive(x) }),
         ] {
             if let Some(rest) = text.strip_prefix(prefix) {
                 return Ok(make(number(rest)?));
             }
         }
         let (Some(open), Some(close)) = (text.chars().next(), text.chars().last()) else {
-            return Err(format!(
-                "range {text:?}: expected e.g. '> 0', '>= 1' or '[0, 1]'"
-            ));
+            return Err(format!("range {text:?}: expected e.g. '> 0', '>= 1' or '[0, 1]'"));
         };
         let inner = &text[open.len_utf8()..text.len() - close.len_utf8()];
         let Some((a, b)) = inner.split_once(',') else {
-            return Err(format!(
-                "range {text:?}: expected two bounds separated by a comma"
-            ));
+            return Err(format!("range {text:?}: expected two bounds separated by a comma"));
         };
         let bound = |x: f64, inclusive: bool| {
             if x.is_infinite() && !inclusive {
@@ -235,18 +192,9 @@ mod tests {
             Range::NON_NEGATIVE,
             Range::UNIT,
             Range::at_least(1.0),
-            Range {
-                low: Bound::Exclusive(0.0),
-                high: Bound::Exclusive(1.0),
-            },
-            Range {
-                low: Bound::Exclusive(0.0),
-                high: Bound::Inclusive(f64::INFINITY),
-            },
-            Range {
-                low: Bound::Unbounded,
-                high: Bound::Inclusive(5.0),
-            },
+            Range { low: Bound::Exclusive(0.0), high: Bound::Exclusive(1.0) },
+            Range { low: Bound::Exclusive(0.0), high: Bound::Inclusive(f64::INFINITY) },
+            Range { low: Bound::Unbounded, high: Bound::Inclusive(5.0) },
             Range::closed(0.0, 0.5),
         ] {
             let text = range.to_string();
@@ -265,11 +213,7 @@ mod tests {
         assert!(!Range::ANY.contains(f64::NAN));
         let or_inf: Range = "(0, inf]".parse().unwrap();
         assert!(or_inf.contains(f64::INFINITY) && or_inf.contains(1.0) && !or_inf.contains(0.0));
-        assert!(
-            Range::UNIT.contains(0.0)
-                && Range::UNIT.contains(1.0)
-                && !Range::UNIT.contains(1.0 + 1e-12)
-        );
+        assert!(Range::UNIT.contains(0.0) && Range::UNIT.contains(1.0) && !Range::UNIT.contains(1.0 + 1e-12));
     }
 
     #[test]

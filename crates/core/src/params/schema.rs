@@ -95,23 +95,12 @@ impl Schema {
                 format!("a finite {what}")
             } else {
                 let range = self.range.to_string();
-                let joiner = if range.starts_with(['[', '(']) {
-                    " in "
-                } else {
-                    " "
-                };
-                format!(
-                    "a{} {what}{joiner}{range}",
-                    if what == "integer" { "n" } else { "" }
-                )
+                let joiner = if range.starts_with(['[', '(']) { " in " } else { " " };
+                format!("a{} {what}{joiner}{range}", if what == "integer" { "n" } else { "" })
             }
         };
         let base = match &self.kind {
-            Kind::Bool => format!(
-                "true or false ({}, {})",
-                TRUE_WORDS.join("/"),
-                FALSE_WORDS.join("/")
-            ),
+            Kind::Bool => format!("true or false ({}, {})", TRUE_WORDS.join("/"), FALSE_WORDS.join("/")),
             Kind::Integer => numeric("integer"),
             Kind::Float => numeric("float"),
             Kind::Choice(choices) => format!("one of {}", choices.join(", ")),
@@ -124,10 +113,7 @@ impl Schema {
     }
 
     fn error(&self, given: &Value) -> Error {
-        Error::Parameter {
-            name: self.name.clone(),
-            reason: format!("expected {}, got {given}", self.expected()),
-        }
+        Error::Parameter { name: self.name.clone(), reason: format!("expected {}, got {given}", self.expected()) }
     }
 
     /// Checks a typed value and converts it to this parameter's kind: an
@@ -144,9 +130,7 @@ impl Schema {
             (Kind::Bool, Value::Integer(i @ (0 | 1))) => Value::Bool(*i == 1),
             (Kind::Integer, Value::Integer(i)) => Value::Integer(*i),
             // Whole numbers only, and within i64 (a float of 2^63 is not).
-            (Kind::Integer, Value::Float(x)) if x.fract() == 0.0 && x.abs() < 9.2e18 => {
-                Value::Integer(*x as i64)
-            }
+            (Kind::Integer, Value::Float(x)) if x.fract() == 0.0 && x.abs() < 9.2e18 => Value::Integer(*x as i64),
             (Kind::Float, Value::Integer(i)) => Value::Float(*i as f64),
             (Kind::Float, Value::Float(x)) => Value::Float(*x),
             _ => return Err(self.error(value)),
@@ -169,11 +153,7 @@ impl Schema {
         };
         let text = text.trim();
         // Exact first; then case-insensitively, giving the table's spelling.
-        if let Some(c) = choices
-            .iter()
-            .find(|c| c.as_str() == text)
-            .or_else(|| choices.iter().find(|c| c.eq_ignore_ascii_case(text)))
-        {
+        if let Some(c) = choices.iter().find(|c| c.as_str() == text).or_else(|| choices.iter().find(|c| c.eq_ignore_ascii_case(text))) {
             return Ok(Value::Text(c.clone()));
         }
         if self.optional && text.eq_ignore_ascii_case("none") {
@@ -198,9 +178,7 @@ impl Schema {
             Kind::Bool => Err(self.error(&given)),
             Kind::Integer => match (trimmed.parse::<i64>(), trimmed.parse::<f64>()) {
                 (Ok(i), _) => self.convert(&Value::Integer(i)),
-                (_, Ok(x)) if x.fract() == 0.0 => self
-                    .convert(&Value::Float(x))
-                    .map_err(|_| self.error(&given)),
+                (_, Ok(x)) if x.fract() == 0.0 => self.convert(&Value::Float(x)).map_err(|_| self.error(&given)),
                 _ => Err(self.error(&given)),
             },
             Kind::Float => match trimmed.parse::<f64>() {
@@ -251,10 +229,7 @@ mod tests {
         let r = reason(s.parse("maybe"));
         assert!(r.contains("true or false") && r.contains("'maybe'"), "{r}");
         // "false" given as text in a dict is false, not a truthy string.
-        assert_eq!(
-            s.convert(&Value::Text("false".into())).unwrap(),
-            Value::Bool(false)
-        );
+        assert_eq!(s.convert(&Value::Text("false".into())).unwrap(), Value::Bool(false));
         assert_eq!(s.convert(&Value::Integer(0)).unwrap(), Value::Bool(false));
         assert!(s.convert(&Value::Integer(2)).is_err());
         assert!(s.convert(&Value::Float(1.0)).is_err());
@@ -303,18 +278,11 @@ mod tests {
 
     #[test]
     fn choices_are_matched_by_name() {
-        let s = schema(
-            Kind::Choice(vec!["QR".into(), "CHOLESKY".into()]),
-            Range::ANY,
-            false,
-        );
+        let s = schema(Kind::Choice(vec!["QR".into(), "CHOLESKY".into()]), Range::ANY, false);
         assert_eq!(s.parse("QR").unwrap(), Value::Text("QR".into()));
         assert_eq!(s.parse("cholesky").unwrap(), Value::Text("CHOLESKY".into()));
         let r = reason(s.parse("LU"));
-        assert!(
-            r.contains("one of QR, CHOLESKY") && r.contains("'LU'"),
-            "{r}"
-        );
+        assert!(r.contains("one of QR, CHOLESKY") && r.contains("'LU'"), "{r}");
         assert!(s.convert(&Value::Float(1.0)).is_err());
         assert_eq!(s.type_name(), "QR | CHOLESKY");
     }

@@ -27,11 +27,7 @@ pub fn close_matches<'a>(name: &str, known: impl Iterator<Item = &'a str>) -> Ve
         })
         .collect();
     scored.sort();
-    scored
-        .into_iter()
-        .take(3)
-        .map(|(_, k)| k.to_string())
-        .collect()
+    scored.into_iter().take(3).map(|(_, k)| k.to_string()).collect()
 }
 
 #[cfg(test)]
@@ -40,21 +36,9 @@ mod tests {
 
     #[test]
     fn typos_find_their_parameter() {
-        let known = [
-            "gate_sigmas",
-            "q",
-            "max_hypotheses",
-            "init_max_hypotheses",
-            "motion",
-        ];
-        assert_eq!(
-            close_matches("gate_sigma", known.into_iter())[0],
-            "gate_sigmas"
-        );
-        assert_eq!(
-            close_matches("max_hypothesis", known.into_iter())[0],
-            "max_hypotheses"
-        );
+        let known = ["gate_sigmas", "q", "max_hypotheses", "init_max_hypotheses", "motion"];
+        assert_eq!(close_matches("gate_sigma", known.into_iter())[0], "gate_sigmas");
+        assert_eq!(close_matches("max_hypothesis", known.into_iter())[0], "max_hypotheses");
         assert!(close_matches("completely_different", known.into_iter()).is_empty());
         assert_eq!(edit_distance("kitten", "sitting"), 3);
     }

@@ -30,10 +30,7 @@ pub struct BiasClock {
 
 impl BiasClock {
     /// No read yet.
-    pub const UNSET: BiasClock = BiasClock {
-        time_s: f64::NEG_INFINITY,
-        frequency_hz: f64::NAN,
-    };
+    pub const UNSET: BiasClock = BiasClock { time_s: f64::NEG_INFINITY, frequency_hz: f64::NAN };
 }
 
 /// One antenna's bias prediction for one hypothesis at the reading's time:
@@ -71,43 +68,25 @@ pub struct BiasStep {
 
 impl BiasStep {
     /// No bias state for this reading.
-    pub const NONE: BiasStep = BiasStep {
-        antenna: None,
-        rho: 0.0,
-        drive: 0.0,
-    };
+    pub const NONE: BiasStep = BiasStep { antenna: None, rho: 0.0, drive: 0.0 };
 
     /// The step for antenna `antenna` read `interval_s` after its previous
     /// read (∞ if none), stationary variance `stationary_m2` (m²) and
     /// correlation time `time_s` (s).
     pub fn new(antenna: usize, interval_s: f64, stationary_m2: f64, time_s: f64) -> Self {
-        let rho = if interval_s.is_finite() {
-            (-interval_s.max(0.0) / time_s).exp()
-        } else {
-            0.0
-        };
-        Self {
-            antenna: Some(antenna),
-            rho,
-            drive: stationary_m2 * (1.0 - rho * rho),
-        }
+        let rho = if interval_s.is_finite() { (-interval_s.max(0.0) / time_s).exp() } else { 0.0 };
+        Self { antenna: Some(antenna), rho, drive: stationary_m2 * (1.0 - rho * rho) }
     }
 
     /// The same step with `jump_m2` (m²) more drive: a share of the bias
     /// drawn afresh (on a new carrier), independent of the rest.
     pub fn with_jump(self, jump_m2: f64) -> Self {
-        Self {
-            drive: self.drive + jump_m2,
-            ..self
-        }
+        Self { drive: self.drive + jump_m2, ..self }
     }
 
     /// The prediction from a hypothesis' last `(mean, variance)`.
     pub fn predict(&self, mean: f64, variance: f64) -> BiasPrediction {
-        BiasPrediction {
-            mean: self.rho * mean,
-            variance: self.rho * self.rho * variance + self.drive,
-        }
+        BiasPrediction { mean: self.rho * mean, variance: self.rho * self.rho * variance + self.drive }
     }
 }
 
@@ -118,13 +97,7 @@ mod tests {
     #[test]
     fn first_read_is_the_stationary_prior_and_later_reads_decay() {
         let first = BiasStep::new(2, f64::INFINITY, 4e-6, 0.5);
-        assert_eq!(
-            first.predict(1e-3, 1e-6),
-            BiasPrediction {
-                mean: 0.0,
-                variance: 4e-6
-            }
-        );
+        assert_eq!(first.predict(1e-3, 1e-6), BiasPrediction { mean: 0.0, variance: 4e-6 });
         let next = BiasStep::new(2, 0.25, 4e-6, 0.5);
         let rho = (-0.5f64).exp();
         let b = next.predict(1e-3, 1e-6);
@@ -145,23 +118,14 @@ mod tests {
         let step = BiasStep::new(1, 0.25, 4e-6, 0.5).with_jump(1e-6);
         let plain = BiasStep::new(1, 0.25, 4e-6, 0.5);
         assert_eq!(step.rho, plain.rho);
-        assert!(
-            (step.predict(2e-3, 1e-6).variance - (plain.predict(2e-3, 1e-6).variance + 1e-6)).abs()
-                < 1e-18
-        );
-        assert_eq!(
-            step.predict(2e-3, 1e-6).mean,
-            plain.predict(2e-3, 1e-6).mean
-        );
+        assert!((step.predict(2e-3, 1e-6).variance - (plain.predict(2e-3, 1e-6).variance + 1e-6)).abs() < 1e-18);
+        assert_eq!(step.predict(2e-3, 1e-6).mean, plain.predict(2e-3, 1e-6).mean);
     }
 
     /// The update is the scalar Kalman update with gain V/S.
     #[test]
     fn update_takes_its_share_of_the_innovation() {
-        let b = BiasPrediction {
-            mean: 0.001,
-            variance: 1e-6,
-        };
+        let b = BiasPrediction { mean: 0.001, variance: 1e-6 };
         let (mean, variance) = b.update(0.004, 4e-6);
         assert!((mean - (0.001 + 0.25 * 0.004)).abs() < 1e-15);
         assert!((variance - 0.75e-6).abs() < 1e-18);

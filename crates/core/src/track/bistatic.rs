@@ -46,23 +46,12 @@ impl HelperGeometry {
                     // The path length is convex in the tag position, so its
                     // maximum over the box is at a corner.
                     Some(r) => {
-                        let (zlo, zhi) = if scene.dimensions == 2 {
-                            (scene.plane_z, scene.plane_z)
-                        } else {
-                            (r.min.z, r.max.z)
-                        };
+                        let (zlo, zhi) = if scene.dimensions == 2 { (scene.plane_z, scene.plane_z) } else { (r.min.z, r.max.z) };
                         let mut far: f64 = 0.0;
                         for &x in &[r.min.x, r.max.x] {
                             for &y in &[r.min.y, r.max.y] {
                                 for &z in &[zlo, zhi] {
-                                    far = far.max(
-                                        bistatic_distance(
-                                            &Vector3::new(x, y, z),
-                                            &txp,
-                                            &a.position,
-                                        )
-                                        .0,
-                                    );
+                                    far = far.max(bistatic_distance(&Vector3::new(x, y, z), &txp, &a.position).0);
                                 }
                             }
                         }
@@ -72,13 +61,7 @@ impl HelperGeometry {
                 }
             })
             .collect();
-        Some(Self {
-            tx,
-            tx_position: txp,
-            bounds,
-            dimensions: scene.dimensions,
-            plane_z: scene.plane_z,
-        })
+        Some(Self { tx, tx_position: txp, bounds, dimensions: scene.dimensions, plane_z: scene.plane_z })
     }
 
     /// Receivers one intersection needs: 2 in a plane, 3 in space.
@@ -125,32 +108,17 @@ pub fn frame_receivers(
     params: &CandidateParams,
 ) -> Result<Vec<Receiver>, Decline> {
     let f = frame.frequencies_hz.len();
-    if !frame.time_s.is_finite()
-        || frame.tx != geometry.tx
-        || f == 0
-        || frame.h.len() != frame.rx.len() * f
-    {
+    if !frame.time_s.is_finite() || frame.tx != geometry.tx || f == 0 || frame.h.len() != frame.rx.len() * f {
         return Err(Decline::Invalid);
     }
     let mut receivers = Vec::with_capacity(frame.rx.len());
     for (r, &antenna) in frame.rx.iter().enumerate() {
-        if antenna >= scene.antennas.len() || scene.antennas[antenna].role != crate::scene::Role::Rx
-        {
+        if antenna >= scene.antennas.len() || scene.antennas[antenna].role != crate::scene::Role::Rx {
             return Err(Decline::Invalid);
         }
         let (lo, hi) = geometry.bounds[antenna];
-        if let Some(candidates) = distance_candidates(
-            &frame.frequencies_hz,
-            &frame.h[r * f..(r + 1) * f],
-            lo,
-            hi,
-            params,
-        ) {
-            receivers.push(Receiver {
-                antenna,
-                position: scene.antennas[antenna].position,
-                candidates,
-            });
+        if let Some(candidates) = distance_candidates(&frame.frequencies_hz, &frame.h[r * f..(r + 1) * f], lo, hi, params) {
+            receivers.push(Receiver { antenna, position: scene.antennas[antenna].position, candidates });
         }
     }
     if receivers.len() < geometry.needed() {
@@ -208,11 +176,7 @@ pub fn usable_subsets(geometry: &HelperGeometry, receivers: &[Receiver]) -> Vec<
                     a
                 })
                 .collect();
-            let scale = offsets
-                .iter()
-                .map(|a| a.norm())
-                .fold(0.0, f64::max)
-                .max(1e-9);
+            let scale = offsets.iter().map(|a| a.norm()).fold(0.0, f64::max).max(1e-9);
             let mut spread: f64 = 0.0;
             for a in 0..offsets.len() {
                 for b in a + 1..offsets.len() {
@@ -271,12 +235,7 @@ fn intersection_covariance(
 /// path biases b). Such a bias is the same on every frame, so no number of
 /// frames averages it away; the filter's own spread does not contain it.
 /// Planar scenes get z = 0. None when the receivers cannot fix `p`.
-pub fn calibration_covariance(
-    geometry: &HelperGeometry,
-    receivers: &[Vector3<f64>],
-    p: &Vector3<f64>,
-    sigma_m: f64,
-) -> Option<Matrix3<f64>> {
+pub fn calibration_covariance(geometry: &HelperGeometry, receivers: &[Vector3<f64>], p: &Vector3<f64>, sigma_m: f64) -> Option<Matrix3<f64>> {
     let planar = geometry.dimensions == 2;
     let mut information = Matrix3::zeros();
     for rx in receivers {
@@ -294,10 +253,7 @@ pub fn calibration_covariance(
 /// left at 0. None when singular or not finite.
 pub fn information_covariance(information: &Matrix3<f64>, planar: bool) -> Option<Matrix3<f64>> {
     let c = if planar {
-        let block = information
-            .fixed_view::<2, 2>(0, 0)
-            .into_owned()
-            .try_inverse()?;
+        let block = information.fixed_view::<2, 2>(0, 0).into_owned().try_inverse()?;
         let mut c = Matrix3::zeros();
         c.fixed_view_mut::<2, 2>(0, 0).copy_from(&block);
         c
@@ -321,15 +277,7 @@ pub fn tuple_gaussian(
     near: &Vector3<f64>,
     tolerance_m: f64,
 ) -> Option<PositionGaussian> {
-    fuse_subsets(
-        geometry,
-        receivers,
-        indices,
-        subset_list,
-        near,
-        tolerance_m,
-        true,
-    )
+    fuse_subsets(geometry, receivers, indices, subset_list, near, tolerance_m, true)
 }
 
 /// [`tuple_gaussian`] over the subsets whose loci meet, None only when
@@ -345,15 +293,7 @@ pub fn tuple_gaussian_lenient(
     near: &Vector3<f64>,
     tolerance_m: f64,
 ) -> Option<PositionGaussian> {
-    fuse_subsets(
-        geometry,
-        receivers,
-        indices,
-        subset_list,
-        near,
-        tolerance_m,
-        false,
-    )
+    fuse_subsets(geometry, receivers, indices, subset_list, near, tolerance_m, false)
 }
 
 fn fuse_subsets(
@@ -384,19 +324,9 @@ fn fuse_subsets(
             members.push(&receivers[j]);
             sigmas.push(receivers[j].candidates.sigma_m);
         }
-        let solutions =
-            bistatic_intersections(&tx, &positions, &distances, geometry.plane(), tolerance_m);
-        let p = solutions.into_iter().min_by(|a, b| {
-            (a - near)
-                .norm_squared()
-                .total_cmp(&(b - near).norm_squared())
-        });
-        let Some((p, c)) = p.and_then(|p| {
-            Some((
-                p,
-                intersection_covariance(&p, &tx, &members, &sigmas, planar)?,
-            ))
-        }) else {
+        let solutions = bistatic_intersections(&tx, &positions, &distances, geometry.plane(), tolerance_m);
+        let p = solutions.into_iter().min_by(|a, b| (a - near).norm_squared().total_cmp(&(b - near).norm_squared()));
+        let Some((p, c)) = p.and_then(|p| Some((p, intersection_covariance(&p, &tx, &members, &sigmas, planar)?))) else {
             if require_all {
                 return None;
             }
@@ -419,16 +349,8 @@ fn fuse_subsets(
             pairs += 1;
         }
     }
-    let perimeter_m = if pairs > 0 {
-        perimeter / pairs as f64
-    } else {
-        0.0
-    };
-    Some(PositionGaussian {
-        mean,
-        covariance,
-        perimeter_m,
-    })
+    let perimeter_m = if pairs > 0 { perimeter / pairs as f64 } else { 0.0 };
+    Some(PositionGaussian { mean, covariance, perimeter_m })
 }
 
 /// `log N(d; μ, σ²)` of a scalar.
@@ -443,12 +365,7 @@ pub fn log_normal(d: f64, mean: f64, sigma: f64) -> f64 {
 /// wavelength (≫ σ) apart, so only the nearest comb tooth contributes
 /// measurably; candidates outside the kept list get `weight_floor`.
 /// Also returns the χ² of those nearest teeth (for outlier detection).
-pub fn mixture_log_likelihood(
-    geometry: &HelperGeometry,
-    receivers: &[Receiver],
-    p: &Vector3<f64>,
-    weight_floor: f64,
-) -> (f64, f64) {
+pub fn mixture_log_likelihood(geometry: &HelperGeometry, receivers: &[Receiver], p: &Vector3<f64>, weight_floor: f64) -> (f64, f64) {
     let mut log_l = 0.0;
     let mut chi2 = 0.0;
     for rx in receivers {
@@ -476,14 +393,8 @@ pub struct MixtureLogs {
 impl MixtureLogs {
     pub fn new(receivers: &[Receiver], weight_floor: f64) -> Self {
         Self {
-            log_weights: receivers
-                .iter()
-                .map(|r| r.candidates.weights.iter().map(|w| w.ln()).collect())
-                .collect(),
-            log_sigma: receivers
-                .iter()
-                .map(|r| r.candidates.sigma_m.ln())
-                .collect(),
+            log_weights: receivers.iter().map(|r| r.candidates.weights.iter().map(|w| w.ln()).collect()).collect(),
+            log_sigma: receivers.iter().map(|r| r.candidates.sigma_m.ln()).collect(),
             log_floor: weight_floor.ln(),
         }
     }
@@ -493,12 +404,7 @@ impl MixtureLogs {
 /// (`logs` built from the same `receivers` and floor): the same numbers,
 /// bit for bit (`ln max(w, f) = max(ln w, ln f)`, the same operations in the
 /// same order).
-pub fn mixture_log_likelihood_with(
-    geometry: &HelperGeometry,
-    receivers: &[Receiver],
-    logs: &MixtureLogs,
-    p: &Vector3<f64>,
-) -> (f64, f64) {
+pub fn mixture_log_likelihood_with(geometry: &HelperGeometry, receivers: &[Receiver], logs: &MixtureLogs, p: &Vector3<f64>) -> (f64, f64) {
     let half_log_two_pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
     let mut log_l = 0.0;
     let mut chi2 = 0.0;
@@ -508,11 +414,7 @@ pub fn mixture_log_likelihood_with(
         let n = c.nearest_index(d);
         let z = (d - c.distance(n)) / c.sigma_m;
         chi2 += z * z;
-        let log_w = if n >= 0 && (n as usize) < c.weights.len() {
-            logs.log_weights[j][n as usize].max(logs.log_floor)
-        } else {
-            logs.log_floor
-        };
+        let log_w = if n >= 0 && (n as usize) < c.weights.len() { logs.log_weights[j][n as usize].max(logs.log_floor) } else { logs.log_floor };
         log_l += log_w + (-0.5 * z * z - logs.log_sigma[j] - half_log_two_pi);
     }
     (log_l, chi2)
@@ -525,25 +427,9 @@ mod tests {
     #[test]
     fn collinear_subsets_are_left_out() {
         use crate::model::wideband::Candidates;
-        let candidates = Candidates {
-            distances_m: vec![2.0],
-            weights: vec![1.0],
-            spacing_m: 0.33,
-            sigma_m: 0.003,
-            best: 0,
-        };
-        let geometry = HelperGeometry {
-            tx: 0,
-            tx_position: Vector3::new(0.6, 0.0, 0.0),
-            bounds: vec![],
-            dimensions: 3,
-            plane_z: 0.0,
-        };
-        let at = |x: f64, y: f64| Receiver {
-            antenna: 1,
-            position: Vector3::new(x, y, 0.0),
-            candidates: candidates.clone(),
-        };
+        let candidates = Candidates { distances_m: vec![2.0], weights: vec![1.0], spacing_m: 0.33, sigma_m: 0.003, best: 0 };
+        let geometry = HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 };
+        let at = |x: f64, y: f64| Receiver { antenna: 1, position: Vector3::new(x, y, 0.0), candidates: candidates.clone() };
         // The outside example's layout: three receivers in a row with tx, one off the line.
         let receivers = vec![at(0.0, 0.0), at(0.4, 0.0), at(0.8, 0.0), at(0.6, 0.4)];
         let usable = usable_subsets(&geometry, &receivers);
@@ -553,10 +439,7 @@ mod tests {
 
     #[test]
     fn subsets_are_all_combinations() {
-        assert_eq!(
-            subsets(4, 3),
-            vec![vec![0, 1, 2], vec![0, 1, 3], vec![0, 2, 3], vec![1, 2, 3]]
-        );
+        assert_eq!(subsets(4, 3), vec![vec![0, 1, 2], vec![0, 1, 3], vec![0, 2, 3], vec![1, 2, 3]]);
         assert_eq!(subsets(3, 2).len(), 3);
         assert_eq!(subsets(5, 3).len(), 10);
     }
@@ -564,13 +447,7 @@ mod tests {
     #[test]
     fn tabulated_logarithms_give_the_same_likelihood() {
         use crate::model::wideband::Candidates;
-        let geometry = HelperGeometry {
-            tx: 0,
-            tx_position: Vector3::new(0.6, 0.0, 0.0),
-            bounds: vec![],
-            dimensions: 3,
-            plane_z: 0.0,
-        };
+        let geometry = HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 };
         let receivers: Vec<Receiver> = [[0.0, 0.0], [0.4, 0.0], [0.8, 0.0], [0.6, 0.4]]
             .iter()
             .enumerate()
@@ -578,11 +455,7 @@ mod tests {
                 antenna: j + 1,
                 position: Vector3::new(p[0], p[1], 0.0),
                 candidates: Candidates {
-                    distances_m: vec![
-                        2.0 + 0.1 * j as f64,
-                        2.33 + 0.1 * j as f64,
-                        2.66 + 0.1 * j as f64,
-                    ],
+                    distances_m: vec![2.0 + 0.1 * j as f64, 2.33 + 0.1 * j as f64, 2.66 + 0.1 * j as f64],
                     weights: vec![0.2, 0.7, 0.1],
                     spacing_m: 0.33,
                     sigma_m: 0.003 + 0.001 * j as f64,
@@ -592,11 +465,7 @@ mod tests {
             .collect();
         let logs = MixtureLogs::new(&receivers, 1e-3);
         for k in 0..200 {
-            let p = Vector3::new(
-                0.3 + 0.01 * k as f64,
-                1.0 - 0.003 * k as f64,
-                0.5 + 0.002 * k as f64,
-            );
+            let p = Vector3::new(0.3 + 0.01 * k as f64, 1.0 - 0.003 * k as f64, 0.5 + 0.002 * k as f64);
             let a = mixture_log_likelihood(&geometry, &receivers, &p, 1e-3);
             let b = mixture_log_likelihood_with(&geometry, &receivers, &logs, &p);
             assert_eq!(a.0.to_bits(), b.0.to_bits(), "{k}");
@@ -608,9 +477,7 @@ mod tests {
     fn log_normal_integrates_to_one() {
         let (mean, sigma) = (0.3, 0.01);
         let step = 1e-4;
-        let total: f64 = (-1000..1000)
-            .map(|k| log_normal(mean + k as f64 * step, mean, sigma).exp() * step)
-            .sum();
+        let total: f64 = (-1000..1000).map(|k| log_normal(mean + k as f64 * step, mean, sigma).exp() * step).sum();
         assert!((total - 1.0).abs() < 1e-6, "{total}");
     }
 }

@@ -18,9 +18,7 @@ use crate::scene::Scene;
 use super::bistatic::{frame_receivers, tuple_gaussian, usable_subsets, HelperGeometry};
 use crate::model::wideband::CandidateWeighting;
 
-use super::{
-    Estimate, Measurement, Params, Tracker, TrackerStats, TurboTrackParams, WidebandFrame,
-};
+use super::{Estimate, Measurement, Params, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
 
 /// The registry's constructor of `ellipse-intersection`.
 pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
@@ -45,13 +43,7 @@ impl EllipseIntersection {
         let geometry = HelperGeometry::new(&scene).ok_or_else(|| {
             Error::Scene("a wideband tracker needs one antenna with role \"tx\" and at least 3 (2 for dimensions = 2) with role \"rx\"".into())
         })?;
-        Ok(Self {
-            scene,
-            geometry,
-            params,
-            last_time_s: f64::NEG_INFINITY,
-            stats: TrackerStats::default(),
-        })
+        Ok(Self { scene, geometry, params, last_time_s: f64::NEG_INFINITY, stats: TrackerStats::default() })
     }
 
     fn step_frame(&mut self, frame: &WidebandFrame) -> Option<Estimate> {
@@ -60,9 +52,7 @@ impl EllipseIntersection {
             self.stats.out_of_order += 1;
             return None;
         }
-        let Ok(mut receivers) =
-            frame_receivers(&self.scene, &self.geometry, frame, &self.params.candidates)
-        else {
+        let Ok(mut receivers) = frame_receivers(&self.scene, &self.geometry, frame, &self.params.candidates) else {
             self.stats.invalid += 1;
             return None;
         };
@@ -77,26 +67,13 @@ impl EllipseIntersection {
             Some(r) => (r.min + r.max) / 2.0,
             None => self.geometry.tx_position + Vector3::new(0.0, 0.0, 1.0),
         };
-        let Some(g) = tuple_gaussian(
-            &self.geometry,
-            &receivers,
-            &indices,
-            &subset_list,
-            &seed,
-            self.params.intersection_tolerance_m,
-        ) else {
+        let Some(g) = tuple_gaussian(&self.geometry, &receivers, &indices, &subset_list, &seed, self.params.intersection_tolerance_m)
+        else {
             // The strongest candidates' loci do not meet: no fix this frame.
             self.stats.outliers += 1;
             return None;
         };
-        Some(Estimate::from_position(
-            frame.time_s,
-            &g.mean,
-            &g.covariance,
-            [f64::NAN; 3],
-            1,
-            1.0,
-        ))
+        Some(Estimate::from_position(frame.time_s, &g.mean, &g.covariance, [f64::NAN; 3], 1, 1.0))
     }
 }
 

@@ -33,6 +33,7 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+
 use super::bistatic::{mixture_log_likelihood, HelperGeometry, Receiver};
 use super::lobes::{mixture_spread, path_length_step, LobeDecision, LobeFrame};
 
@@ -91,10 +92,8 @@ pub fn fit_nearest_lobe(
         x.z = geometry.plane_z;
     }
     for _ in 0..steps {
-        let nearest =
-            |_, rx: &Receiver, d| Some(rx.candidates.distance(rx.candidates.nearest_index(d)));
-        let mut step = path_length_step(geometry, receivers, &x, nearest)
-            .filter(|s| s.iter().all(|v| v.is_finite()))?;
+        let nearest = |_, rx: &Receiver, d| Some(rx.candidates.distance(rx.candidates.nearest_index(d)));
+        let mut step = path_length_step(geometry, receivers, &x, nearest).filter(|s| s.iter().all(|v| v.is_finite()))?;
         if step.norm() > MAX_STEP_M {
             step *= MAX_STEP_M / step.norm();
         }
@@ -129,12 +128,7 @@ impl FarLobes {
     /// filter's lobe, when known) or of a held alternative is the same lobe
     /// and is skipped; with every slot taken it replaces the weakest
     /// alternative when that one's evidence is below `evidence`.
-    pub fn offer(
-        &mut self,
-        candidates: impl IntoIterator<Item = Vector3<f64>>,
-        evidence: f64,
-        filter: Option<&Vector3<f64>>,
-    ) {
+    pub fn offer(&mut self, candidates: impl IntoIterator<Item = Vector3<f64>>, evidence: f64, filter: Option<&Vector3<f64>>) {
         for position in candidates {
             let same = |other: &Vector3<f64>| (other - position).norm() < SAME_LOBE_M;
             if filter.is_some_and(same) || self.alternatives.iter().any(|a| same(&a.position)) {
@@ -145,12 +139,7 @@ impl FarLobes {
                 self.alternatives.push(fresh);
                 continue;
             }
-            let weakest = self
-                .alternatives
-                .iter()
-                .enumerate()
-                .min_by(|a, b| a.1.evidence.total_cmp(&b.1.evidence))
-                .map(|(i, _)| i);
+            let weakest = self.alternatives.iter().enumerate().min_by(|a, b| a.1.evidence.total_cmp(&b.1.evidence)).map(|(i, _)| i);
             if let Some(i) = weakest.filter(|&i| self.alternatives[i].evidence < evidence) {
                 self.alternatives[i] = fresh;
             }
@@ -162,15 +151,10 @@ impl FarLobes {
     /// a held alternative is the same lobe: the state before a restart,
     /// which the restarted filter may have left for a wrong lobe.
     pub fn prefer(&mut self, position: Vector3<f64>, evidence: f64) {
-        if self
-            .alternatives
-            .iter()
-            .any(|a| (a.position - position).norm() < SAME_LOBE_M)
-        {
+        if self.alternatives.iter().any(|a| (a.position - position).norm() < SAME_LOBE_M) {
             return;
         }
-        self.alternatives
-            .insert(0, Alternative { position, evidence });
+        self.alternatives.insert(0, Alternative { position, evidence });
         self.alternatives.truncate(SLOTS);
     }
 
@@ -179,58 +163,30 @@ impl FarLobes {
     /// Returns the displacement to the winning alternative when one passed
     /// the switch level; the lobe left becomes an alternative, every
     /// evidence re-based on the new lobe (`L'_m = L_m − L_won`).
-    pub fn update(
-        &mut self,
-        frame: &LobeFrame<'_>,
-        estimate: &Vector3<f64>,
-        into_region: impl Fn(&Vector3<f64>) -> Vector3<f64>,
-    ) -> LobeDecision {
-        let LobeFrame {
-            geometry,
-            receivers,
-            weight_floor,
-            levels,
-        } = *frame;
+    pub fn update(&mut self, frame: &LobeFrame<'_>, estimate: &Vector3<f64>, into_region: impl Fn(&Vector3<f64>) -> Vector3<f64>) -> LobeDecision {
+        let LobeFrame { geometry, receivers, weight_floor, levels } = *frame;
         if self.alternatives.is_empty() || receivers.is_empty() {
             self.previous_x0 = None;
             return LobeDecision::Stay;
         }
-        let x0 =
-            fit_nearest_lobe(geometry, receivers, estimate, 1, &into_region).unwrap_or(*estimate);
+        let x0 = fit_nearest_lobe(geometry, receivers, estimate, 1, &into_region).unwrap_or(*estimate);
         // The tag's motion since the last frame, as the filter saw it; a
         // jump of the filter's own lobe (a lattice switch, a restart) is
         // not motion.
-        let moved = self
-            .previous_x0
-            .map(|p| x0 - p)
-            .filter(|m| m.norm() <= SAME_LOBE_M)
-            .unwrap_or_else(Vector3::zeros);
+        let moved = self.previous_x0.map(|p| x0 - p).filter(|m| m.norm() <= SAME_LOBE_M).unwrap_or_else(Vector3::zeros);
         self.previous_x0 = Some(x0);
         let l0 = mixture_log_likelihood(geometry, receivers, &x0, weight_floor).0;
         let (cap, floor) = (levels.frame_cap_nats, levels.floor_nats);
         let mut kept: Vec<Alternative> = Vec::with_capacity(self.alternatives.len());
         for a in &self.alternatives {
-            let Some(x) = fit_nearest_lobe(
-                geometry,
-                receivers,
-                &(a.position + moved),
-                STEPS,
-                &into_region,
-            ) else {
-                continue;
-            };
-            if (x - x0).norm() < SAME_LOBE_M
-                || kept.iter().any(|k| (k.position - x).norm() < SAME_LOBE_M)
-            {
+            let Some(x) = fit_nearest_lobe(geometry, receivers, &(a.position + moved), STEPS, &into_region) else { continue };
+            if (x - x0).norm() < SAME_LOBE_M || kept.iter().any(|k| (k.position - x).norm() < SAME_LOBE_M) {
                 // Merged into the filter's lobe or a stronger alternative.
                 continue;
             }
             let llr = mixture_log_likelihood(geometry, receivers, &x, weight_floor).0 - l0;
             let llr = if llr.is_nan() { -cap } else { llr };
-            kept.push(Alternative {
-                position: x,
-                evidence: (a.evidence + llr.clamp(-cap, cap)).max(-floor),
-            });
+            kept.push(Alternative { position: x, evidence: (a.evidence + llr.clamp(-cap, cap)).max(-floor) });
         }
         self.alternatives = kept;
         let winner = self
@@ -240,17 +196,12 @@ impl FarLobes {
             .filter(|(_, a)| a.evidence > levels.switch_nats)
             .max_by(|a, b| a.1.evidence.total_cmp(&b.1.evidence))
             .map(|(i, a)| (i, *a));
-        let Some((i, won)) = winner else {
-            return LobeDecision::Stay;
-        };
+        let Some((i, won)) = winner else { return LobeDecision::Stay };
         self.alternatives.remove(i);
         for a in &mut self.alternatives {
             a.evidence = (a.evidence - won.evidence).max(-floor);
         }
-        self.alternatives.push(Alternative {
-            position: x0,
-            evidence: (-won.evidence).max(-floor),
-        });
+        self.alternatives.push(Alternative { position: x0, evidence: (-won.evidence).max(-floor) });
         self.previous_x0 = None;
         LobeDecision::Switch(won.position - x0)
     }
@@ -258,12 +209,7 @@ impl FarLobes {
     /// The alternatives' spread about `about` (m², `lobes::mixture_spread`)
     /// at tempered log-odds `κ L_k`, `κ = SPREAD_TEMPERING`.
     pub fn spread(&self, about: &Vector3<f64>) -> Matrix3<f64> {
-        mixture_spread(
-            self.alternatives
-                .iter()
-                .map(|a| (a.position, SPREAD_TEMPERING * a.evidence)),
-            about,
-        )
+        mixture_spread(self.alternatives.iter().map(|a| (a.position, SPREAD_TEMPERING * a.evidence)), about)
     }
 }
 
@@ -282,25 +228,14 @@ mod tests {
         crate::track::lobes::tests::receivers(tag, 0.003, [0; 4], sharpness)
     }
 
-    const LEVELS: LobeLevels = LobeLevels {
-        switch_nats: 10.0,
-        floor_nats: 200.0,
-        frame_cap_nats: 2.0,
-    };
+    const LEVELS: LobeLevels = LobeLevels { switch_nats: 10.0, floor_nats: 200.0, frame_cap_nats: 2.0 };
 
     /// Seed 1124's pair: the truth near the antennas' plane and its lobe
     /// shifted (+1, 0, −1, 0) teeth, 1.35 m away.
     fn pair() -> (Vector3<f64>, Vector3<f64>) {
         let truth = Vector3::new(-0.112, 0.959, 0.138);
         let rx = receivers(&truth, 1.0);
-        let wrong = fit_nearest_lobe(
-            &geometry(),
-            &rx,
-            &Vector3::new(0.864, 0.508, 0.96),
-            6,
-            |p| *p,
-        )
-        .unwrap();
+        let wrong = fit_nearest_lobe(&geometry(), &rx, &Vector3::new(0.864, 0.508, 0.96), 6, |p| *p).unwrap();
         (truth, wrong)
     }
 
@@ -325,16 +260,7 @@ mod tests {
         far.offer([truth], 0.0, Some(&wrong));
         let mut switched = None;
         for frame in 0..20 {
-            if let LobeDecision::Switch(d) = far.update(
-                &LobeFrame {
-                    geometry: &geometry(),
-                    receivers: &rx,
-                    weight_floor: 1e-6,
-                    levels: &LEVELS,
-                },
-                &wrong,
-                |p| *p,
-            ) {
+            if let LobeDecision::Switch(d) = far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &wrong, |p| *p) {
                 switched = Some((frame, d));
                 break;
             }
@@ -356,43 +282,16 @@ mod tests {
         let mut far = FarLobes::default();
         far.offer([wrong], 0.0, Some(&truth));
         let initial = far.spread(&truth).trace();
-        assert!(
-            initial.sqrt() > 0.5,
-            "an unresolved far lobe widens the covariance: {initial}"
-        );
+        assert!(initial.sqrt() > 0.5, "an unresolved far lobe widens the covariance: {initial}");
         for _ in 0..5 {
-            assert_eq!(
-                far.update(
-                    &LobeFrame {
-                        geometry: &geometry(),
-                        receivers: &rx,
-                        weight_floor: 1e-6,
-                        levels: &LEVELS
-                    },
-                    &truth,
-                    |p| *p
-                ),
-                LobeDecision::Stay
-            );
+            assert_eq!(far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &truth, |p| *p), LobeDecision::Stay);
         }
         // At −10 nats the tempered spread still covers the far lobe (decimetres) ...
         let young = far.spread(&truth).trace().sqrt();
         assert!(young > 0.1 && young < initial.sqrt(), "{young}");
         // ... and after 60 frames at the cap (−120 nats) nothing of it shows.
         for _ in 0..55 {
-            assert_eq!(
-                far.update(
-                    &LobeFrame {
-                        geometry: &geometry(),
-                        receivers: &rx,
-                        weight_floor: 1e-6,
-                        levels: &LEVELS
-                    },
-                    &truth,
-                    |p| *p
-                ),
-                LobeDecision::Stay
-            );
+            assert_eq!(far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &truth, |p| *p), LobeDecision::Stay);
         }
         assert!(far.spread(&truth).trace().sqrt() < 1e-5);
     }
@@ -404,22 +303,12 @@ mod tests {
         far.offer([Vector3::new(0.01, 0.0, 0.0)], 0.0, Some(&filter));
         assert!(far.alternatives().is_empty());
         // Best first: with the slots full, later (worse) fits at the same level replace nothing.
-        far.offer(
-            (1..=SLOTS + 2).map(|i| Vector3::new(i as f64, 0.0, 0.0)),
-            0.0,
-            Some(&filter),
-        );
+        far.offer((1..=SLOTS + 2).map(|i| Vector3::new(i as f64, 0.0, 0.0)), 0.0, Some(&filter));
         assert_eq!(far.alternatives().len(), SLOTS);
-        assert!(far
-            .alternatives()
-            .iter()
-            .all(|a| a.position.x <= SLOTS as f64));
+        assert!(far.alternatives().iter().all(|a| a.position.x <= SLOTS as f64));
         far.alternatives[2].evidence = -50.0;
         far.offer([Vector3::new(0.0, 9.0, 0.0)], -200.0, Some(&filter));
-        assert!(
-            far.alternatives().iter().all(|a| a.position.y == 0.0),
-            "a weaker newcomer replaces nothing"
-        );
+        assert!(far.alternatives().iter().all(|a| a.position.y == 0.0), "a weaker newcomer replaces nothing");
         far.offer([Vector3::new(0.0, 9.0, 0.0)], -10.0, None);
         assert_eq!(far.alternatives()[2].position, Vector3::new(0.0, 9.0, 0.0));
     }
@@ -437,42 +326,20 @@ mod tests {
         assert!((fit - truth).norm() < 0.2, "{fit}");
         let mut far = FarLobes::default();
         far.offer([on_plane], 0.0, Some(&wrong));
-        far.update(
-            &LobeFrame {
-                geometry: &geometry(),
-                receivers: &rx,
-                weight_floor: 1e-6,
-                levels: &LEVELS,
-            },
-            &wrong,
-            floor,
-        );
+        far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &wrong, floor);
         assert_eq!(far.alternatives().len(), 1);
     }
 
     #[test]
     fn a_preferred_state_displaces_the_last_ranked() {
         let mut far = FarLobes::default();
-        far.offer(
-            (1..=SLOTS).map(|i| Vector3::new(i as f64, 0.0, 0.0)),
-            0.0,
-            None,
-        );
+        far.offer((1..=SLOTS).map(|i| Vector3::new(i as f64, 0.0, 0.0)), 0.0, None);
         far.prefer(Vector3::new(0.0, 5.0, 0.0), 0.0);
         assert_eq!(far.alternatives().len(), SLOTS);
         assert_eq!(far.alternatives()[0].position, Vector3::new(0.0, 5.0, 0.0));
-        assert!(far
-            .alternatives()
-            .iter()
-            .all(|a| a.position.x < SLOTS as f64));
+        assert!(far.alternatives().iter().all(|a| a.position.x < SLOTS as f64));
         far.prefer(Vector3::new(0.01, 5.0, 0.0), 0.0);
-        assert_eq!(
-            far.alternatives()
-                .iter()
-                .filter(|a| a.position.y == 5.0)
-                .count(),
-            1
-        );
+        assert_eq!(far.alternatives().iter().filter(|a| a.position.y == 5.0).count(), 1);
     }
 
     #[test]
@@ -481,16 +348,7 @@ mod tests {
         let rx = receivers(&truth, 1.0);
         let mut far = FarLobes::default();
         far.offer([wrong], 0.0, Some(&truth));
-        far.update(
-            &LobeFrame {
-                geometry: &geometry(),
-                receivers: &rx,
-                weight_floor: 1e-6,
-                levels: &LEVELS,
-            },
-            &truth,
-            |p| Vector3::new(p.x, p.y, p.z.min(0.5)),
-        );
+        far.update(&LobeFrame { geometry: &geometry(), receivers: &rx, weight_floor: 1e-6, levels: &LEVELS }, &truth, |p| Vector3::new(p.x, p.y, p.z.min(0.5)));
         assert_eq!(far.alternatives().len(), 1);
         let held = far.alternatives()[0];
         assert!(held.position.z <= 0.5);

@@ -35,17 +35,14 @@ use std::sync::Arc;
 
 use nalgebra::{Matrix3, Vector3};
 
-use super::bias::{BiasClock, BiasPrediction, BiasStep};
 use super::candidates::nearest_candidate;
+use super::bias::{BiasClock, BiasPrediction, BiasStep};
 use super::initial::{initial_covariance, InitialSearch, InitialState};
-use super::line_twins::{line_layout, line_twins, LineLayout};
 use super::read_budget::Budget;
+use super::line_twins::{line_layout, line_twins, LineLayout};
 use super::{Estimate, Measurement, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
-use crate::filter::{
-    apply_scalar, imm, innovation, log_gaussian, pack_pair, predict, unpack_pair, update_position,
-    PackedCovariance,
-};
+use crate::filter::{apply_scalar, imm, innovation, log_gaussian, pack_pair, predict, unpack_pair, update_position, PackedCovariance};
 use crate::geometry::multilaterate;
 use crate::model::{range, MotionModel, StateMatrix, StateVector, Transition};
 use crate::scene::Scene;
@@ -273,111 +270,58 @@ impl GlacParams {
         ];
         for (name, v) in positive {
             if !(v > 0.0 && v.is_finite()) {
-                return Err(Error::Parameter {
-                    name: name.into(),
-                    reason: format!("must be positive, got {v}"),
-                });
+                return Err(Error::Parameter { name: name.into(), reason: format!("must be positive, got {v}") });
             }
         }
         if !(self.bias_sigma_rad >= 0.0 && self.bias_sigma_rad.is_finite()) {
-            return Err(Error::Parameter {
-                name: "bias_sigma_rad".into(),
-                reason: "must be zero or positive".into(),
-            });
+            return Err(Error::Parameter { name: "bias_sigma_rad".into(), reason: "must be zero or positive".into() });
         }
         if !(self.hop_bias_sigma_rad >= 0.0 && self.hop_bias_sigma_rad.is_finite()) {
-            return Err(Error::Parameter {
-                name: "hop_bias_sigma_rad".into(),
-                reason: "must be zero or positive".into(),
-            });
+            return Err(Error::Parameter { name: "hop_bias_sigma_rad".into(), reason: "must be zero or positive".into() });
         }
-        for (name, v) in [
-            ("bank_sigma_rad", self.bank_sigma_rad),
-            ("bank_time_s", self.bank_time_s),
-        ] {
+        for (name, v) in [("bank_sigma_rad", self.bank_sigma_rad), ("bank_time_s", self.bank_time_s)] {
             if v.is_some_and(|v| !(v > 0.0 && v.is_finite())) {
-                return Err(Error::Parameter {
-                    name: name.into(),
-                    reason: "must be positive".into(),
-                });
+                return Err(Error::Parameter { name: name.into(), reason: "must be positive".into() });
             }
         }
         if !(self.bank_switch_nats > 0.0 && self.bank_drop_nats >= self.bank_switch_nats) {
-            return Err(Error::Parameter {
-                name: "bank_drop_nats".into(),
-                reason: "must be at least bank_switch_nats (both positive)".into(),
-            });
+            return Err(Error::Parameter { name: "bank_drop_nats".into(), reason: "must be at least bank_switch_nats (both positive)".into() });
         }
         if !(self.phase_wander_rad >= 0.0 && self.phase_wander_rad.is_finite()) {
-            return Err(Error::Parameter {
-                name: "phase_wander_rad".into(),
-                reason: "must be zero or positive".into(),
-            });
+            return Err(Error::Parameter { name: "phase_wander_rad".into(), reason: "must be zero or positive".into() });
         }
         if !(self.reseed_interval_s >= 0.0 && self.reseed_interval_s.is_finite()) {
-            return Err(Error::Parameter {
-                name: "reseed_interval_s".into(),
-                reason: "must be zero or positive".into(),
-            });
+            return Err(Error::Parameter { name: "reseed_interval_s".into(), reason: "must be zero or positive".into() });
         }
         if !(self.weight_temperature >= 1.0 && self.weight_temperature.is_finite()) {
-            return Err(Error::Parameter {
-                name: "weight_temperature".into(),
-                reason: "must be at least 1".into(),
-            });
+            return Err(Error::Parameter { name: "weight_temperature".into(), reason: "must be at least 1".into() });
         }
         if !(0.0..1.0).contains(&self.quick_stop) {
-            return Err(Error::Parameter {
-                name: "quick_stop".into(),
-                reason: "must be in [0, 1)".into(),
-            });
+            return Err(Error::Parameter { name: "quick_stop".into(), reason: "must be in [0, 1)".into() });
         }
         let q = match self.motion {
             MotionModel::ConstantVelocity { q } | MotionModel::RandomWalk { q } => q,
         };
         if !(q > 0.0 && q.is_finite()) {
-            return Err(Error::Parameter {
-                name: "q".into(),
-                reason: format!("process noise must be positive, got {q}"),
-            });
+            return Err(Error::Parameter { name: "q".into(), reason: format!("process noise must be positive, got {q}") });
         }
-        if self
-            .manoeuvre_q
-            .is_some_and(|q| !(q > 0.0 && q.is_finite()))
-        {
-            return Err(Error::Parameter {
-                name: "manoeuvre_q".into(),
-                reason: "must be positive".into(),
-            });
+        if self.manoeuvre_q.is_some_and(|q| !(q > 0.0 && q.is_finite())) {
+            return Err(Error::Parameter { name: "manoeuvre_q".into(), reason: "must be positive".into() });
         }
-        if self.likelihood == Likelihood::Paper
-            && self.manoeuvre_q.is_some()
-            && self.inference == Inference::Fast
-        {
+        if self.likelihood == Likelihood::Paper && self.manoeuvre_q.is_some() && self.inference == Inference::Fast {
             return Err(Error::Parameter {
                 name: "likelihood".into(),
-                reason:
-                    "'paper' (eqs. 12-13) is defined for one motion model: set manoeuvre_q = None"
-                        .into(),
+                reason: "'paper' (eqs. 12-13) is defined for one motion model: set manoeuvre_q = None".into(),
             });
         }
         if !(0.0..=0.5).contains(&self.model_switch_probability) {
-            return Err(Error::Parameter {
-                name: "model_switch_probability".into(),
-                reason: "must be in [0, 0.5]".into(),
-            });
+            return Err(Error::Parameter { name: "model_switch_probability".into(), reason: "must be in [0, 0.5]".into() });
         }
         if self.read_budget == 0 {
-            return Err(Error::Parameter {
-                name: "read_budget".into(),
-                reason: "must be at least 1".into(),
-            });
+            return Err(Error::Parameter { name: "read_budget".into(), reason: "must be at least 1".into() });
         }
         if self.max_hypotheses == 0 {
-            return Err(Error::Parameter {
-                name: "max_hypotheses".into(),
-                reason: "must be at least 1".into(),
-            });
+            return Err(Error::Parameter { name: "max_hypotheses".into(), reason: "must be at least 1".into() });
         }
         Ok(())
     }
@@ -453,11 +397,7 @@ pub const MAX_BIASES: usize = 8;
 impl Hypotheses {
     /// Room for `n` hypotheses with bias states for `biases` antennas.
     fn with_capacity(n: usize, biases: usize) -> Self {
-        Self {
-            items: Vec::with_capacity(n),
-            bias: Vec::with_capacity(n * biases),
-            biases,
-        }
+        Self { items: Vec::with_capacity(n), bias: Vec::with_capacity(n * biases), biases }
     }
 
     /// Hypothesis `i`'s bias states (mean m, variance m²), by antenna.
@@ -481,13 +421,7 @@ impl Hypotheses {
 
     fn push(&mut self, x: StateVector, p: StateMatrix, log_likelihood: f64) {
         let packed = PackedCovariance::pack(&p);
-        self.items.push(Hypothesis {
-            mu: [1.0, 0.0],
-            x: [x, x],
-            p: [packed, packed],
-            log_likelihood,
-            outliers: 0,
-        });
+        self.items.push(Hypothesis { mu: [1.0, 0.0], x: [x, x], p: [packed, packed], log_likelihood, outliers: 0 });
         // Unknown until the antenna is first read, when the AR(1)
         // prediction (ρ = 0) sets the stationary variance.
         self.bias.extend(std::iter::repeat_n([0.0; 2], self.biases));
@@ -496,16 +430,12 @@ impl Hypotheses {
     /// Appends a copy of hypothesis `i` (for ambiguity branching).
     fn duplicate(&mut self, i: usize) {
         self.items.push(self.items[i]);
-        self.bias
-            .extend_from_within(i * self.biases..(i + 1) * self.biases);
+        self.bias.extend_from_within(i * self.biases..(i + 1) * self.biases);
     }
 
     /// Appends hypothesis `i` of `other` with log-likelihood `log_likelihood`.
     fn append_from(&mut self, other: &Hypotheses, i: usize, log_likelihood: f64) {
-        self.items.push(Hypothesis {
-            log_likelihood,
-            ..other.items[i]
-        });
+        self.items.push(Hypothesis { log_likelihood, ..other.items[i] });
         debug_assert_eq!(self.biases, other.biases);
         self.bias.extend_from_slice(other.biases_of(i));
     }
@@ -553,11 +483,7 @@ impl Hypotheses {
 
     /// Index of the likeliest hypothesis (the one reported), if any.
     fn best(&self) -> Option<usize> {
-        (0..self.len()).max_by(|&a, &b| {
-            self.items[a]
-                .log_likelihood
-                .total_cmp(&self.items[b].log_likelihood)
-        })
+        (0..self.len()).max_by(|&a, &b| self.items[a].log_likelihood.total_cmp(&self.items[b].log_likelihood))
     }
 
     /// Normalises log-likelihoods so that Σ exp = 1 (log-sum-exp).
@@ -685,10 +611,7 @@ struct AntennaClock {
 }
 
 impl AntennaClock {
-    const UNREAD: AntennaClock = AntennaClock {
-        read_s: f64::NEG_INFINITY,
-        interval_s: f64::INFINITY,
-    };
+    const UNREAD: AntennaClock = AntennaClock { read_s: f64::NEG_INFINITY, interval_s: f64::INFINITY };
 }
 
 /// A read waiting for the tracker.
@@ -729,33 +652,18 @@ struct StepProgress {
 /// A search spread over reads.
 enum Job {
     /// Initial state pruning over the buffer, started by the read at `now_s`.
-    Initial {
-        search: InitialSearch,
-        last_s: f64,
-        counts: Vec<usize>,
-        now_s: f64,
-    },
+    Initial { search: InitialSearch, last_s: f64, counts: Vec<usize>, now_s: f64 },
     /// Its result, waiting for a budget that covers building the hypotheses.
     /// A thousand hypotheses' filters are megabytes to write: built
     /// [`BUILD_BLOCK`] at a time into `built`.
-    Commit {
-        t_x: f64,
-        initial: Vec<super::initial::InitialHypothesis>,
-        built: Hypotheses,
-        last_s: f64,
-        counts: Vec<usize>,
-        now_s: f64,
-    },
+    Commit { t_x: f64, initial: Vec<super::initial::InitialHypothesis>, built: Hypotheses, last_s: f64, counts: Vec<usize>, now_s: f64 },
 }
 
 /// Re-seeding, in the background: it runs on what the reads leave of
 /// their budgets, while the live hypotheses keep tracking.
 enum Reseed {
     /// The search over the recent reads.
-    Search {
-        search: InitialSearch,
-        reads: Vec<PhaseRead>,
-    },
+    Search { search: InitialSearch, reads: Vec<PhaseRead> },
     /// The replay of the reads after t_x (and of those tracked since, up
     /// to `replayed_s`) through the candidates alone, with their own clock
     /// and bias clocks.
@@ -789,21 +697,9 @@ pub fn build(scene: &Scene, params: &super::Params) -> Result<Box<dyn Tracker>> 
     match p.bank_sigma_rad {
         Some(level) if p.inference == Inference::Fast && p.bias_state => {
             p.validate()?;
-            let base = GlacParams {
-                bank_sigma_rad: None,
-                ..p.clone()
-            };
-            let other = GlacParams {
-                bias_sigma_rad: level,
-                bias_time_s: p.bank_time_s.unwrap_or(p.bias_time_s),
-                ..base.clone()
-            };
-            Ok(Box::new(super::glac_bank::GlacBank::of(
-                scene.clone(),
-                vec![base, other],
-                p.bank_switch_nats,
-                p.bank_drop_nats,
-            )?))
+            let base = GlacParams { bank_sigma_rad: None, ..p.clone() };
+            let other = GlacParams { bias_sigma_rad: level, bias_time_s: p.bank_time_s.unwrap_or(p.bias_time_s), ..base.clone() };
+            Ok(Box::new(super::glac_bank::GlacBank::of(scene.clone(), vec![base, other], p.bank_switch_nats, p.bank_drop_nats)?))
         }
         _ => Ok(Box::new(Glac::new(scene.clone(), p.clone())?)),
     }
@@ -813,25 +709,13 @@ impl Glac {
     pub fn new(scene: Scene, params: GlacParams) -> Result<Self> {
         params.validate()?;
         let positions: Vec<Vector3<f64>> = scene.antennas.iter().map(|a| a.position).collect();
-        let line_layout = if scene.dimensions == 3 {
-            line_layout(&positions)
-        } else {
-            None
-        };
-        Ok(Self::with_shared(
-            Arc::new(scene),
-            Arc::new(params),
-            line_layout,
-        ))
+        let line_layout = if scene.dimensions == 3 { line_layout(&positions) } else { None };
+        Ok(Self::with_shared(Arc::new(scene), Arc::new(params), line_layout))
     }
 
     /// A tracker in its initial state over `scene` and `params` as they
     /// are (validated by the caller).
-    fn with_shared(
-        scene: Arc<Scene>,
-        params: Arc<GlacParams>,
-        line_layout: Option<LineLayout>,
-    ) -> Self {
+    fn with_shared(scene: Arc<Scene>, params: Arc<GlacParams>, line_layout: Option<LineLayout>) -> Self {
         let axes = scene.dimensions;
         let n_antennas = scene.antennas.len();
         let biases = n_antennas.min(MAX_BIASES);
@@ -893,9 +777,7 @@ impl Glac {
     }
 
     fn phase_noise(&self) -> f64 {
-        self.params
-            .phase_noise_rad
-            .unwrap_or(self.scene.phase_noise_rad)
+        self.params.phase_noise_rad.unwrap_or(self.scene.phase_noise_rad)
     }
 
     /// Range noise variance R (m²) of a read on a carrier whose antenna
@@ -920,17 +802,9 @@ impl Glac {
     /// known; white alone before any antenna was read twice): for
     /// initialisation and the variants that fuse several antennas at once.
     fn range_variance(&self, frequency_hz: f64) -> f64 {
-        let (sum, count) = self
-            .antenna_clock
-            .iter()
-            .map(|c| c.interval_s)
-            .filter(|t| t.is_finite())
-            .fold((0.0, 0usize), |(s, n), t| (s + t, n + 1));
-        let typical = if count == 0 {
-            f64::INFINITY
-        } else {
-            sum / count as f64
-        };
+        let (sum, count) =
+            self.antenna_clock.iter().map(|c| c.interval_s).filter(|t| t.is_finite()).fold((0.0, 0usize), |(s, n), t| (s + t, n + 1));
+        let typical = if count == 0 { f64::INFINITY } else { sum / count as f64 };
         self.range_variance_after(frequency_hz, typical)
     }
 
@@ -969,20 +843,9 @@ impl Glac {
         }
         let range_sigma = self.initial_range_sigma(self.buffer[0].frequency_hz);
         let with_velocity = self.params.motion.has_velocity();
-        match InitialSearch::new(
-            &self.scene,
-            &self.buffer,
-            &self.params.initial,
-            range_sigma,
-            with_velocity,
-        ) {
+        match InitialSearch::new(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity) {
             Some(search) => {
-                self.job = Some(Box::new(Job::Initial {
-                    search,
-                    last_s: last,
-                    counts,
-                    now_s,
-                }));
+                self.job = Some(Box::new(Job::Initial { search, last_s: last, counts, now_s }));
                 true
             }
             None => {
@@ -1000,15 +863,7 @@ impl Glac {
 
     /// The initial search's hypotheses go live: the buffered reads after
     /// t_x are queued (first) to be replayed through them.
-    fn commit(
-        &mut self,
-        t_x: f64,
-        hypotheses: Hypotheses,
-        last_s: f64,
-        counts: Vec<usize>,
-        now_s: f64,
-        out: &mut Option<Estimate>,
-    ) {
+    fn commit(&mut self, t_x: f64, hypotheses: Hypotheses, last_s: f64, counts: Vec<usize>, now_s: f64, out: &mut Option<Estimate>) {
         self.hypotheses = hypotheses;
         self.stats.max_hypotheses = self.stats.max_hypotheses.max(self.hypotheses.len() as u64);
         self.time_s = t_x;
@@ -1021,18 +876,10 @@ impl Glac {
         self.group_antennas = counts.iter().map(|&c| c >= 2).collect();
         self.group.clear();
         self.phase = Phase::Tracking;
-        let replay: Vec<PhaseRead> = self
-            .buffer
-            .iter()
-            .copied()
-            .filter(|m| m.time_s > t_x)
-            .collect();
+        let replay: Vec<PhaseRead> = self.buffer.iter().copied().filter(|m| m.time_s > t_x).collect();
         self.buffer.clear();
         for m in replay.into_iter().rev() {
-            self.pending.push_front(Pending {
-                read: m,
-                replay: Some(now_s),
-            });
+            self.pending.push_front(Pending { read: m, replay: Some(now_s) });
         }
         if !self.pending.front().is_some_and(|p| p.replay.is_some()) {
             *out = self.remember(self.best_estimate(now_s));
@@ -1040,25 +887,10 @@ impl Glac {
     }
 
     /// Runs `job` on within `budget`: `Some` (the job) while work is left.
-    fn advance_job(
-        &mut self,
-        job: Job,
-        budget: &mut Budget,
-        out: &mut Option<Estimate>,
-    ) -> Option<Job> {
+    fn advance_job(&mut self, job: Job, budget: &mut Budget, out: &mut Option<Estimate>) -> Option<Job> {
         match job {
-            Job::Initial {
-                mut search,
-                last_s,
-                counts,
-                now_s,
-            } => match search.advance(&self.scene, budget) {
-                None => Some(Job::Initial {
-                    search,
-                    last_s,
-                    counts,
-                    now_s,
-                }),
+            Job::Initial { mut search, last_s, counts, now_s } => match search.advance(&self.scene, budget) {
+                None => Some(Job::Initial { search, last_s, counts, now_s }),
                 Some(None) => {
                     self.slide_window(last_s);
                     *out = self.coasting_estimate(now_s);
@@ -1067,52 +899,20 @@ impl Glac {
                 Some(Some((t_x, initial))) => {
                     let initial = self.reachable(initial, t_x);
                     let built = Hypotheses::with_capacity(initial.len(), self.biases());
-                    self.advance_job(
-                        Job::Commit {
-                            t_x,
-                            initial,
-                            built,
-                            last_s,
-                            counts,
-                            now_s,
-                        },
-                        budget,
-                        out,
-                    )
+                    self.advance_job(Job::Commit { t_x, initial, built, last_s, counts, now_s }, budget, out)
                 }
             },
-            Job::Commit {
-                t_x,
-                initial,
-                mut built,
-                last_s,
-                counts,
-                now_s,
-            } => {
+            Job::Commit { t_x, initial, mut built, last_s, counts, now_s } => {
                 while built.len() < initial.len() {
                     let block = BUILD_BLOCK.min(initial.len() - built.len());
                     if !budget.try_spend_overhead(block as u64 * BUILD_UNITS) {
-                        return Some(Job::Commit {
-                            t_x,
-                            initial,
-                            built,
-                            last_s,
-                            counts,
-                            now_s,
-                        });
+                        return Some(Job::Commit { t_x, initial, built, last_s, counts, now_s });
                     }
                     let from = built.len();
                     self.build_hypotheses(&mut built, &initial[from..from + block]);
                 }
                 if !budget.try_spend_overhead(1 + initial.len() as u64 / FINISH_PER_UNIT) {
-                    return Some(Job::Commit {
-                        t_x,
-                        initial,
-                        built,
-                        last_s,
-                        counts,
-                        now_s,
-                    });
+                    return Some(Job::Commit { t_x, initial, built, last_s, counts, now_s });
                 }
                 built.normalise();
                 self.commit(t_x, built, last_s, counts, now_s, out);
@@ -1146,16 +946,8 @@ impl Glac {
 
     /// Appends hypotheses started from `initial` (unnormalised; see
     /// [`Glac::hypotheses_from`]).
-    fn build_hypotheses(
-        &self,
-        hypotheses: &mut Hypotheses,
-        initial: &[super::initial::InitialHypothesis],
-    ) {
-        let v_sigma = if self.params.motion.has_velocity() {
-            self.params.init_velocity_sigma_m_s
-        } else {
-            0.0
-        };
+    fn build_hypotheses(&self, hypotheses: &mut Hypotheses, initial: &[super::initial::InitialHypothesis]) {
+        let v_sigma = if self.params.motion.has_velocity() { self.params.init_velocity_sigma_m_s } else { 0.0 };
         let p0 = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
         for h in initial {
             let mut x = h.state;
@@ -1172,21 +964,12 @@ impl Glac {
     /// of it, σ its largest position sigma). All of them when there is no
     /// last state, or when none is reachable (the bound was wrong: the tag
     /// was moved faster; searching everywhere beats losing it).
-    fn reachable(
-        &self,
-        initial: Vec<super::initial::InitialHypothesis>,
-        t_x: f64,
-    ) -> Vec<super::initial::InitialHypothesis> {
-        let Some((t, position, covariance)) = self.last_good else {
-            return initial;
-        };
-        let radius =
-            self.params.max_speed_m_s * (t_x - t).max(0.0) + 3.0 * largest_sigma(&covariance);
+    fn reachable(&self, initial: Vec<super::initial::InitialHypothesis>, t_x: f64) -> Vec<super::initial::InitialHypothesis> {
+        let Some((t, position, covariance)) = self.last_good else { return initial };
+        let radius = self.params.max_speed_m_s * (t_x - t).max(0.0) + 3.0 * largest_sigma(&covariance);
         let near: Vec<_> = initial
             .iter()
-            .filter(|h| {
-                (Vector3::new(h.state[0], h.state[1], h.state[2]) - position).norm() <= radius
-            })
+            .filter(|h| (Vector3::new(h.state[0], h.state[1], h.state[2]) - position).norm() <= radius)
             .cloned()
             .collect();
         if near.is_empty() {
@@ -1211,27 +994,10 @@ impl Glac {
                     let replayed_s = reads.last().map_or(t_x, |m| m.time_s);
                     let reads = reads.into_iter().filter(|m| m.time_s > t_x).collect();
                     let bias_clock = vec![BiasClock::UNSET; self.bias_clock.len()];
-                    self.advance_reseed(
-                        Reseed::Replay {
-                            fresh,
-                            time_s: t_x,
-                            bias_clock,
-                            reads,
-                            replayed_s,
-                            progress: None,
-                        },
-                        budget,
-                    )
+                    self.advance_reseed(Reseed::Replay { fresh, time_s: t_x, bias_clock, reads, replayed_s, progress: None }, budget)
                 }
             },
-            Reseed::Replay {
-                mut fresh,
-                mut time_s,
-                mut bias_clock,
-                mut reads,
-                mut replayed_s,
-                mut progress,
-            } => {
+            Reseed::Replay { mut fresh, mut time_s, mut bias_clock, mut reads, mut replayed_s, mut progress } => {
                 // The candidates and their clocks stand in for the live ones
                 // while they are stepped.
                 std::mem::swap(&mut self.hypotheses, &mut fresh);
@@ -1247,12 +1013,7 @@ impl Glac {
                     }
                     if reads.is_empty() {
                         // Reads tracked since: the candidates follow them too.
-                        reads.extend(
-                            self.recent
-                                .iter()
-                                .copied()
-                                .filter(|m| m.time_s > replayed_s),
-                        );
+                        reads.extend(self.recent.iter().copied().filter(|m| m.time_s > replayed_s));
                         replayed_s = reads.back().map_or(replayed_s, |m| m.time_s);
                     }
                     if self.hypotheses.len() == 0 || reads.is_empty() {
@@ -1268,19 +1029,8 @@ impl Glac {
                 std::mem::swap(&mut self.time_s, &mut time_s);
                 std::mem::swap(&mut self.bias_clock, &mut bias_clock);
                 let join = JOIN_UNITS * (fresh.len() + self.hypotheses.len()) as u64;
-                if !done
-                    || !budget.try_spend_overhead(
-                        1 + join + self.hypotheses.len() as u64 / FINISH_PER_UNIT,
-                    )
-                {
-                    return Some(Reseed::Replay {
-                        fresh,
-                        time_s,
-                        bias_clock,
-                        reads,
-                        replayed_s,
-                        progress,
-                    });
+                if !done || !budget.try_spend_overhead(1 + join + self.hypotheses.len() as u64 / FINISH_PER_UNIT) {
+                    return Some(Reseed::Replay { fresh, time_s, bias_clock, reads, replayed_s, progress });
                 }
                 self.join_reseeded(&fresh);
                 None
@@ -1298,9 +1048,7 @@ impl Glac {
     fn reseed(&mut self, now_s: f64) {
         self.start_reseed(now_s);
         while let Some(job) = self.reseeding.take() {
-            self.reseeding = self
-                .advance_reseed(*job, &mut Budget::unlimited())
-                .map(Box::new);
+            self.reseeding = self.advance_reseed(*job, &mut Budget::unlimited()).map(Box::new);
         }
     }
 
@@ -1310,11 +1058,7 @@ impl Glac {
     fn reseed_interval(&self) -> f64 {
         let doubled = self.params.reseed_interval_s * 2f64.powi(self.reseed_streak.min(30) as i32);
         // A cap below the base interval leaves the base interval.
-        doubled.min(
-            self.params
-                .reseed_max_interval_s
-                .max(self.params.reseed_interval_s),
-        )
+        doubled.min(self.params.reseed_max_interval_s.max(self.params.reseed_interval_s))
     }
 
     /// Starts re-seeding in the background ([`Glac::advance_reseed`]).
@@ -1328,14 +1072,7 @@ impl Glac {
             let with_velocity = self.params.motion.has_velocity();
             // The likeliest few only: the search runs while tracking, and its
             // replay costs a filter update per candidate and read.
-            let settings = InitialState {
-                max_hypotheses: self
-                    .params
-                    .initial
-                    .max_hypotheses
-                    .min(RESEED_MAX_CANDIDATES),
-                ..self.params.initial.clone()
-            };
+            let settings = InitialState { max_hypotheses: self.params.initial.max_hypotheses.min(RESEED_MAX_CANDIDATES), ..self.params.initial.clone() };
             InitialSearch::new(&self.scene, &reads, &settings, range_sigma, with_velocity)
         });
         self.reseeding = started.map(|search| Box::new(Reseed::Search { search, reads }));
@@ -1350,9 +1087,7 @@ impl Glac {
         let cell = |x: &StateVector| [0, 1, 2].map(|k| (x[k] / RESEED_DISTANCE_M).floor() as i64);
         let mut grid: super::key_hash::CellMap<Vec<usize>> = Default::default();
         for j in 0..self.hypotheses.len() {
-            grid.entry(cell(&self.hypotheses.items[j].x[0]))
-                .or_default()
-                .push(j);
+            grid.entry(cell(&self.hypotheses.items[j].x[0])).or_default().push(j);
         }
         let live = &self.hypotheses;
         let followed = |x: &StateVector| {
@@ -1360,27 +1095,20 @@ impl Glac {
             (-1..=1).any(|dx| {
                 (-1..=1).any(|dy| {
                     (-1..=1).any(|dz| {
-                        grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz])
-                            .is_some_and(|ids| {
-                                ids.iter().any(|&j| {
-                                    (live.items[j].x[0] - x).fixed_rows::<3>(0).norm()
-                                        < RESEED_DISTANCE_M
-                                })
-                            })
+                        grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]).is_some_and(|ids| {
+                            ids.iter().any(|&j| (live.items[j].x[0] - x).fixed_rows::<3>(0).norm() < RESEED_DISTANCE_M)
+                        })
                     })
                 })
             })
         };
-        let joining: Vec<usize> = (0..fresh.len())
-            .filter(|&i| !followed(&fresh.items[i].x[0]))
-            .collect();
+        let joining: Vec<usize> = (0..fresh.len()).filter(|&i| !followed(&fresh.items[i].x[0])).collect();
         if joining.is_empty() {
             return;
         }
         let log_share = RESEED_WEIGHT.ln();
         for &i in &joining {
-            self.hypotheses
-                .append_from(fresh, i, log_share + fresh.items[i].log_likelihood);
+            self.hypotheses.append_from(fresh, i, log_share + fresh.items[i].log_likelihood);
         }
         self.prune();
     }
@@ -1420,15 +1148,10 @@ impl Glac {
         let dt = (m.time_s - self.time_s).max(0.0);
         let step = FastStep {
             transition: self.params.motion.transition(dt, self.axes),
-            manoeuvre: self
-                .params
-                .manoeuvre_q
-                .map(|q| MotionModel::ConstantVelocity { q }.transition(dt, self.axes)),
+            manoeuvre: self.params.manoeuvre_q.map(|q| MotionModel::ConstantVelocity { q }.transition(dt, self.axes)),
             switch: self.params.model_switch_probability,
             antenna: self.scene.antennas[m.antenna].position,
-            residue: self
-                .scene
-                .distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
+            residue: self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
             spacing: self.scene.candidate_spacing(m.frequency_hz),
             r: self.range_variance_after(m.frequency_hz, self.antenna_clock[m.antenna].interval_s),
             gate2: self.params.gate_sigmas * self.params.gate_sigmas,
@@ -1436,16 +1159,7 @@ impl Glac {
             axes: self.axes,
         };
         let bias = self.bias_step(m);
-        StepProgress {
-            read: *m,
-            purpose,
-            step,
-            bias,
-            n: self.hypotheses.len(),
-            next: 0,
-            branches: Vec::new(),
-            origins: Vec::new(),
-        }
+        StepProgress { read: *m, purpose, step, bias, n: self.hypotheses.len(), next: 0, branches: Vec::new(), origins: Vec::new() }
     }
 
     /// Steps hypotheses `next..n` while `budget` lasts (one unit each);
@@ -1465,14 +1179,8 @@ impl Glac {
             // The reading predicts range + bias, with both uncertainties.
             let (predicted, variance) = (range + b.mean, variance + b.variance);
             let z = nearest_candidate(step.residue, step.spacing, predicted);
-            if n + s.branches.len() < branch_limit
-                && 9.0 * variance > 0.25 * step.spacing * step.spacing
-            {
-                let second = if predicted > z {
-                    z + step.spacing
-                } else {
-                    z - step.spacing
-                };
+            if n + s.branches.len() < branch_limit && 9.0 * variance > 0.25 * step.spacing * step.spacing {
+                let second = if predicted > z { z + step.spacing } else { z - step.spacing };
                 if second >= 0.0 {
                     // A branch is an exact copy of the predicted hypothesis: it
                     // keeps that prediction (bias, predicted reading, its variance).
@@ -1495,8 +1203,7 @@ impl Glac {
     fn finish_fast(&mut self, s: &StepProgress) {
         let h = &mut self.hypotheses;
         for &(j, z, b, predicted, variance) in &s.branches {
-            s.step
-                .update_predicted(h, j, unpack_pair(&h.items[j].p), z - b.mean, b.variance);
+            s.step.update_predicted(h, j, unpack_pair(&h.items[j].p), z - b.mean, b.variance);
             update_bias(&s.bias, h, j, &b, z - predicted, variance);
         }
         let models = if s.step.manoeuvre.is_some() { 2 } else { 1 };
@@ -1513,12 +1220,7 @@ impl Glac {
     /// Advances a spread fast step: `Some` while hypotheses are left; at
     /// its end (when the budget covers it) the step finishes and a tracked
     /// read gets its per-read handling.
-    fn advance_step(
-        &mut self,
-        mut s: StepProgress,
-        budget: &mut Budget,
-        out: &mut Option<Estimate>,
-    ) -> Option<StepProgress> {
+    fn advance_step(&mut self, mut s: StepProgress, budget: &mut Budget, out: &mut Option<Estimate>) -> Option<StepProgress> {
         if !self.run_fast(&mut s, budget) {
             return Some(s);
         }
@@ -1541,9 +1243,7 @@ impl Glac {
         let dt = (m.time_s - self.time_s).max(0.0);
         let transition = self.params.motion.transition(dt, self.axes);
         let antenna = self.scene.antennas[m.antenna].position;
-        let residue = self
-            .scene
-            .distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
+        let residue = self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad);
         let spacing = self.scene.candidate_spacing(m.frequency_hz);
         let (lo, hi) = self.scene.distance_bounds(m.antenna);
         let r = self.range_variance_after(m.frequency_hz, self.antenna_clock[m.antenna].interval_s);
@@ -1561,11 +1261,7 @@ impl Glac {
                 let (u, b) = innovation(&p, z, d, &jac, r);
                 let (mut xc, mut pc) = (x, p);
                 apply_scalar(&mut xc, &mut pc, &u, &b);
-                self.scratch.push(
-                    xc,
-                    pc,
-                    h.items[i].log_likelihood + log_gaussian(u.innovation, u.variance),
-                );
+                self.scratch.push(xc, pc, h.items[i].log_likelihood + log_gaussian(u.innovation, u.variance));
             }
         }
         self.stats.filter_updates += self.scratch.len() as u64;
@@ -1627,19 +1323,10 @@ impl Glac {
             (motion, _) => motion,
         };
         let transition = motion.transition(dt, self.axes);
-        let anchors: Vec<Vector3<f64>> = group
-            .iter()
-            .map(|g| self.scene.antennas[g.antenna].position)
-            .collect();
+        let anchors: Vec<Vector3<f64>> = group.iter().map(|g| self.scene.antennas[g.antenna].position).collect();
         let residues: Vec<(f64, f64)> = group
             .iter()
-            .map(|g| {
-                (
-                    self.scene
-                        .distance_residue(g.antenna, g.frequency_hz, g.phase_rad),
-                    self.scene.candidate_spacing(g.frequency_hz),
-                )
-            })
+            .map(|g| (self.scene.distance_residue(g.antenna, g.frequency_hz, g.phase_rad), self.scene.candidate_spacing(g.frequency_hz)))
             .collect();
         let r = self.range_variance(m.frequency_hz);
         let gate2 = self.params.gate_sigmas * self.params.gate_sigmas * self.axes as f64;
@@ -1652,12 +1339,10 @@ impl Glac {
             predict(x, p, &transition);
             let predicted = Vector3::new(x[0], x[1], x[2]);
             for (k, a) in anchors.iter().enumerate() {
-                distances[k] =
-                    nearest_candidate(residues[k].0, residues[k].1, (predicted - a).norm());
+                distances[k] = nearest_candidate(residues[k].0, residues[k].1, (predicted - a).norm());
             }
             let fix = multilaterate(&anchors, &distances, predicted, self.axes, 5);
-            let mut log_l =
-                -0.5 * (gate2 + group.len() as f64 * (2.0 * std::f64::consts::PI * r).ln());
+            let mut log_l = -0.5 * (gate2 + group.len() as f64 * (2.0 * std::f64::consts::PI * r).ln());
             if let Some(fix) = fix.and_then(|f| f.normal.try_inverse().map(|inv| (f, inv))) {
                 let (fix, normal_inv) = fix;
                 let mut r_pos: Matrix3<f64> = normal_inv * r;
@@ -1666,9 +1351,7 @@ impl Glac {
                 }
                 let (mut xc, mut pc) = (*x, *p);
                 if let Some((nu, s)) = update_position(&mut xc, &mut pc, &fix.position, &r_pos) {
-                    let d2 = s
-                        .try_inverse()
-                        .map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[(0, 0)]);
+                    let d2 = s.try_inverse().map_or(f64::INFINITY, |si| (nu.transpose() * si * nu)[(0, 0)]);
                     if d2 <= gate2 {
                         *x = xc;
                         *p = pc;
@@ -1706,11 +1389,7 @@ impl Glac {
             return;
         }
         h.normalise();
-        let log_threshold = if self.params.quick_stop > 0.0 {
-            self.params.quick_stop.ln()
-        } else {
-            f64::NEG_INFINITY
-        };
+        let log_threshold = if self.params.quick_stop > 0.0 { self.params.quick_stop.ln() } else { f64::NEG_INFINITY };
         let margin = self.params.region_margin_m;
         let max_out = self.params.max_consecutive_outliers;
         let (region, axes) = (self.scene.region.clone(), self.axes);
@@ -1724,13 +1403,8 @@ impl Glac {
         };
         for (i, keep) in alive.iter_mut().enumerate() {
             let x = &h.items[i].x[0];
-            let inside = region
-                .as_ref()
-                .is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
-            *keep = h.items[i].log_likelihood >= log_threshold
-                && inside
-                && h.items[i].outliers < max_out
-                && x.iter().all(|v| v.is_finite());
+            let inside = region.as_ref().is_none_or(|r| r.contains(&Vector3::new(x[0], x[1], x[2]), margin, axes));
+            *keep = h.items[i].log_likelihood >= log_threshold && inside && h.items[i].outliers < max_out && x.iter().all(|v| v.is_finite());
         }
         h.retain(|i| alive[i]);
         if h.len() > 1 && h.len() <= 64 && self.params.merge_distance_m > 0.0 {
@@ -1747,9 +1421,7 @@ impl Glac {
                 }
                 for j in i + 1..n {
                     if keep[j] {
-                        let dp = (h.items[i].x[0] - h.items[j].x[0])
-                            .fixed_rows::<3>(0)
-                            .norm_squared();
+                        let dp = (h.items[i].x[0] - h.items[j].x[0]).fixed_rows::<3>(0).norm_squared();
                         if dp < md2 {
                             if h.items[i].log_likelihood >= h.items[j].log_likelihood {
                                 keep[j] = false;
@@ -1780,18 +1452,11 @@ impl Glac {
         let h = &self.hypotheses;
         let best = self.reported()?;
         let (x, own) = h.state(best);
-        let mut p = if h.len() == 1 {
-            own
-        } else {
-            mixture_covariance(h, &x, self.params.weight_temperature)
-        };
+        let mut p = if h.len() == 1 { own } else { mixture_covariance(h, &x, self.params.weight_temperature) };
         self.add_bias_covariance(&mut p, &x);
         self.add_twin_covariance(&mut p, &x);
-        let velocity = if self.params.motion.has_velocity() {
-            [x[3], x[4], x[5]]
-        } else {
-            [f64::NAN, f64::NAN, f64::NAN]
-        };
+        let velocity =
+            if self.params.motion.has_velocity() { [x[3], x[4], x[5]] } else { [f64::NAN, f64::NAN, f64::NAN] };
         Some(Estimate {
             time_s,
             position: [x[0], x[1], x[2]],
@@ -1834,9 +1499,7 @@ impl Glac {
         if self.axes == 2 {
             normal[(2, 2)] = 1.0; // z is pinned; any value keeps it invertible
         }
-        let Some(inverse) = normal.try_inverse() else {
-            return;
-        };
+        let Some(inverse) = normal.try_inverse() else { return };
         if !inverse.iter().all(|v| v.is_finite()) {
             return;
         }
@@ -1853,25 +1516,14 @@ impl Glac {
     /// The bias states' step for reading `m`, and the antenna's bias clock
     /// moved to its time.
     fn bias_step(&mut self, m: &PhaseRead) -> BiasStep {
-        if !self.params.bias_state
-            || m.antenna >= self.biases()
-            || self.params.bias_sigma_rad == 0.0
-        {
+        if !self.params.bias_state || m.antenna >= self.biases() || self.params.bias_sigma_rad == 0.0 {
             return BiasStep::NONE;
         }
         let clock = self.bias_clock[m.antenna];
-        self.bias_clock[m.antenna] = BiasClock {
-            time_s: m.time_s,
-            frequency_hz: m.frequency_hz,
-        };
+        self.bias_clock[m.antenna] = BiasClock { time_s: m.time_s, frequency_hz: m.frequency_hz };
         let to_range = Scene::range_per_radian(m.frequency_hz);
         let stationary = (self.params.bias_sigma_rad * to_range).powi(2);
-        let step = BiasStep::new(
-            m.antenna,
-            m.time_s - clock.time_s,
-            stationary,
-            self.params.bias_time_s,
-        );
+        let step = BiasStep::new(m.antenna, m.time_s - clock.time_s, stationary, self.params.bias_time_s);
         // A new carrier brings its own calibration residual and multipath
         // phase: that share of the bias is drawn afresh.
         if clock.time_s.is_finite() && clock.frequency_hz != m.frequency_hz {
@@ -1890,21 +1542,15 @@ impl Glac {
     /// reported one). Hopping over calibrated channels breaks the twins,
     /// and then nothing is added.
     fn add_twin_covariance(&self, p: &mut StateMatrix, x: &StateVector) {
-        let Some(layout) = &self.line_layout else {
-            return;
-        };
-        if !self.last_frequency_hz.is_finite()
-            || (self.hopped && !self.scene.channel_offsets.is_empty())
-        {
+        let Some(layout) = &self.line_layout else { return };
+        if !self.last_frequency_hz.is_finite() || (self.hopped && !self.scene.channel_offsets.is_empty()) {
             return;
         }
         let position = Vector3::new(x[0], x[1], x[2]);
         let spacing = self.scene.candidate_spacing(self.last_frequency_hz);
         let margin = self.params.region_margin_m;
         let region = self.scene.region.as_ref();
-        let twins = line_twins(layout, &position, spacing, MAX_TWIN_SHIFT, |q| {
-            region.is_none_or(|r| r.contains(q, margin, 3))
-        });
+        let twins = line_twins(layout, &position, spacing, MAX_TWIN_SHIFT, |q| region.is_none_or(|r| r.contains(q, margin, 3)));
         if twins.is_empty() {
             return;
         }
@@ -1931,13 +1577,8 @@ impl Glac {
     fn reported(&self) -> Option<usize> {
         let h = &self.hypotheses;
         let best = h.best()?;
-        let Some((_, previous, _)) = self.last_good else {
-            return Some(best);
-        };
-        if h.len() == 1 {
-            return Some(best);
-        }
-        if !self.resolved_once {
+        let Some((_, previous, _)) = self.last_good else { return Some(best) };
+        if h.len() == 1 || !self.resolved_once {
             return Some(best);
         }
         let floor = h.items[best].log_likelihood - REPORT_HOLD_NATS;
@@ -1945,18 +1586,14 @@ impl Glac {
             let x = &h.items[i].x[0];
             (Vector3::new(x[0], x[1], x[2]) - previous).norm_squared()
         };
-        (0..h.len())
-            .filter(|&i| h.items[i].log_likelihood >= floor)
-            .min_by(|&a, &b| distance(a).total_cmp(&distance(b)))
+        (0..h.len()).filter(|&i| h.items[i].log_likelihood >= floor).min_by(|&a, &b| distance(a).total_cmp(&distance(b)))
     }
 
     /// Notes a switch of the reported trajectory: the reported hypothesis
     /// lies more than [`RESEED_SIGMA_M`] beyond where the previous estimate
     /// could have moved at its speed.
     fn note_switch(&mut self, now_s: f64) {
-        let (Some(best), Some((t, previous, _))) = (self.reported(), self.last_good) else {
-            return;
-        };
+        let (Some(best), Some((t, previous, _))) = (self.reported(), self.last_good) else { return };
         let x = &self.hypotheses.items[best].x[0];
         let moved = (Vector3::new(x[0], x[1], x[2]) - previous).norm();
         let speed = Vector3::new(x[3], x[4], x[5]).norm();
@@ -2009,10 +1646,7 @@ impl Glac {
 /// count. T = 1 is the plain posterior. Weights below 1e-12 are skipped.
 fn mixture_covariance(h: &Hypotheses, centre: &StateVector, temperature: f64) -> StateMatrix {
     let max = h.log_likelihoods().fold(f64::NEG_INFINITY, f64::max);
-    let weights: Vec<f64> = h
-        .log_likelihoods()
-        .map(|l| ((l - max) / temperature).exp())
-        .collect();
+    let weights: Vec<f64> = h.log_likelihoods().map(|l| ((l - max) / temperature).exp()).collect();
     let total: f64 = weights.iter().sum();
     let mut sum = StateMatrix::zeros();
     for (i, w) in weights.iter().enumerate() {
@@ -2048,11 +1682,7 @@ fn plain_spread(h: &Hypotheses) -> f64 {
 
 /// Largest per-axis 1-sigma of a position covariance, metres.
 fn largest_sigma(covariance: &Matrix3<f64>) -> f64 {
-    covariance
-        .diagonal()
-        .iter()
-        .fold(0.0f64, |m, v| m.max(*v))
-        .sqrt()
+    covariance.diagonal().iter().fold(0.0f64, |m, v| m.max(*v)).sqrt()
 }
 
 /// log p(z_k | z_1:k−1) of a fast step, before pruning: the log of
@@ -2064,8 +1694,7 @@ fn read_evidence(h: &Hypotheses, s: &StepProgress) -> f64 {
     let max = h.log_likelihoods().fold(f64::NEG_INFINITY, f64::max);
     let mut sum: f64 = h.log_likelihoods().map(|l| (l - max).exp()).sum();
     for (&(j, ..), &i) in s.branches.iter().zip(&s.origins) {
-        sum -= 0.5
-            * ((h.items[i].log_likelihood - max).exp() + (h.items[j].log_likelihood - max).exp());
+        sum -= 0.5 * ((h.items[i].log_likelihood - max).exp() + (h.items[j].log_likelihood - max).exp());
     }
     max + sum.max(f64::MIN_POSITIVE).ln()
 }
@@ -2083,20 +1712,9 @@ fn predict_bias(step: &BiasStep, h: &Hypotheses, i: usize) -> BiasPrediction {
 
 /// The bias update of hypothesis `i` after its state update: a gated
 /// reading (its outlier count rose) leaves the bias at its prediction.
-fn update_bias(
-    step: &BiasStep,
-    h: &mut Hypotheses,
-    i: usize,
-    b: &BiasPrediction,
-    innovation: f64,
-    variance: f64,
-) {
+fn update_bias(step: &BiasStep, h: &mut Hypotheses, i: usize, b: &BiasPrediction, innovation: f64, variance: f64) {
     let Some(a) = step.antenna else { return };
-    let (mean, var) = if h.items[i].outliers == 0 {
-        b.update(innovation, variance)
-    } else {
-        (b.mean, b.variance)
-    };
+    let (mean, var) = if h.items[i].outliers == 0 { b.update(innovation, variance) } else { (b.mean, b.variance) };
     h.bias[i * h.biases + a] = [mean, var];
 }
 
@@ -2163,14 +1781,7 @@ impl FastStep {
     /// gated reading is charged the density at the gate, so a hypothesis
     /// cannot gain by rejecting data.
     /// `predicted`: the covariances [`FastStep::predict`] returned.
-    fn update_predicted(
-        &self,
-        h: &mut Hypotheses,
-        i: usize,
-        predicted: [StateMatrix; 2],
-        z: f64,
-        extra_r: f64,
-    ) {
+    fn update_predicted(&self, h: &mut Hypotheses, i: usize, predicted: [StateMatrix; 2], z: f64, extra_r: f64) {
         let gated = |s: f64| -0.5 * (self.gate2 + (2.0 * std::f64::consts::PI * s).ln());
         let r = self.r + extra_r;
         let h = &mut h.items[i];
@@ -2187,8 +1798,7 @@ impl FastStep {
                     Likelihood::Innovation => log_gaussian(u.innovation, u.variance),
                     Likelihood::Paper => {
                         let d_post = range(x, &self.antenna, self.axes, false).0;
-                        log_gaussian(d_post - z, r)
-                            + transition_log_density(x, &x_predicted, &self.transition)
+                        log_gaussian(d_post - z, r) + transition_log_density(x, &x_predicted, &self.transition)
                     }
                 }
             } else {
@@ -2217,10 +1827,7 @@ impl FastStep {
         if accepted {
             h.outliers = 0;
             let max = density[0].max(density[1]);
-            let w = [
-                c[0] * (density[0] - max).exp(),
-                c[1] * (density[1] - max).exp(),
-            ];
+            let w = [c[0] * (density[0] - max).exp(), c[1] * (density[1] - max).exp()];
             let total = w[0] + w[1];
             for (j, (u, b)) in updates.iter().enumerate() {
                 apply_scalar(&mut h.x[j], &mut p[j], u, b);
@@ -2250,8 +1857,7 @@ fn transition_log_density(x: &StateVector, predicted: &StateVector, t: &Transiti
             }
             let (a, b) = (dx[i], dx[i + 3]);
             let maha = (vv * a * a - 2.0 * pv * a * b + pp * b * b) / det;
-            log_density +=
-                -0.5 * (maha + (4.0 * std::f64::consts::PI * std::f64::consts::PI * det).ln());
+            log_density += -0.5 * (maha + (4.0 * std::f64::consts::PI * std::f64::consts::PI * det).ln());
         } else if pp > 0.0 {
             log_density += log_gaussian(dx[i], pp);
         }
@@ -2280,27 +1886,16 @@ impl Glac {
             return None;
         }
         self.arrival_s = m.time_s;
-        let read = Pending {
-            read: *m,
-            replay: None,
-        };
+        let read = Pending { read: *m, replay: None };
         // The variants' steps cannot be split (naive: every hypothesis
         // times every candidate), so they run unbudgeted, as before.
-        let limit = if self.params.inference == Inference::Fast {
-            self.params.read_budget as u64
-        } else {
-            u64::MAX
-        };
+        let limit = if self.params.inference == Inference::Fast { self.params.read_budget as u64 } else { u64::MAX };
         let mut budget = Budget::new(limit);
         // The estimate after the latest read taken through: on the stack
         // while this call works, kept in the tracker only while reads are
         // left for later calls (the tag-state line holding it stays cold
         // on a converged tag's read; `take` would copy all of it).
-        let mut latest = if self.result.is_some() {
-            self.result.take()
-        } else {
-            None
-        };
+        let mut latest = if self.result.is_some() { self.result.take() } else { None };
         if self.job.is_none() && self.progress.is_none() && self.pending.is_empty() {
             // Nothing queued (a converged tag): straight in, without
             // touching the queue's memory.
@@ -2325,12 +1920,7 @@ impl Glac {
     /// Works off the job, the step under way and the queued reads, in that
     /// order, while `budget` lasts; `first`, a read that would be queued
     /// last on an empty queue, goes first.
-    fn work(
-        &mut self,
-        budget: &mut Budget,
-        mut first: Option<Pending>,
-        out: &mut Option<Estimate>,
-    ) {
+    fn work(&mut self, budget: &mut Budget, mut first: Option<Pending>, out: &mut Option<Estimate>) {
         loop {
             if let Some(mut job) = self.job.take() {
                 if let Some(left) = self.advance_job(*job, budget, out) {
@@ -2381,17 +1971,10 @@ impl Glac {
 
     /// Takes queued read `p` in: its bookkeeping (a fresh read), then the
     /// initial buffer or the hypotheses; the fast step it starts, if any.
-    fn begin_read(
-        &mut self,
-        p: Pending,
-        budget: &mut Budget,
-        out: &mut Option<Estimate>,
-    ) -> Option<StepProgress> {
+    fn begin_read(&mut self, p: Pending, budget: &mut Budget, out: &mut Option<Estimate>) -> Option<StepProgress> {
         let m = &p.read;
         if p.replay.is_none() {
-            if self.phase == Phase::Tracking
-                && m.time_s - self.last_time_s > self.params.reinit_gap_s
-            {
+            if self.phase == Phase::Tracking && m.time_s - self.last_time_s > self.params.reinit_gap_s {
                 self.restart();
             }
             self.last_time_s = m.time_s;
@@ -2402,10 +1985,7 @@ impl Glac {
                 self.hopped = true;
             }
             let clock = &mut self.antenna_clock[m.antenna];
-            *clock = AntennaClock {
-                read_s: m.time_s,
-                interval_s: m.time_s - clock.read_s,
-            };
+            *clock = AntennaClock { read_s: m.time_s, interval_s: m.time_s - clock.read_s };
         }
         if self.phase == Phase::Initialising {
             self.stats.initialising += 1;
@@ -2547,20 +2127,13 @@ impl Tracker for Glac {
     }
 
     fn fresh(&self) -> Option<Box<dyn Tracker>> {
-        Some(Box::new(Self::with_shared(
-            self.scene.clone(),
-            self.params.clone(),
-            self.line_layout.clone(),
-        )))
+        Some(Box::new(Self::with_shared(self.scene.clone(), self.params.clone(), self.line_layout.clone())))
     }
 
     fn prefetch(&self) {
         use crate::prefetch;
         // The fields a converged read touches come before `result`.
-        prefetch::bytes(
-            (self as *const Self).cast(),
-            std::mem::offset_of!(Glac, result),
-        );
+        prefetch::bytes((self as *const Self).cast(), std::mem::offset_of!(Glac, result));
         // The first hypotheses: a converged tag has one; more are worth
         // asking for only while they are few.
         let items = &self.hypotheses.items;
@@ -2624,11 +2197,7 @@ pub(crate) mod tests {
     fn pruning_to_a_few_hypotheses_gives_back_their_room() {
         let mut h = Hypotheses::with_capacity(200, 4);
         for k in 0..200 {
-            h.push(
-                StateVector::repeat(k as f64),
-                StateMatrix::identity(),
-                -(k as f64),
-            );
+            h.push(StateVector::repeat(k as f64), StateMatrix::identity(), -(k as f64));
             for a in 0..4 {
                 h.bias[k * 4 + a] = [k as f64, a as f64];
             }
@@ -2639,16 +2208,9 @@ pub(crate) mod tests {
         h.retain(|i| i == 3);
         assert_eq!(h.len(), 1);
         assert_eq!(h.items[0].x[0][0], 30.0, "retain keeps order and contents");
-        assert_eq!(
-            h.biases_of(0),
-            &[[30.0, 0.0], [30.0, 1.0], [30.0, 2.0], [30.0, 3.0]],
-            "and the bias states with them"
-        );
+        assert_eq!(h.biases_of(0), &[[30.0, 0.0], [30.0, 1.0], [30.0, 2.0], [30.0, 3.0]], "and the bias states with them");
         for capacity in [h.items.capacity(), h.bias.capacity() / 4] {
-            assert!(
-                capacity <= SHRINK_CAPACITY,
-                "capacity {capacity} after converging"
-            );
+            assert!(capacity <= SHRINK_CAPACITY, "capacity {capacity} after converging");
         }
         // Small arrays are left alone (no churn while a few hypotheses live).
         let mut small = Hypotheses::with_capacity(SHRINK_CAPACITY, 4);
@@ -2670,28 +2232,10 @@ pub(crate) mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], 0.0),
-                phase_offset_rad: 0.0,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
-        let region = Region {
-            min: Vector3::new(0.1, -0.5, 0.0),
-            max: Vector3::new(1.6, 1.5, 0.0),
-        };
-        Scene::new(
-            2,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            phase_noise_rad,
-            antennas,
-            Some(region),
-            vec![],
-        )
-        .unwrap()
+        let region = Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) };
+        Scene::new(2, 0.0, 1.0, std::f64::consts::TAU, phase_noise_rad, antennas, Some(region), vec![]).unwrap()
     }
 
     fn reads(scene: &Scene, n: usize) -> Vec<PhaseRead> {
@@ -2701,12 +2245,7 @@ pub(crate) mod tests {
                 let p = Vector3::new(0.6 + 0.1 * t, 0.3 + 0.05 * t, 0.0);
                 let a = k % 4;
                 let d = (p - scene.antennas[a].position).norm();
-                PhaseRead {
-                    time_s: t,
-                    antenna: a,
-                    frequency_hz: 915.25e6,
-                    phase_rad: scene.ideal_phase(a, 915.25e6, d),
-                }
+                PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: scene.ideal_phase(a, 915.25e6, d) }
             })
             .collect()
     }
@@ -2734,11 +2273,7 @@ pub(crate) mod tests {
         let p = StateMatrix::identity() * 1e-6;
         let a = StateVector::from_iterator([0.5, 0.5, 0.5, 0.0, 0.0, 0.0]);
         h.push(a, p, w.ln());
-        h.push(
-            StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]),
-            p,
-            (1.0 - w).ln(),
-        );
+        h.push(StateVector::from_iterator([0.7, 0.5, 0.5, 0.0, 0.0, 0.0]), p, (1.0 - w).ln());
         (h, a, p)
     }
 
@@ -2772,46 +2307,17 @@ pub(crate) mod tests {
         let antennas = positions
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], p[2]),
-                phase_offset_rad: 0.0,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], p[2]), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
-        let scene = Scene::new(
-            3,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            0.1,
-            antennas,
-            None,
-            vec![],
-        )
-        .unwrap();
-        let params = GlacParams {
-            bias_sigma_rad: 0.1,
-            bias_state: false,
-            ..GlacParams::default()
-        };
+        let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, None, vec![]).unwrap();
+        let params = GlacParams { bias_sigma_rad: 0.1, bias_state: false, ..GlacParams::default() };
         let mut tracker = Glac::new(scene, params).unwrap();
         let x = StateVector::zeros();
         let mut p = StateMatrix::zeros();
         tracker.add_bias_covariance(&mut p, &x);
-        assert_eq!(
-            p,
-            StateMatrix::zeros(),
-            "no read yet: nothing known of the carrier"
-        );
+        assert_eq!(p, StateMatrix::zeros(), "no read yet: nothing known of the carrier");
         tracker.last_frequency_hz = 915e6;
-        tracker.antenna_clock = vec![
-            AntennaClock {
-                read_s: 0.0,
-                interval_s: f64::INFINITY
-            };
-            3
-        ];
+        tracker.antenna_clock = vec![AntennaClock { read_s: 0.0, interval_s: f64::INFINITY }; 3];
         tracker.add_bias_covariance(&mut p, &x);
         let to_range = Scene::range_per_radian(915e6);
         let expected = (0.1 * to_range).powi(2);
@@ -2835,18 +2341,13 @@ pub(crate) mod tests {
         let scene = scene();
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
         let all = reads(&scene, 300); // 10 s at 30 reads/s
-                                      // Reads stop from 4 s to 5.5 s (longer than reinit_gap_s = 1 s).
-        let kept: Vec<_> = all
-            .iter()
-            .filter(|m| m.time_s < 4.0 || m.time_s >= 5.5)
-            .collect();
+        // Reads stop from 4 s to 5.5 s (longer than reinit_gap_s = 1 s).
+        let kept: Vec<_> = all.iter().filter(|m| m.time_s < 4.0 || m.time_s >= 5.5).collect();
         let mut before = None;
         let mut coasting = Vec::new();
         let mut after = Vec::new();
         for m in kept {
-            let Some(e) = tracker.step(&Measurement::Phase(*m)) else {
-                continue;
-            };
+            let Some(e) = tracker.step(&Measurement::Phase(*m)) else { continue };
             if m.time_s < 4.0 {
                 before = Some(e);
             } else if e.hypotheses == 0 {
@@ -2861,10 +2362,7 @@ pub(crate) mod tests {
         for e in &coasting {
             assert_eq!(e.position, before.position);
             let radius = tracker.params().max_speed_m_s * (e.time_s - before.time_s);
-            assert!(
-                e.position_sigma()[0] * 3.0 >= radius,
-                "the reachable ball must lie within 3 sigma"
-            );
+            assert!(e.position_sigma()[0] * 3.0 >= radius, "the reachable ball must lie within 3 sigma");
         }
         // Re-committed within the re-initialisation window, on the truth.
         let (t, first) = &after[0];
@@ -2875,32 +2373,17 @@ pub(crate) mod tests {
 
     #[test]
     fn reachable_keeps_candidates_within_the_speed_bound() {
-        let mut tracker = Glac::new(
-            scene(),
-            GlacParams {
-                max_speed_m_s: 0.5,
-                ..GlacParams::default()
-            },
-        )
-        .unwrap();
+        let mut tracker = Glac::new(scene(), GlacParams { max_speed_m_s: 0.5, ..GlacParams::default() }).unwrap();
         let at = |x: f64| super::super::initial::InitialHypothesis {
             state: StateVector::from_iterator([x, 0.3, 0.0, 0.0, 0.0, 0.0]),
             log_likelihood: 0.0,
             max_residual_m: 0.0,
         };
         let candidates = || vec![at(0.5), at(0.9), at(1.5)];
-        assert_eq!(
-            tracker.reachable(candidates(), 1.0).len(),
-            3,
-            "no last state: every candidate"
-        );
+        assert_eq!(tracker.reachable(candidates(), 1.0).len(), 3, "no last state: every candidate");
         tracker.last_good = Some((0.0, Vector3::new(0.5, 0.3, 0.0), Matrix3::identity() * 1e-6));
         // 1 s at 0.5 m/s + 3 mm: 0.5 and 0.9 are reachable, 1.5 is not.
-        let kept: Vec<f64> = tracker
-            .reachable(candidates(), 1.0)
-            .iter()
-            .map(|h| h.state[0])
-            .collect();
+        let kept: Vec<f64> = tracker.reachable(candidates(), 1.0).iter().map(|h| h.state[0]).collect();
         assert_eq!(kept, vec![0.5, 0.9]);
         // None reachable: the bound was wrong, search everywhere.
         assert_eq!(tracker.reachable(vec![at(1.5)], 1.0).len(), 1);
@@ -2914,29 +2397,19 @@ pub(crate) mod tests {
         let mut tracker = Glac::new(scene(), GlacParams::default()).unwrap();
         let (h, a, _) = two_hypotheses(0.4);
         tracker.hypotheses = h;
-        tracker.last_good = Some((
-            0.0,
-            Vector3::new(a[0], a[1], a[2]),
-            Matrix3::identity() * 1e-6,
-        ));
+        let at_a = Some((0.0, Vector3::new(a[0], a[1], a[2]), Matrix3::identity() * 1e-6));
+        tracker.last_good = at_a;
         // Never resolved: the likeliest (the second, 0.6 against 0.4).
         assert_eq!(tracker.reported(), Some(1));
         tracker.remember(tracker.best_estimate(0.0));
-        assert!(
-            !tracker.resolved_once,
-            "a report covering both rivals is not resolved"
-        );
+        assert!(!tracker.resolved_once, "a report covering both rivals is not resolved");
         tracker.resolved_once = true;
-        tracker.last_good = Some((
-            0.0,
-            Vector3::new(a[0], a[1], a[2]),
-            Matrix3::identity() * 1e-6,
-        ));
+        tracker.last_good = at_a;
         // Resolved once: the first, nearest the last report, 0.4 nats behind.
         assert_eq!(tracker.reported(), Some(0));
         // A rival REPORT_HOLD_NATS + 0.1 ahead takes the report.
-        tracker.hypotheses.items[1].log_likelihood =
-            tracker.hypotheses.items[0].log_likelihood + REPORT_HOLD_NATS + 0.1;
+        let lead = tracker.hypotheses.items[0].log_likelihood + REPORT_HOLD_NATS + 0.1;
+        tracker.hypotheses.items[1].log_likelihood = lead;
         assert_eq!(tracker.reported(), Some(1));
     }
 
@@ -2946,12 +2419,7 @@ pub(crate) mod tests {
     fn bias_state_follows_the_ar1_model() {
         let scene = scene();
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
-        let read = |t: f64| PhaseRead {
-            time_s: t,
-            antenna: 1,
-            frequency_hz: 915e6,
-            phase_rad: 0.0,
-        };
+        let read = |t: f64| PhaseRead { time_s: t, antenna: 1, frequency_hz: 915e6, phase_rad: 0.0 };
         let to_range = Scene::range_per_radian(915e6);
         let stationary = (0.07 * to_range).powi(2);
         let first = tracker.bias_step(&read(1.0));
@@ -2960,14 +2428,7 @@ pub(crate) mod tests {
         let next = tracker.bias_step(&read(1.25));
         assert!((next.rho - (-0.25f64 / 0.5).exp()).abs() < 1e-12);
         assert!((next.drive - stationary * (1.0 - next.rho * next.rho)).abs() < 1e-18);
-        let mut off = Glac::new(
-            scene.clone(),
-            GlacParams {
-                bias_state: false,
-                ..GlacParams::default()
-            },
-        )
-        .unwrap();
+        let mut off = Glac::new(scene.clone(), GlacParams { bias_state: false, ..GlacParams::default() }).unwrap();
         assert_eq!(off.bias_step(&read(1.0)).antenna, None);
     }
 
@@ -2977,44 +2438,20 @@ pub(crate) mod tests {
     #[test]
     fn a_new_carrier_draws_the_hop_share_of_the_bias_afresh() {
         let scene = scene();
-        let mut tracker = Glac::new(
-            scene.clone(),
-            GlacParams {
-                hop_bias_sigma_rad: 0.1,
-                ..GlacParams::default()
-            },
-        )
-        .unwrap();
-        let read = |t: f64, antenna: usize, f: f64| PhaseRead {
-            time_s: t,
-            antenna,
-            frequency_hz: f,
-            phase_rad: 0.0,
-        };
+        let mut tracker = Glac::new(scene.clone(), GlacParams { hop_bias_sigma_rad: 0.1, ..GlacParams::default() }).unwrap();
+        let read = |t: f64, antenna: usize, f: f64| PhaseRead { time_s: t, antenna, frequency_hz: f, phase_rad: 0.0 };
         let first = tracker.bias_step(&read(1.0, 1, 915e6));
         assert_eq!(first.rho, 0.0);
         let other_antenna = tracker.bias_step(&read(1.1, 2, 903e6));
-        assert_eq!(
-            other_antenna.rho, 0.0,
-            "antenna 2's first read is its stationary prior"
-        );
+        assert_eq!(other_antenna.rho, 0.0, "antenna 2's first read is its stationary prior");
         let same = tracker.bias_step(&read(1.25, 1, 915e6));
         let hopped = tracker.bias_step(&read(1.5, 1, 903e6));
-        let (rho, stationary) = ((-0.25f64 / 0.5).exp(), |f: f64| {
-            (0.07 * Scene::range_per_radian(f)).powi(2)
-        });
+        let (rho, stationary) = ((-0.25f64 / 0.5).exp(), |f: f64| (0.07 * Scene::range_per_radian(f)).powi(2));
         assert!((same.drive - stationary(915e6) * (1.0 - rho * rho)).abs() < 1e-18);
         let jump = (0.1 * Scene::range_per_radian(903e6)).powi(2);
         assert!((hopped.rho - rho).abs() < 1e-12);
         assert!((hopped.drive - (stationary(903e6) * (1.0 - rho * rho) + jump)).abs() < 1e-18);
-        let mut off = Glac::new(
-            scene,
-            GlacParams {
-                hop_bias_sigma_rad: 0.0,
-                ..GlacParams::default()
-            },
-        )
-        .unwrap();
+        let mut off = Glac::new(scene, GlacParams { hop_bias_sigma_rad: 0.0, ..GlacParams::default() }).unwrap();
         off.bias_step(&read(1.0, 1, 915e6));
         let no_jump = off.bias_step(&read(1.25, 1, 903e6));
         assert!((no_jump.drive - stationary(903e6) * (1.0 - rho * rho)).abs() < 1e-18);
@@ -3030,20 +2467,13 @@ pub(crate) mod tests {
             .into_iter()
             .map(|mut m| {
                 if m.antenna == 2 {
-                    m.phase_rad = (m.phase_rad
-                        + 0.15 * (std::f64::consts::TAU * m.time_s / 3.0).sin())
-                    .rem_euclid(std::f64::consts::TAU);
+                    m.phase_rad = (m.phase_rad + 0.15 * (std::f64::consts::TAU * m.time_s / 3.0).sin()).rem_euclid(std::f64::consts::TAU);
                 }
                 m
             })
             .collect();
         let error = |bias_state: bool| {
-            let params = GlacParams {
-                bias_state,
-                bias_sigma_rad: 0.15,
-                phase_noise_rad: Some(0.02),
-                ..GlacParams::default()
-            };
+            let params = GlacParams { bias_state, bias_sigma_rad: 0.15, phase_noise_rad: Some(0.02), ..GlacParams::default() };
             let mut tracker = Glac::new(scene.clone(), params).unwrap();
             let mut sum = 0.0;
             let mut count = 0;
@@ -3060,21 +2490,14 @@ pub(crate) mod tests {
             sum / count as f64
         };
         let (with, without) = (error(true), error(false));
-        assert!(
-            with < 0.8 * without,
-            "mean error with bias states {with} m, without {without} m"
-        );
+        assert!(with < 0.8 * without, "mean error with bias states {with} m, without {without} m");
     }
 
     /// Searches an unresolved track starts on its own double the interval
     /// up to `reseed_max_interval_s`; a cap below the base leaves the base.
     #[test]
     fn the_reseed_interval_backs_off_up_to_its_cap() {
-        let params = GlacParams {
-            reseed_interval_s: 1.0,
-            reseed_max_interval_s: 8.0,
-            ..GlacParams::default()
-        };
+        let params = GlacParams { reseed_interval_s: 1.0, reseed_max_interval_s: 8.0, ..GlacParams::default() };
         let mut tracker = Glac::new(scene(), params).unwrap();
         let intervals: Vec<f64> = (0..6)
             .map(|streak| {
@@ -3083,15 +2506,7 @@ pub(crate) mod tests {
             })
             .collect();
         assert_eq!(intervals, [1.0, 2.0, 4.0, 8.0, 8.0, 8.0]);
-        let mut tracker = Glac::new(
-            scene(),
-            GlacParams {
-                reseed_interval_s: 2.0,
-                reseed_max_interval_s: 1.0,
-                ..GlacParams::default()
-            },
-        )
-        .unwrap();
+        let mut tracker = Glac::new(scene(), GlacParams { reseed_interval_s: 2.0, reseed_max_interval_s: 1.0, ..GlacParams::default() }).unwrap();
         tracker.reseed_streak = 3;
         assert_eq!(tracker.reseed_interval(), 2.0);
         tracker.restart();
@@ -3119,11 +2534,7 @@ pub(crate) mod tests {
         let b = StateVector::from_iterator([1.0, 0.5, 0.5, 0.0, 0.0, 0.0]);
         tracker.hypotheses.push(a, p, 0.0);
         tracker.hypotheses.push(b, p, 1e-5f64.ln());
-        tracker.last_good = Some((
-            0.9,
-            Vector3::new(0.5, 0.5, 0.5),
-            Matrix3::identity() * 0.2 * 0.2,
-        ));
+        tracker.last_good = Some((0.9, Vector3::new(0.5, 0.5, 0.5), Matrix3::identity() * 0.2 * 0.2));
         tracker.switched_s = 0.0;
         assert!(tracker.unresolved(1.0));
         assert!(!tracker.unresolved(SWITCH_MEMORY_S + 0.1));
@@ -3141,9 +2552,7 @@ pub(crate) mod tests {
     fn a_jump_to_another_candidate_is_a_switch() {
         let mut tracker = Glac::new(scene(), GlacParams::default()).unwrap();
         let moving = StateVector::from_iterator([0.53, 0.5, 0.5, 0.3, 0.0, 0.0]);
-        tracker
-            .hypotheses
-            .push(moving, StateMatrix::identity() * 1e-6, 0.0);
+        tracker.hypotheses.push(moving, StateMatrix::identity() * 1e-6, 0.0);
         tracker.last_good = Some((1.0, Vector3::new(0.5, 0.5, 0.5), Matrix3::identity() * 1e-6));
         tracker.note_switch(1.1); // 3 cm in 0.1 s at 0.3 m/s
         assert_eq!(tracker.switched_s, f64::NEG_INFINITY);
@@ -3176,37 +2585,17 @@ pub(crate) mod tests {
         let before = tracker.stats().reseeds;
         tracker.reseed(now);
         assert_eq!(tracker.stats().reseeds, before + 1);
-        let t = |i: usize| {
-            Vector3::new(
-                tracker.hypotheses.items[i].x[0][0],
-                tracker.hypotheses.items[i].x[0][1],
-                0.0,
-            )
-        };
-        let near: Vec<usize> = (0..tracker.hypotheses.len())
-            .filter(|&i| (t(i) - truth(now)).norm() < 0.01)
-            .collect();
-        assert!(
-            !near.is_empty(),
-            "the search over the recent reads finds the truth again"
-        );
-        let weight: f64 = near
-            .iter()
-            .map(|&i| tracker.hypotheses.items[i].log_likelihood.exp())
-            .sum();
-        assert!(
-            weight < 10.0 * RESEED_WEIGHT,
-            "a newcomer joins at a small weight, got {weight}"
-        );
+        let t = |i: usize| Vector3::new(tracker.hypotheses.items[i].x[0][0], tracker.hypotheses.items[i].x[0][1], 0.0);
+        let near: Vec<usize> = (0..tracker.hypotheses.len()).filter(|&i| (t(i) - truth(now)).norm() < 0.01).collect();
+        assert!(!near.is_empty(), "the search over the recent reads finds the truth again");
+        let weight: f64 = near.iter().map(|&i| tracker.hypotheses.items[i].log_likelihood.exp()).sum();
+        assert!(weight < 10.0 * RESEED_WEIGHT, "a newcomer joins at a small weight, got {weight}");
         let mut last = None;
         for m in &all[split..] {
             last = tracker.step(&Measurement::Phase(*m)).map(|e| (m.time_s, e));
         }
         let (t_end, e) = last.unwrap();
-        assert!(
-            (Vector3::from(e.position) - truth(t_end)).norm() < 0.01,
-            "the true trajectory wins back"
-        );
+        assert!((Vector3::from(e.position) - truth(t_end)).norm() < 0.01, "the true trajectory wins back");
     }
 
     /// On the paper's layout, even a tracker holding only a twin of the
@@ -3214,71 +2603,30 @@ pub(crate) mod tests {
     /// every axis); hopping over calibrated channels takes the twins away.
     #[test]
     fn twins_of_three_antennas_on_a_line_widen_the_sigma() {
-        let pos = [
-            [0.0, 0.0, 0.0],
-            [0.0, 0.3, 0.0],
-            [0.0, 0.8, 0.0],
-            [0.8, 0.8, 0.0],
-        ];
+        let pos = [[0.0, 0.0, 0.0], [0.0, 0.3, 0.0], [0.0, 0.8, 0.0], [0.8, 0.8, 0.0]];
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], p[2]),
-                phase_offset_rad: 0.0,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], p[2]), phase_offset_rad: 0.0, role: Default::default() })
             .collect();
-        let region = Region {
-            min: Vector3::new(-0.5, -0.5, 0.05),
-            max: Vector3::new(1.5, 1.5, 2.0),
-        };
-        let channel = vec![crate::scene::ChannelOffset {
-            frequency_hz: 915e6,
-            phase_offset_rad: 0.0,
-        }];
-        let scene = Scene::new(
-            3,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            0.1,
-            antennas,
-            Some(region),
-            channel,
-        )
-        .unwrap();
+        let region = Region { min: Vector3::new(-0.5, -0.5, 0.05), max: Vector3::new(1.5, 1.5, 2.0) };
+        let channel = vec![crate::scene::ChannelOffset { frequency_hz: 915e6, phase_offset_rad: 0.0 }];
+        let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), channel).unwrap();
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
         let truth = Vector3::new(0.45, 0.35, 0.7);
-        let layout = tracker
-            .line_layout
-            .clone()
-            .expect("the paper's layout has a line");
-        let twin = line_twins(&layout, &truth, scene.candidate_spacing(915e6), 1, |q| {
-            q.z > 0.05
-        })[0];
+        let layout = tracker.line_layout.clone().expect("the paper's layout has a line");
+        let twin = line_twins(&layout, &truth, scene.candidate_spacing(915e6), 1, |q| q.z > 0.05)[0];
         tracker.last_frequency_hz = 915e6;
         tracker.first_frequency_hz = 915e6;
         let x = StateVector::from_iterator([twin.x, twin.y, twin.z, 0.0, 0.0, 0.0]);
-        tracker
-            .hypotheses
-            .push(x, StateMatrix::identity() * 1e-6, 0.0);
+        tracker.hypotheses.push(x, StateMatrix::identity() * 1e-6, 0.0);
         let e = tracker.best_estimate(1.0).unwrap();
         let sigma = e.position_sigma();
         for k in 0..3 {
-            assert!(
-                (truth[k] - twin[k]).abs() <= 3.0 * sigma[k],
-                "axis {k}: {} vs sigma {}",
-                truth[k] - twin[k],
-                sigma[k]
-            );
+            assert!((truth[k] - twin[k]).abs() <= 3.0 * sigma[k], "axis {k}: {} vs sigma {}", truth[k] - twin[k], sigma[k]);
         }
         tracker.hopped = true;
-        assert!(
-            tracker.best_estimate(1.0).unwrap().position_sigma()[0] < 0.01,
-            "calibrated hopping fixes the integer"
-        );
+        assert!(tracker.best_estimate(1.0).unwrap().position_sigma()[0] < 0.01, "calibrated hopping fixes the integer");
     }
 
     #[test]
@@ -3286,10 +2634,7 @@ pub(crate) mod tests {
         let scene = scene();
         let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
         let all = reads(&scene, 60);
-        let first = all
-            .iter()
-            .position(|m| tracker.step(&Measurement::Phase(*m)).is_some())
-            .unwrap();
+        let first = all.iter().position(|m| tracker.step(&Measurement::Phase(*m)).is_some()).unwrap();
         assert!(all[first].time_s >= GlacParams::default().init_window_s);
         assert_eq!(tracker.stats().initialising as usize, first + 1);
         tracker.reset();
@@ -3303,54 +2648,24 @@ pub(crate) mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], 0.0),
-                phase_offset_rad: 0.9 * i as f64,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.9 * i as f64, role: Default::default() })
             .collect();
-        let region = Region {
-            min: Vector3::new(-0.1, -0.3, 0.05),
-            max: Vector3::new(1.2, 1.2, 1.2),
-        };
-        let scene = Scene::new(
-            3,
-            0.0,
-            1.0,
-            std::f64::consts::PI,
-            0.05,
-            antennas,
-            Some(region),
-            vec![],
-        )
-        .unwrap();
+        let region = Region { min: Vector3::new(-0.1, -0.3, 0.05), max: Vector3::new(1.2, 1.2, 1.2) };
+        let scene = Scene::new(3, 0.0, 1.0, std::f64::consts::PI, 0.05, antennas, Some(region), vec![]).unwrap();
         let truth = |t: f64| {
             let a = 0.5 * t;
-            Vector3::new(
-                0.45 + 0.2 * a.cos(),
-                0.4 + 0.2 * a.sin(),
-                0.6 + 0.1 * a.sin(),
-            )
+            Vector3::new(0.45 + 0.2 * a.cos(), 0.4 + 0.2 * a.sin(), 0.6 + 0.1 * a.sin())
         };
         let mut state = 7u64;
         let reads = (0..240)
             .map(|k| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 let noise = 0.1 * (((state >> 11) as f64) / (1u64 << 53) as f64 - 0.5);
                 let t = 0.033 * k as f64;
                 let a = k % 4;
                 let d = (truth(t) - scene.antennas[a].position).norm();
-                let phase =
-                    (scene.ideal_phase(a, 915.25e6, d) + noise).rem_euclid(std::f64::consts::PI);
-                PhaseRead {
-                    time_s: t,
-                    antenna: a,
-                    frequency_hz: 915.25e6,
-                    phase_rad: phase,
-                }
+                let phase = (scene.ideal_phase(a, 915.25e6, d) + noise).rem_euclid(std::f64::consts::PI);
+                PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: phase }
             })
             .collect();
         (scene, reads, truth)
@@ -3366,16 +2681,9 @@ pub(crate) mod tests {
     fn the_read_budget_bounds_each_read_and_keeps_the_result() {
         let (scene, reads, truth) = mod_pi_3d();
         let run = |read_budget: usize, reseed_interval_s: f64| {
-            let params = GlacParams {
-                read_budget,
-                reseed_interval_s,
-                ..GlacParams::default()
-            };
+            let params = GlacParams { read_budget, reseed_interval_s, ..GlacParams::default() };
             let mut tracker = Glac::new(scene.clone(), params).unwrap();
-            let estimates: Vec<Option<Estimate>> = reads
-                .iter()
-                .map(|m| tracker.step(&Measurement::Phase(*m)))
-                .collect();
+            let estimates: Vec<Option<Estimate>> = reads.iter().map(|m| tracker.step(&Measurement::Phase(*m))).collect();
             (tracker.stats(), estimates)
         };
         let count = |e: &[Option<Estimate>]| e.iter().filter(|e| e.is_some()).count();
@@ -3383,41 +2691,20 @@ pub(crate) mod tests {
         for reseed_interval_s in [0.0, 1.0] {
             let (bounded, late) = run(budget, reseed_interval_s);
             let (unbounded, prompt) = run(usize::MAX, reseed_interval_s);
-            assert!(
-                bounded.max_expanded_per_read <= budget as u64,
-                "{bounded:?}"
-            );
-            assert!(
-                unbounded.max_expanded_per_read > 4 * budget as u64,
-                "the recording must need the budget: {unbounded:?}"
-            );
-            assert!(
-                bounded.max_hypotheses > budget as u64,
-                "a step through more hypotheses than the budget spans reads"
-            );
-            assert!(
-                count(&late) > 100 && count(&late) < count(&prompt),
-                "{} of {}",
-                count(&late),
-                count(&prompt)
-            );
+            assert!(bounded.max_expanded_per_read <= budget as u64, "{bounded:?}");
+            assert!(unbounded.max_expanded_per_read > 4 * budget as u64, "the recording must need the budget: {unbounded:?}");
+            assert!(bounded.max_hypotheses > budget as u64, "a step through more hypotheses than the budget spans reads");
+            assert!(count(&late) > 100 && count(&late) < count(&prompt), "{} of {}", count(&late), count(&prompt));
             let error = |e: &[Option<Estimate>]| {
                 let last = e.last().unwrap().as_ref().expect("caught up by the end");
                 (Vector3::from(last.position) - truth(reads.last().unwrap().time_s)).norm()
             };
             assert!(error(&late) <= error(&prompt) + 0.005);
             if reseed_interval_s == 0.0 {
-                assert_eq!(
-                    bounded.filter_updates, unbounded.filter_updates,
-                    "the same work, spread"
-                );
+                assert_eq!(bounded.filter_updates, unbounded.filter_updates, "the same work, spread");
                 for (k, (a, b)) in late.iter().zip(&prompt).enumerate() {
                     if let (Some(a), Some(b)) = (a, b) {
-                        assert_eq!(
-                            (a.position, a.covariance),
-                            (b.position, b.covariance),
-                            "read {k}"
-                        );
+                        assert_eq!((a.position, a.covariance), (b.position, b.covariance), "read {k}");
                     }
                 }
             }
@@ -3427,43 +2714,24 @@ pub(crate) mod tests {
     #[test]
     fn naive_inference_respects_the_cap() {
         let scene = scene();
-        let params = GlacParams {
-            inference: Inference::Naive,
-            max_hypotheses: 500,
-            ..GlacParams::default()
-        };
+        let params = GlacParams { inference: Inference::Naive, max_hypotheses: 500, ..GlacParams::default() };
         let mut tracker = Glac::new(scene.clone(), params).unwrap();
         for m in reads(&scene, 20) {
             tracker.step(&Measurement::Phase(m));
             assert!(tracker.hypothesis_count() <= 500);
         }
-        assert!(
-            tracker.stats().max_hypotheses >= 100,
-            "naive inference should branch"
-        );
+        assert!(tracker.stats().max_hypotheses >= 100, "naive inference should branch");
     }
 
     #[test]
     fn rejects_invalid_parameters() {
-        let bad = GlacParams {
-            quick_stop: 1.5,
-            ..GlacParams::default()
-        };
+        let bad = GlacParams { quick_stop: 1.5, ..GlacParams::default() };
         assert!(Glac::new(scene(), bad).is_err());
-        let bad = GlacParams {
-            motion: MotionModel::ConstantVelocity { q: -1.0 },
-            ..GlacParams::default()
-        };
+        let bad = GlacParams { motion: MotionModel::ConstantVelocity { q: -1.0 }, ..GlacParams::default() };
         assert!(Glac::new(scene(), bad).is_err());
-        let bad = GlacParams {
-            phase_wander_rad: -0.1,
-            ..GlacParams::default()
-        };
+        let bad = GlacParams { phase_wander_rad: -0.1, ..GlacParams::default() };
         assert!(Glac::new(scene(), bad).is_err());
-        let bad = GlacParams {
-            phase_wander_s: 0.0,
-            ..GlacParams::default()
-        };
+        let bad = GlacParams { phase_wander_s: 0.0, ..GlacParams::default() };
         assert!(Glac::new(scene(), bad).is_err());
     }
 
@@ -3479,9 +2747,7 @@ pub(crate) mod tests {
         let mut gaussian = || {
             // Box–Muller from a 64-bit LCG: deterministic, no dependency.
             let mut uniform = || {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 ((state >> 11) as f64 + 0.5) / (1u64 << 53) as f64
             };
             let (u1, u2) = (uniform(), uniform());
@@ -3499,20 +2765,13 @@ pub(crate) mod tests {
         }
         let variance = sums.iter().map(|s| s * s).sum::<f64>() / blocks as f64 / n as f64;
         let expected = correlated_variance_factor(rho);
-        assert!(
-            (variance / expected - 1.0).abs() < 0.2,
-            "simulated {variance}, factor {expected}"
-        );
+        assert!((variance / expected - 1.0).abs() < 0.2, "simulated {variance}, factor {expected}");
     }
 
     #[test]
     fn range_noise_grows_as_an_antenna_is_read_again_sooner() {
         let white = Glac::new(scene(), GlacParams::default()).unwrap();
-        let params = GlacParams {
-            phase_noise_rad: Some(0.015),
-            phase_wander_rad: 0.12,
-            ..GlacParams::default()
-        };
+        let params = GlacParams { phase_noise_rad: Some(0.015), phase_wander_rad: 0.12, ..GlacParams::default() };
         let wander = Glac::new(scene(), params).unwrap();
         let f = 915.25e6;
         let to_range = Scene::range_per_radian(f);

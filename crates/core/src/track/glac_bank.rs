@@ -55,69 +55,29 @@ impl GlacBank {
     /// One member per level of `levels` (σ_b, rad), the first reported
     /// until the evidence says otherwise.
     #[cfg(test)]
-    pub fn new(
-        scene: Scene,
-        params: GlacParams,
-        levels: &[f64],
-        switch_nats: f64,
-        drop_nats: f64,
-    ) -> Result<Self> {
-        let members: Vec<GlacParams> = levels
-            .iter()
-            .map(|&sigma| GlacParams {
-                bias_sigma_rad: sigma,
-                bank_sigma_rad: None,
-                ..params.clone()
-            })
-            .collect();
+    pub fn new(scene: Scene, params: GlacParams, levels: &[f64], switch_nats: f64, drop_nats: f64) -> Result<Self> {
+        let members: Vec<GlacParams> =
+            levels.iter().map(|&sigma| GlacParams { bias_sigma_rad: sigma, bank_sigma_rad: None, ..params.clone() }).collect();
         Self::of(scene, members, switch_nats, drop_nats)
     }
 
     /// One member per parameter set, the first reported until the
     /// evidence says otherwise.
-    pub fn of(
-        scene: Scene,
-        params: Vec<GlacParams>,
-        switch_nats: f64,
-        drop_nats: f64,
-    ) -> Result<Self> {
-        let members = params
-            .iter()
-            .map(|p| Self::member(&scene, p).map(Some))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Self {
-            members,
-            scene,
-            params,
-            leader: 0,
-            switch_nats,
-            drop_nats,
-            dropped_updates: 0,
-            dropped_expanded: 0,
-            measurements: 0,
-            switches: 0,
-        })
+    pub fn of(scene: Scene, params: Vec<GlacParams>, switch_nats: f64, drop_nats: f64) -> Result<Self> {
+        let members = params.iter().map(|p| Self::member(&scene, p).map(Some)).collect::<Result<Vec<_>>>()?;
+        Ok(Self { members, scene, params, leader: 0, switch_nats, drop_nats, dropped_updates: 0, dropped_expanded: 0, measurements: 0, switches: 0 })
     }
 
     fn member(scene: &Scene, params: &GlacParams) -> Result<Member> {
         let mut glac = Glac::new(scene.clone(), params.clone())?;
         glac.record_evidence();
-        Ok(Member {
-            glac,
-            log_evidence: 0.0,
-            queue: VecDeque::new(),
-            result: None,
-        })
+        Ok(Member { glac, log_evidence: 0.0, queue: VecDeque::new(), result: None })
     }
 
     /// Live members' levels (σ_b, rad) and accumulated log evidence.
     #[cfg(test)]
     pub fn levels(&self) -> Vec<(f64, f64)> {
-        self.members
-            .iter()
-            .flatten()
-            .map(|m| (m.glac.params().bias_sigma_rad, m.log_evidence))
-            .collect()
+        self.members.iter().flatten().map(|m| (m.glac.params().bias_sigma_rad, m.log_evidence)).collect()
     }
 
     /// The reported member's σ_b, rad.
@@ -133,9 +93,7 @@ impl GlacBank {
     }
 
     fn leader(&self) -> &Member {
-        self.members[self.leader]
-            .as_ref()
-            .expect("the leader is live")
+        self.members[self.leader].as_ref().expect("the leader is live")
     }
 
     /// Adds the evidence of the reads every live member has tracked.
@@ -153,20 +111,11 @@ impl GlacBank {
             return;
         }
         loop {
-            let fronts: Vec<Option<f64>> = self
-                .members
-                .iter()
-                .flatten()
-                .map(|m| m.queue.front().map(|e| e.0))
-                .collect();
+            let fronts: Vec<Option<f64>> = self.members.iter().flatten().map(|m| m.queue.front().map(|e| e.0)).collect();
             if fronts.iter().any(|f| f.is_none()) {
                 break;
             }
-            let latest = fronts
-                .iter()
-                .flatten()
-                .copied()
-                .fold(f64::NEG_INFINITY, f64::max);
+            let latest = fronts.iter().flatten().copied().fold(f64::NEG_INFINITY, f64::max);
             let mut all = true;
             for m in self.members.iter_mut().flatten() {
                 // Reads before `latest` some member never tracked: dropped.
@@ -183,12 +132,7 @@ impl GlacBank {
                 m.log_evidence += e;
             }
         }
-        let best = self
-            .members
-            .iter()
-            .flatten()
-            .map(|m| m.log_evidence)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let best = self.members.iter().flatten().map(|m| m.log_evidence).fold(f64::NEG_INFINITY, f64::max);
         for m in self.members.iter_mut().flatten() {
             m.log_evidence -= best;
         }
@@ -209,11 +153,7 @@ impl GlacBank {
             self.switches += 1;
         }
         for (i, slot) in self.members.iter_mut().enumerate() {
-            if i != self.leader
-                && slot
-                    .as_ref()
-                    .is_some_and(|m| m.log_evidence < -self.drop_nats)
-            {
+            if i != self.leader && slot.as_ref().is_some_and(|m| m.log_evidence < -self.drop_nats) {
                 let m = slot.take().expect("checked");
                 self.dropped_updates += m.glac.stats().filter_updates;
                 self.dropped_expanded += m.glac.stats().max_expanded_per_read;
@@ -237,20 +177,9 @@ impl Tracker for GlacBank {
     /// most one read cost: the sum of every member's most, a bound).
     fn stats(&self) -> TrackerStats {
         let mut stats = self.leader().glac.stats();
-        stats.filter_updates = self.dropped_updates
-            + self
-                .members
-                .iter()
-                .flatten()
-                .map(|m| m.glac.stats().filter_updates)
-                .sum::<u64>();
-        stats.max_expanded_per_read = self.dropped_expanded
-            + self
-                .members
-                .iter()
-                .flatten()
-                .map(|m| m.glac.stats().max_expanded_per_read)
-                .sum::<u64>();
+        stats.filter_updates = self.dropped_updates + self.members.iter().flatten().map(|m| m.glac.stats().filter_updates).sum::<u64>();
+        stats.max_expanded_per_read =
+            self.dropped_expanded + self.members.iter().flatten().map(|m| m.glac.stats().max_expanded_per_read).sum::<u64>();
         stats.measurements = self.measurements;
         stats
     }
@@ -304,36 +233,19 @@ mod tests {
         (0..n)
             .map(|k| {
                 let t = dt * k as f64;
-                let p = Vector3::new(
-                    0.7 + 0.2 * (0.5 * t).cos(),
-                    0.4 + 0.2 * (0.5 * t).sin(),
-                    0.0,
-                );
+                let p = Vector3::new(0.7 + 0.2 * (0.5 * t).cos(), 0.4 + 0.2 * (0.5 * t).sin(), 0.0);
                 let a = k % 4;
-                b[a] = rho * b[a]
-                    + bias * (1.0 - rho * rho).sqrt() * rng.sample::<f64, _>(StandardNormal);
+                b[a] = rho * b[a] + bias * (1.0 - rho * rho).sqrt() * rng.sample::<f64, _>(StandardNormal);
                 let d = (p - scene.antennas[a].position).norm();
                 let noise = white * rng.sample::<f64, _>(StandardNormal) + b[a];
-                let phase = crate::angle::wrap(
-                    scene.ideal_phase(a, 915.25e6, d) + noise,
-                    std::f64::consts::TAU,
-                );
-                Measurement::Phase(PhaseRead {
-                    time_s: t,
-                    antenna: a,
-                    frequency_hz: 915.25e6,
-                    phase_rad: phase,
-                })
+                let phase = crate::angle::wrap(scene.ideal_phase(a, 915.25e6, d) + noise, std::f64::consts::TAU);
+                Measurement::Phase(PhaseRead { time_s: t, antenna: a, frequency_hz: 915.25e6, phase_rad: phase })
             })
             .collect()
     }
 
     fn bank(scene: &Scene) -> GlacBank {
-        let params = GlacParams {
-            phase_noise_rad: Some(0.02),
-            bias_time_s: 1.0,
-            ..GlacParams::default()
-        };
+        let params = GlacParams { phase_noise_rad: Some(0.02), bias_time_s: 1.0, ..GlacParams::default() };
         GlacBank::new(scene.clone(), params, &[0.05, 0.4], 3.0, 20.0).unwrap()
     }
 
@@ -345,12 +257,7 @@ mod tests {
             bank.step(&m);
         }
         assert_eq!(bank.reported_level(), 0.05);
-        assert_eq!(
-            bank.levels().len(),
-            1,
-            "the large level is dropped: {:?}",
-            bank.levels()
-        );
+        assert_eq!(bank.levels().len(), 1, "the large level is dropped: {:?}", bank.levels());
     }
 
     #[test]
@@ -369,39 +276,23 @@ mod tests {
         let scene = scene();
         let data = reads(&scene, 12.0, 0.02, 0.0, 3);
         let mut bank = bank(&scene);
-        let mut single = Glac::new(
-            scene.clone(),
-            GlacParams {
-                phase_noise_rad: Some(0.02),
-                bias_time_s: 1.0,
-                bias_sigma_rad: 0.05,
-                ..GlacParams::default()
-            },
-        )
-        .unwrap();
+        let mut single =
+            Glac::new(scene.clone(), GlacParams { phase_noise_rad: Some(0.02), bias_time_s: 1.0, bias_sigma_rad: 0.05, ..GlacParams::default() })
+                .unwrap();
         let half = data.len() / 2;
         for m in &data[..half] {
             bank.step(m);
             single.step(m);
         }
-        assert_eq!(
-            bank.levels().len(),
-            1,
-            "dropped by half time: {:?}",
-            bank.levels()
-        );
-        let (bank_before, single_before) =
-            (bank.stats().filter_updates, single.stats().filter_updates);
+        assert_eq!(bank.levels().len(), 1, "dropped by half time: {:?}", bank.levels());
+        let (bank_before, single_before) = (bank.stats().filter_updates, single.stats().filter_updates);
         for m in &data[half..] {
             bank.step(m);
             single.step(m);
         }
         let bank_work = bank.stats().filter_updates - bank_before;
         let single_work = single.stats().filter_updates - single_before;
-        assert_eq!(
-            bank_work, single_work,
-            "the survivor is the lone tracker's twin"
-        );
+        assert_eq!(bank_work, single_work, "the survivor is the lone tracker's twin");
         bank.reset();
         assert_eq!(bank.levels().len(), 2, "a reset brings every level back");
         assert_eq!(bank.reported_level(), 0.05);

@@ -40,10 +40,7 @@ fn motion_kind(p: &GlacParams) -> Motion {
 }
 
 /// `[0, 1)`: the quick-stop threshold is a normalised likelihood below 1.
-const BELOW_ONE: Range = Range {
-    low: Bound::Inclusive(0.0),
-    high: Bound::Exclusive(1.0),
-};
+const BELOW_ONE: Range = Range { low: Bound::Inclusive(0.0), high: Bound::Exclusive(1.0) };
 
 /// The table of GLAC and its variants (`glac`, `glac-no-velocity`, ...).
 pub fn glac_table() -> Table<GlacParams> {

@@ -110,12 +110,8 @@ impl AntennaCandidates {
 
     /// Every candidate within `tolerance` (m) of `d`, nearest first.
     fn within(&self, d: f64, tolerance: f64) -> Vec<Candidate> {
-        let mut near: Vec<Candidate> = self
-            .candidates
-            .iter()
-            .copied()
-            .filter(|c| (c.distance - d).abs() <= tolerance)
-            .collect();
+        let mut near: Vec<Candidate> =
+            self.candidates.iter().copied().filter(|c| (c.distance - d).abs() <= tolerance).collect();
         near.sort_by(|a, b| (a.distance - d).abs().total_cmp(&(b.distance - d).abs()));
         if near.is_empty() {
             near.push(self.nearest(d));
@@ -140,9 +136,7 @@ pub fn initial_hypotheses(
     with_velocity: bool,
 ) -> Option<(f64, Vec<InitialHypothesis>)> {
     let mut search = InitialSearch::new(scene, reads, settings, range_sigma_m, with_velocity)?;
-    search
-        .advance(scene, &mut Budget::unlimited())
-        .expect("an unlimited budget completes the search")
+    search.advance(scene, &mut Budget::unlimited()).expect("an unlimited budget completes the search")
 }
 
 /// Work units (see [`Budget`]) of one trilateration of a candidate triple
@@ -205,10 +199,7 @@ const BLOCK: usize = 4096;
 
 impl<T> Default for Chunked<T> {
     fn default() -> Self {
-        Self {
-            blocks: Vec::new(),
-            len: 0,
-        }
+        Self { blocks: Vec::new(), len: 0 }
     }
 }
 
@@ -222,10 +213,7 @@ impl<T> Chunked<T> {
         } else if self.len % BLOCK == 0 {
             self.blocks.push(Vec::with_capacity(BLOCK));
         }
-        self.blocks
-            .last_mut()
-            .expect("a block was pushed")
-            .push(value);
+        self.blocks.last_mut().expect("a block was pushed").push(value);
         self.len += 1;
     }
 
@@ -263,9 +251,7 @@ impl PartialOrd for Ranked {
 }
 impl Ord for Ranked {
     fn cmp(&self, other: &Self) -> std::cmp::Ordering {
-        self.log_likelihood
-            .total_cmp(&other.log_likelihood)
-            .then(other.index.cmp(&self.index))
+        self.log_likelihood.total_cmp(&other.log_likelihood).then(other.index.cmp(&self.index))
     }
 }
 
@@ -284,19 +270,14 @@ impl InitialSearch {
         for m in reads {
             per_antenna[m.antenna].push(m);
         }
-        let usable: Vec<usize> = (0..n_antennas)
-            .filter(|&a| per_antenna[a].len() >= 2)
-            .collect();
+        let usable: Vec<usize> = (0..n_antennas).filter(|&a| per_antenna[a].len() >= 2).collect();
         if usable.len() < 3 {
             return None;
         }
         // t_x: the latest time at which every usable antenna has been read, so
         // the hypotheses start as late (as close to "now") as possible and one
         // antenna's value at t_x is a reading, not an interpolation.
-        let t_x = usable
-            .iter()
-            .map(|&a| per_antenna[a].last().unwrap().time_s)
-            .fold(f64::INFINITY, f64::min);
+        let t_x = usable.iter().map(|&a| per_antenna[a].last().unwrap().time_s).fold(f64::INFINITY, f64::min);
 
         let axes = scene.dimensions;
         let (usable, lists): (Vec<usize>, Vec<AntennaCandidates>) = usable
@@ -306,8 +287,7 @@ impl InitialSearch {
         if usable.len() < 3 || lists.iter().any(|l| l.candidates.is_empty()) {
             return None;
         }
-        let anchors: Vec<Vector3<f64>> =
-            usable.iter().map(|&a| scene.antennas[a].position).collect();
+        let anchors: Vec<Vector3<f64>> = usable.iter().map(|&a| scene.antennas[a].position).collect();
         let triple = best_triple(&anchors, axes)?;
         let r0 = range_sigma_m * range_sigma_m + settings.interpolation_sigma_m.powi(2);
         Some(Self {
@@ -319,10 +299,7 @@ impl InitialSearch {
             lists,
             triple,
             r0,
-            stage: Stage::Intersect {
-                first: 0,
-                second: 0,
-            },
+            stage: Stage::Intersect { first: 0, second: 0 },
             points: Chunked::default(),
             ranked: std::collections::BinaryHeap::new(),
             hypotheses: Chunked::default(),
@@ -334,24 +311,13 @@ impl InitialSearch {
     /// Runs the search on within `budget`: `None` while work is left (call
     /// again with the next read's budget), then the result of
     /// [`initial_hypotheses`].
-    pub fn advance(
-        &mut self,
-        scene: &Scene,
-        budget: &mut Budget,
-    ) -> Option<Option<(f64, Vec<InitialHypothesis>)>> {
+    pub fn advance(&mut self, scene: &Scene, budget: &mut Budget) -> Option<Option<(f64, Vec<InitialHypothesis>)>> {
         let axes = self.axes;
         let settings = &self.settings;
         let in_region = |p: &Vector3<f64>| {
-            scene
-                .region
-                .as_ref()
-                .is_none_or(|r| r.contains(p, settings.region_margin_m, axes))
+            scene.region.as_ref().is_none_or(|r| r.contains(p, settings.region_margin_m, axes))
         };
-        if let Stage::Intersect {
-            mut first,
-            mut second,
-        } = self.stage
-        {
+        if let Stage::Intersect { mut first, mut second } = self.stage {
             let tolerance = settings.residual_threshold_m;
             let [t0, t1, t2] = self.triple;
             let (l0, l1, l2) = (&self.lists[t0], &self.lists[t1], &self.lists[t2]);
@@ -371,15 +337,9 @@ impl InitialSearch {
                     }
                     for c2 in &l2.candidates {
                         if axes == 3 {
-                            if let Some(pair) = sphere_intersections(
-                                &a0,
-                                c0.distance,
-                                &a1,
-                                c1.distance,
-                                &a2,
-                                c2.distance,
-                                tolerance,
-                            ) {
+                            if let Some(pair) =
+                                sphere_intersections(&a0, c0.distance, &a1, c1.distance, &a2, c2.distance, tolerance)
+                            {
                                 for p in pair.into_iter().filter(in_region) {
                                     self.points.push(p);
                                 }
@@ -411,18 +371,10 @@ impl InitialSearch {
                     self.stage = Stage::Refine { next };
                     return None;
                 }
-                let (hypothesis, units) = self.refine(
-                    *self.points.get(next),
-                    &in_region,
-                    &mut distances,
-                    &mut rates,
-                );
+                let (hypothesis, units) = self.refine(*self.points.get(next), &in_region, &mut distances, &mut rates);
                 budget.spend(units);
                 if let Some(h) = hypothesis {
-                    self.ranked.push(Ranked {
-                        log_likelihood: h.log_likelihood,
-                        index: self.hypotheses.len(),
-                    });
+                    self.ranked.push(Ranked { log_likelihood: h.log_likelihood, index: self.hypotheses.len() });
                     self.hypotheses.push(Some(h));
                 }
                 next += 1;
@@ -435,11 +387,7 @@ impl InitialSearch {
         let md = settings.merge_distance_m;
         let cell = |p: &Vector3<f64>| {
             if md > 0.0 {
-                [
-                    (p.x / md).floor() as i64,
-                    (p.y / md).floor() as i64,
-                    (p.z / md).floor() as i64,
-                ]
+                [(p.x / md).floor() as i64, (p.y / md).floor() as i64, (p.z / md).floor() as i64]
             } else {
                 [0; 3]
             }
@@ -449,23 +397,16 @@ impl InitialSearch {
                 return None;
             }
             let Some(top) = self.ranked.pop() else { break };
-            let h = self
-                .hypotheses
-                .get_mut(top.index)
-                .take()
-                .expect("each hypothesis leaves the heap once");
+            let h = self.hypotheses.get_mut(top.index).take().expect("each hypothesis leaves the heap once");
             let p: Vector3<f64> = h.state.fixed_rows::<3>(0).into();
             let c = cell(&p);
             let kept = &self.kept;
             let near = (-1..=1).any(|dx| {
                 (-1..=1).any(|dy| {
                     (-1..=1).any(|dz| {
-                        self.grid
-                            .get(&[c[0] + dx, c[1] + dy, c[2] + dz])
-                            .is_some_and(|ids| {
-                                ids.iter()
-                                    .any(|&k| (kept[k].state.fixed_rows::<3>(0) - p).norm() <= md)
-                            })
+                        self.grid.get(&[c[0] + dx, c[1] + dy, c[2] + dz]).is_some_and(|ids| {
+                            ids.iter().any(|&k| (kept[k].state.fixed_rows::<3>(0) - p).norm() <= md)
+                        })
                     })
                 })
             });
@@ -475,11 +416,7 @@ impl InitialSearch {
             }
         }
         let kept = std::mem::take(&mut self.kept);
-        Some(if kept.is_empty() {
-            None
-        } else {
-            Some((self.t_x, kept))
-        })
+        Some(if kept.is_empty() { None } else { Some((self.t_x, kept)) })
     }
 
     /// Refines one intersection point (two rounds of "pick nearest
@@ -493,8 +430,7 @@ impl InitialSearch {
         distances: &mut [f64],
         rates: &mut [f64],
     ) -> (Option<InitialHypothesis>, u64) {
-        let (axes, lists, anchors, settings) =
-            (self.axes, &self.lists, &self.anchors, &self.settings);
+        let (axes, lists, anchors, settings) = (self.axes, &self.lists, &self.anchors, &self.settings);
         let mut p = start;
         for _ in 0..2 {
             for (k, list) in lists.iter().enumerate() {
@@ -532,14 +468,7 @@ impl InitialSearch {
         state.fixed_rows_mut::<3>(0).copy_from(&p);
         state.fixed_rows_mut::<3>(3).copy_from(&velocity);
         let units = (16 + 3 * combinations as u64 / 2).min(REFINE_MAX_UNITS);
-        (
-            Some(InitialHypothesis {
-                state,
-                log_likelihood,
-                max_residual_m: max_residual,
-            }),
-            units,
-        )
+        (Some(InitialHypothesis { state, log_likelihood, max_residual_m: max_residual }), units)
     }
 }
 
@@ -572,10 +501,7 @@ fn synchronise(
     t_x: f64,
     settings: &InitialState,
 ) -> Option<AntennaCandidates> {
-    let after = reads
-        .iter()
-        .position(|m| m.time_s > t_x)
-        .unwrap_or(reads.len());
+    let after = reads.iter().position(|m| m.time_s > t_x).unwrap_or(reads.len());
     let (ia, ib) = if after == 0 {
         (0, 1)
     } else if after >= reads.len() {
@@ -588,19 +514,10 @@ fn synchronise(
     if dt > settings.max_pair_gap_s {
         return None;
     }
-    let (res_a, s_a) = (
-        scene.distance_residue(antenna, ra.frequency_hz, ra.phase_rad),
-        scene.candidate_spacing(ra.frequency_hz),
-    );
-    let (res_b, s_b) = (
-        scene.distance_residue(antenna, rb.frequency_hz, rb.phase_rad),
-        scene.candidate_spacing(rb.frequency_hz),
-    );
+    let (res_a, s_a) = (scene.distance_residue(antenna, ra.frequency_hz, ra.phase_rad), scene.candidate_spacing(ra.frequency_hz));
+    let (res_b, s_b) = (scene.distance_residue(antenna, rb.frequency_hz, rb.phase_rad), scene.candidate_spacing(rb.frequency_hz));
     let (lo, hi) = scene.distance_bounds(antenna);
-    let (lo, hi) = (
-        (lo - settings.region_margin_m).max(0.0),
-        hi + settings.region_margin_m,
-    );
+    let (lo, hi) = ((lo - settings.region_margin_m).max(0.0), hi + settings.region_margin_m);
     let alpha = (t_x - ra.time_s) / dt;
     let reach = (settings.max_speed_m_s * dt).max(0.5 * s_b);
     let n_lo = ((lo - res_a) / s_a).floor().max(0.0) as i64;
@@ -616,18 +533,12 @@ fn synchronise(
             }
             let distance = d_a + alpha * (d_b - d_a);
             if distance >= lo && distance <= hi {
-                candidates.push(Candidate {
-                    distance,
-                    range_rate: (d_b - d_a) / dt,
-                });
+                candidates.push(Candidate { distance, range_rate: (d_b - d_a) / dt });
             }
         }
     }
     candidates.sort_by(|a, b| a.distance.total_cmp(&b.distance));
-    Some(AntennaCandidates {
-        candidates,
-        gap_s: dt,
-    })
+    Some(AntennaCandidates { candidates, gap_s: dt })
 }
 
 /// The antenna triple with the best geometry: the largest triangle (3D:
@@ -640,10 +551,7 @@ fn best_triple(anchors: &[Vector3<f64>], axes: usize) -> Option<[usize; 3]> {
     for i in 0..n {
         for j in i + 1..n {
             for k in j + 1..n {
-                let area = 0.5
-                    * (anchors[j] - anchors[i])
-                        .cross(&(anchors[k] - anchors[i]))
-                        .norm();
+                let area = 0.5 * (anchors[j] - anchors[i]).cross(&(anchors[k] - anchors[i])).norm();
                 if best.is_none_or(|(_, a)| area > a) {
                     best = Some(([i, j, k], area));
                 }
@@ -680,9 +588,7 @@ fn perimeter_centroid(
         centres[k] = Vector2::new(anchors[k].x, anchors[k].y);
         radii[k] = r2.sqrt();
     }
-    let pair = |i: usize, j: usize| {
-        circle_intersections(&centres[i], radii[i], &centres[j], radii[j], tolerance)
-    };
+    let pair = |i: usize, j: usize| circle_intersections(&centres[i], radii[i], &centres[j], radii[j], tolerance);
     let (p01, p12, p02) = (pair(0, 1)?, pair(1, 2)?, pair(0, 2)?);
     let mut best: Option<(f64, Vector2<f64>)> = None;
     for a in &p01 {
@@ -759,12 +665,7 @@ fn best_velocity(
 /// Least-squares velocity from projected velocities: eᵢ · V = ṙᵢ with eᵢ
 /// the unit vector from antenna i to the tag (Fig. 4b). 2D solves for
 /// (vx, vy) only. Returns zero when the geometry is singular.
-fn projected_velocity(
-    p: &Vector3<f64>,
-    anchors: &[Vector3<f64>],
-    rates: &[f64],
-    axes: usize,
-) -> Vector3<f64> {
+fn projected_velocity(p: &Vector3<f64>, anchors: &[Vector3<f64>], rates: &[f64], axes: usize) -> Vector3<f64> {
     let mut ata = Matrix3::<f64>::zeros();
     let mut atb = Vector3::<f64>::zeros();
     for (a, &rate) in anchors.iter().zip(rates) {
@@ -791,35 +692,14 @@ mod tests {
         let antennas = pos
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::new(p[0], p[1], 0.0),
-                phase_offset_rad: 0.7 * i as f64,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.7 * i as f64, role: Default::default() })
             .collect();
         let region = if dimensions == 3 {
-            Region {
-                min: Vector3::new(-0.5, -0.5, 0.05),
-                max: Vector3::new(1.5, 1.5, 1.5),
-            }
+            Region { min: Vector3::new(-0.5, -0.5, 0.05), max: Vector3::new(1.5, 1.5, 1.5) }
         } else {
-            Region {
-                min: Vector3::new(0.1, -0.5, 0.0),
-                max: Vector3::new(1.6, 1.5, 0.0),
-            }
+            Region { min: Vector3::new(0.1, -0.5, 0.0), max: Vector3::new(1.6, 1.5, 0.0) }
         };
-        Scene::new(
-            dimensions,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            0.1,
-            antennas,
-            Some(region),
-            vec![],
-        )
-        .unwrap()
+        Scene::new(dimensions, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
     }
 
     fn reads_for(scene: &Scene, p0: Vector3<f64>, v: Vector3<f64>, n: usize) -> Vec<PhaseRead> {
@@ -829,12 +709,7 @@ mod tests {
                 let a = k % scene.antennas.len();
                 let d = (p0 + v * t - scene.antennas[a].position).norm();
                 let f = 915.25e6;
-                PhaseRead {
-                    time_s: t,
-                    antenna: a,
-                    frequency_hz: f,
-                    phase_rad: scene.ideal_phase(a, f, d),
-                }
+                PhaseRead { time_s: t, antenna: a, frequency_hz: f, phase_rad: scene.ideal_phase(a, f, d) }
             })
             .collect()
     }
@@ -842,29 +717,19 @@ mod tests {
     #[test]
     fn noiseless_reads_contain_the_truth_3d_and_2d() {
         for (dims, p0, v) in [
-            (
-                3,
-                Vector3::new(0.36, 0.5, 0.71),
-                Vector3::new(0.1, -0.05, 0.08),
-            ),
+            (3, Vector3::new(0.36, 0.5, 0.71), Vector3::new(0.1, -0.05, 0.08)),
             (2, Vector3::new(0.6, 0.3, 0.0), Vector3::new(0.3, 0.2, 0.0)),
         ] {
             let scene = scene(dims);
             let reads = reads_for(&scene, p0, v, 12);
-            let (t_x, hyps) =
-                initial_hypotheses(&scene, &reads, &InitialState::default(), 0.0026, true).unwrap();
+            let (t_x, hyps) = initial_hypotheses(&scene, &reads, &InitialState::default(), 0.0026, true).unwrap();
             let truth = p0 + v * t_x;
             let best = hyps
                 .iter()
                 .map(|h| ((h.state.fixed_rows::<3>(0) - truth).norm(), h))
                 .min_by(|a, b| a.0.total_cmp(&b.0))
                 .unwrap();
-            assert!(
-                best.0 < 0.01,
-                "{dims}D: nearest initial position {} m off ({} hypotheses)",
-                best.0,
-                hyps.len()
-            );
+            assert!(best.0 < 0.01, "{dims}D: nearest initial position {} m off ({} hypotheses)", best.0, hyps.len());
             let dv = (best.1.state.fixed_rows::<3>(3) - v).norm();
             assert!(dv < 0.05, "{dims}D: velocity {dv} m/s off");
         }

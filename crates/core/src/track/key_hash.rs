@@ -62,10 +62,7 @@ mod tests {
         };
         let base = 0x8080_8080u64;
         // Four receivers: the low four bytes, each one tooth up or down.
-        let mut seen: Vec<u64> = (0..4)
-            .flat_map(|byte| [base + (1 << (8 * byte)), base - (1 << (8 * byte))])
-            .map(|k| hash(k) & 0xff)
-            .collect();
+        let mut seen: Vec<u64> = (0..4).flat_map(|byte| [base + (1 << (8 * byte)), base - (1 << (8 * byte))]).map(|k| hash(k) & 0xff).collect();
         seen.sort();
         seen.dedup();
         // 8 neighbouring keys in 8 of 256 buckets.
@@ -83,18 +80,12 @@ mod tests {
             BuildHasherDefault::<KeyHasher>::default().hash_one(c)
         };
         let mut seen: Vec<u64> = (-1..=1)
-            .flat_map(|x| {
-                (-1..=1).flat_map(move |y| (-1..=1).map(move |z| [x + 40, y - 7, z + 1000]))
-            })
+            .flat_map(|x| (-1..=1).flat_map(move |y| (-1..=1).map(move |z| [x + 40, y - 7, z + 1000])))
             .map(|c| hash(c) & 0x3ff)
             .collect();
         seen.sort();
         seen.dedup();
-        assert!(
-            seen.len() >= 25,
-            "27 neighbours in {} of 1024 buckets",
-            seen.len()
-        );
+        assert!(seen.len() >= 25, "27 neighbours in {} of 1024 buckets", seen.len());
         let mut map: CellMap<u32> = CellMap::default();
         map.insert([1, -2, 3], 7);
         assert_eq!(map.get(&[1, -2, 3]), Some(&7));

@@ -49,11 +49,7 @@ pub fn line_layout(antennas: &[Vector3<f64>]) -> Option<LineLayout> {
                 })
                 .collect();
             if n - off.len() >= 3 && off.len() == 1 {
-                return Some(LineLayout {
-                    origin: antennas[i],
-                    direction: u,
-                    free: antennas[off[0]],
-                });
+                return Some(LineLayout { origin: antennas[i], direction: u, free: antennas[off[0]] });
             }
         }
     }
@@ -62,13 +58,7 @@ pub fn line_layout(antennas: &[Vector3<f64>]) -> Option<LineLayout> {
 
 /// Every twin of `p` (m) with the off-line antenna's range shifted by k·`spacing`
 /// for 1 ≤ |k| ≤ `max_shift`, for which `keep` holds (e.g. inside the region).
-pub fn line_twins(
-    layout: &LineLayout,
-    p: &Vector3<f64>,
-    spacing: f64,
-    max_shift: i32,
-    keep: impl Fn(&Vector3<f64>) -> bool,
-) -> Vec<Vector3<f64>> {
+pub fn line_twins(layout: &LineLayout, p: &Vector3<f64>, spacing: f64, max_shift: i32, keep: impl Fn(&Vector3<f64>) -> bool) -> Vec<Vector3<f64>> {
     let u = layout.direction;
     let t = (p - layout.origin).dot(&u);
     let c = layout.origin + u * t;
@@ -115,15 +105,7 @@ mod tests {
     use super::*;
 
     fn paper() -> Vec<Vector3<f64>> {
-        [
-            [0.0, 0.0, 0.0],
-            [0.0, 0.3, 0.0],
-            [0.0, 0.8, 0.0],
-            [0.8, 0.8, 0.0],
-        ]
-        .iter()
-        .map(|p| Vector3::new(p[0], p[1], p[2]))
-        .collect()
+        [[0.0, 0.0, 0.0], [0.0, 0.3, 0.0], [0.0, 0.8, 0.0], [0.8, 0.8, 0.0]].iter().map(|p| Vector3::new(p[0], p[1], p[2])).collect()
     }
 
     #[test]
@@ -151,10 +133,7 @@ mod tests {
                 assert!(((q - a).norm() - (p - a).norm()).abs() < 1e-9);
             }
             let shift = ((q - antennas[3]).norm() - (p - antennas[3]).norm()) / s;
-            assert!(
-                (shift - shift.round()).abs() < 1e-9 && shift.round() != 0.0,
-                "{shift}"
-            );
+            assert!((shift - shift.round()).abs() < 1e-9 && shift.round() != 0.0, "{shift}");
             assert!(q.z > 0.05);
         }
     }

@@ -168,9 +168,7 @@ pub fn refine_on_teeth(
         x.z = geometry.plane_z;
     }
     for _ in 0..iterations {
-        let step = path_length_step(geometry, receivers, &x, |j, rx, _| {
-            teeth.get(j).map(|&n| rx.candidates.distance(n))
-        })?;
+        let step = path_length_step(geometry, receivers, &x, |j, rx, _| teeth.get(j).map(|&n| rx.candidates.distance(n)))?;
         if !(step.norm() < 5.0) {
             return None;
         }
@@ -227,11 +225,7 @@ pub fn follow_to_teeth(
             x += step;
         }
     }
-    let shifted: Vec<i64> = teeth
-        .iter()
-        .zip(shift)
-        .map(|(&n, &k)| n + k as i64)
-        .collect();
+    let shifted: Vec<i64> = teeth.iter().zip(shift).map(|(&n, &k)| n + k as i64).collect();
     refine_on_teeth(geometry, receivers, &shifted, &x, 3)
 }
 
@@ -273,10 +267,7 @@ fn approximate_evidence(
         normal[(2, 2)] = 1.0;
     }
     let Some(inverse) = normal.try_inverse() else {
-        out.resize(
-            lattice.len() / r.max(1),
-            (f64::NEG_INFINITY, Vector3::zeros()),
-        );
+        out.resize(lattice.len() / r.max(1), (f64::NEG_INFINITY, Vector3::zeros()));
         return;
     };
     // δx = (AᵀA)⁻¹ Aᵀ z = Σ_j p_j z_j with p_j = (AᵀA)⁻¹ a_j; the misfit is
@@ -292,11 +283,7 @@ fn approximate_evidence(
         let c = &receivers[j].candidates;
         lambda[j] = c.spacing_m / c.sigma_m;
         let base = c.weight(teeth[j], weight_floor).ln();
-        tof_of[j] = [
-            c.weight(teeth[j] - 1, weight_floor).ln() - base,
-            0.0,
-            c.weight(teeth[j] + 1, weight_floor).ln() - base,
-        ];
+        tof_of[j] = [c.weight(teeth[j] - 1, weight_floor).ln() - base, 0.0, c.weight(teeth[j] + 1, weight_floor).ln() - base];
     }
     for shift in lattice.chunks_exact(receivers.len()) {
         let (mut tof, mut zz) = (0.0, 0.0);
@@ -391,12 +378,7 @@ impl LobeEvidence {
     /// lobes are told apart by the envelope alone. After `ADOPT_AFTER`
     /// frames in a row with another set the evidence starts over on it.
     fn same_receivers(&mut self, receivers: &[Receiver]) -> bool {
-        let same = self.antennas.len() == receivers.len()
-            && self
-                .antennas
-                .iter()
-                .zip(receivers)
-                .all(|(a, r)| *a == r.antenna);
+        let same = self.antennas.len() == receivers.len() && self.antennas.iter().zip(receivers).all(|(a, r)| *a == r.antenna);
         if same && !self.lattice.is_empty() {
             self.other_set = 0;
             return true;
@@ -417,18 +399,8 @@ impl LobeEvidence {
     /// filter's estimate `estimate` (m), accumulated, and the decision.
     /// `in_region` rules lobes out. After a switch the evidence is re-based
     /// on the new lobe (shifts the lattice cannot express start at 0).
-    pub fn update(
-        &mut self,
-        frame: &LobeFrame<'_>,
-        estimate: &Vector3<f64>,
-        in_region: impl Fn(&Vector3<f64>) -> bool,
-    ) -> LobeDecision {
-        let LobeFrame {
-            geometry,
-            receivers,
-            weight_floor,
-            levels,
-        } = *frame;
+    pub fn update(&mut self, frame: &LobeFrame<'_>, estimate: &Vector3<f64>, in_region: impl Fn(&Vector3<f64>) -> bool) -> LobeDecision {
+        let LobeFrame { geometry, receivers, weight_floor, levels } = *frame;
         if !self.same_receivers(receivers) {
             // Skipped: the last frame's lobes (and their spread) stand.
             return LobeDecision::Stay;
@@ -441,15 +413,10 @@ impl LobeEvidence {
         }
         let teeth: Vec<i64> = receivers
             .iter()
-            .map(|rx| {
-                rx.candidates.nearest_index(
-                    bistatic_distance(estimate, &geometry.tx_position, &rx.position).0,
-                )
-            })
+            .map(|rx| rx.candidates.nearest_index(bistatic_distance(estimate, &geometry.tx_position, &rx.position).0))
             .collect();
         // One step: the estimate is a likelihood-weighted particle mean, already near its lobe's fit.
-        let x0 =
-            refine_on_teeth(geometry, receivers, &teeth, estimate, 1).map_or(*estimate, |f| f.0);
+        let x0 = refine_on_teeth(geometry, receivers, &teeth, estimate, 1).map_or(*estimate, |f| f.0);
         let moved = self.previous_x0.map_or(Vector3::zeros(), |p| x0 - p);
         self.previous_x0 = Some(x0);
         if moved.norm() > JUMP_M {
@@ -460,15 +427,7 @@ impl LobeEvidence {
         }
         let l0 = mixture_log_likelihood(geometry, receivers, &x0, weight_floor).0;
         let mut approx = std::mem::take(&mut self.scratch);
-        approximate_evidence(
-            geometry,
-            receivers,
-            &teeth,
-            &x0,
-            &self.lattice,
-            weight_floor,
-            &mut approx,
-        );
+        approximate_evidence(geometry, receivers, &teeth, &x0, &self.lattice, weight_floor, &mut approx);
 
         // The shifts worth an exact fit: highest accumulated + this frame's approximation.
         if !self.started {
@@ -493,22 +452,11 @@ impl LobeEvidence {
             let fit = match self.previous.iter().find(|p| p.0 == i) {
                 Some(&(_, x)) => refine_on_teeth(geometry, receivers, &shifted, &(x + moved), 2),
                 None => refine_on_teeth(geometry, receivers, &shifted, &(x0 + approx[i].1), 4)
-                    .or_else(|| {
-                        follow_to_teeth(
-                            geometry,
-                            receivers,
-                            &teeth,
-                            &self.lattice[i * r..(i + 1) * r],
-                            &x0,
-                        )
-                    }),
+                    .or_else(|| follow_to_teeth(geometry, receivers, &teeth, &self.lattice[i * r..(i + 1) * r], &x0)),
             };
-            let exact = fit.filter(|(x, _)| in_region(x)).map(|(x, _)| {
-                (
-                    mixture_log_likelihood(geometry, receivers, &x, weight_floor).0 - l0,
-                    x,
-                )
-            });
+            let exact = fit
+                .filter(|(x, _)| in_region(x))
+                .map(|(x, _)| (mixture_log_likelihood(geometry, receivers, &x, weight_floor).0 - l0, x));
             match exact {
                 Some((llr, x)) => {
                     approx[i].0 = llr;
@@ -531,9 +479,7 @@ impl LobeEvidence {
             .map(|&(i, x)| (self.evidence[i], i, x))
             .filter(|e| e.0 > levels.switch_nats)
             .max_by(|a, b| a.0.total_cmp(&b.0));
-        let Some((won, i, x)) = winner else {
-            return LobeDecision::Stay;
-        };
+        let Some((won, i, x)) = winner else { return LobeDecision::Stay };
         self.rebase(i, won);
         self.previous_x0 = None;
         LobeDecision::Switch(x - x0)
@@ -546,9 +492,7 @@ impl LobeEvidence {
         let r = self.antennas.len();
         let k: Vec<i8> = self.lattice[i * r..(i + 1) * r].to_vec();
         // Only on a switch: a linear search is fine.
-        let index = |shift: &[i8]| -> Option<usize> {
-            self.lattice.chunks_exact(r).position(|c| c == shift)
-        };
+        let index = |shift: &[i8]| -> Option<usize> { self.lattice.chunks_exact(r).position(|c| c == shift) };
         let old = self.evidence.clone();
         let mut sum = vec![0i8; r];
         for (m, shift) in self.lattice.chunks_exact(r).enumerate() {
@@ -570,18 +514,12 @@ impl LobeEvidence {
         if !self.started {
             return Matrix3::zeros();
         }
-        mixture_spread(
-            self.exact.iter().map(|&(i, x)| (x, self.evidence[i])),
-            about,
-        )
+        mixture_spread(self.exact.iter().map(|&(i, x)| (x, self.evidence[i])), about)
     }
 
     /// The largest accumulated evidence of any exactly evaluated lobe (nats; −∞ with none).
     pub fn strongest(&self) -> f64 {
-        self.exact
-            .iter()
-            .map(|&(i, _)| self.evidence[i])
-            .fold(f64::NEG_INFINITY, f64::max)
+        self.exact.iter().map(|&(i, _)| self.evidence[i]).fold(f64::NEG_INFINITY, f64::max)
     }
 }
 
@@ -591,13 +529,7 @@ pub(crate) mod tests {
     use crate::model::wideband::Candidates;
 
     pub(crate) fn geometry() -> HelperGeometry {
-        HelperGeometry {
-            tx: 0,
-            tx_position: Vector3::new(0.6, 0.0, 0.0),
-            bounds: vec![],
-            dimensions: 3,
-            plane_z: 0.0,
-        }
+        HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 }
     }
 
     const SPACING: f64 = 0.3276;
@@ -605,45 +537,23 @@ pub(crate) mod tests {
     /// Receivers of the outside layout (three in line with tx) whose combs
     /// put a tooth exactly on the path lengths of `tag`, with the envelope's
     /// best tooth `favour[j]` teeth off the truth on receiver j.
-    pub(crate) fn receivers(
-        tag: &Vector3<f64>,
-        sigma: f64,
-        favour: [i64; 4],
-        sharpness: f64,
-    ) -> Vec<Receiver> {
+    pub(crate) fn receivers(tag: &Vector3<f64>, sigma: f64, favour: [i64; 4], sharpness: f64) -> Vec<Receiver> {
         let g = geometry();
-        [
-            [0.0, 0.0, 0.0],
-            [0.4, 0.0, 0.0],
-            [0.8, 0.0, 0.0],
-            [0.6, 0.4, 0.0],
-        ]
-        .iter()
-        .enumerate()
-        .map(|(j, p)| {
-            let position = Vector3::new(p[0], p[1], p[2]);
-            let d = bistatic_distance(tag, &g.tx_position, &position).0;
-            // Teeth d − 5λ … d + 5λ: the truth is index 5.
-            let distances_m: Vec<f64> = (-5..=5).map(|n| d + n as f64 * SPACING).collect();
-            let mut weights: Vec<f64> = (0..11)
-                .map(|n| (-(sharpness) * ((n - 5 - favour[j]) as f64).powi(2)).exp())
-                .collect();
-            let total: f64 = weights.iter().sum();
-            weights.iter_mut().for_each(|w| *w /= total);
-            let best = (5 + favour[j]) as usize;
-            Receiver {
-                antenna: j + 1,
-                position,
-                candidates: Candidates {
-                    distances_m,
-                    weights,
-                    spacing_m: SPACING,
-                    sigma_m: sigma,
-                    best,
-                },
-            }
-        })
-        .collect()
+        [[0.0, 0.0, 0.0], [0.4, 0.0, 0.0], [0.8, 0.0, 0.0], [0.6, 0.4, 0.0]]
+            .iter()
+            .enumerate()
+            .map(|(j, p)| {
+                let position = Vector3::new(p[0], p[1], p[2]);
+                let d = bistatic_distance(tag, &g.tx_position, &position).0;
+                // Teeth d − 5λ … d + 5λ: the truth is index 5.
+                let distances_m: Vec<f64> = (-5..=5).map(|n| d + n as f64 * SPACING).collect();
+                let mut weights: Vec<f64> = (0..11).map(|n| (-(sharpness) * ((n - 5 - favour[j]) as f64).powi(2)).exp()).collect();
+                let total: f64 = weights.iter().sum();
+                weights.iter_mut().for_each(|w| *w /= total);
+                let best = (5 + favour[j]) as usize;
+                Receiver { antenna: j + 1, position, candidates: Candidates { distances_m, weights, spacing_m: SPACING, sigma_m: sigma, best } }
+            })
+            .collect()
     }
 
     #[test]
@@ -657,9 +567,7 @@ pub(crate) mod tests {
         assert!(!seen.contains(&&[0i8, 0, 0, 0][..]));
         // Beyond 6 receivers at most 3 non-zero entries.
         let big = shift_lattice(8);
-        assert!(big
-            .chunks_exact(8)
-            .all(|s| s.iter().filter(|&&v| v != 0).count() <= 3));
+        assert!(big.chunks_exact(8).all(|s| s.iter().filter(|&&v| v != 0).count() <= 3));
     }
 
     #[test]
@@ -667,14 +575,7 @@ pub(crate) mod tests {
         let tag = Vector3::new(0.8, 1.6, 0.8);
         let rx = receivers(&tag, 0.003, [0; 4], 1.0);
         let teeth = vec![5i64; 4];
-        let (x, chi2) = refine_on_teeth(
-            &geometry(),
-            &rx,
-            &teeth,
-            &(tag + Vector3::new(0.02, -0.03, 0.01)),
-            6,
-        )
-        .unwrap();
+        let (x, chi2) = refine_on_teeth(&geometry(), &rx, &teeth, &(tag + Vector3::new(0.02, -0.03, 0.01)), 6).unwrap();
         assert!((x - tag).norm() < 1e-6, "{x}");
         assert!(chi2 < 1e-6);
     }
@@ -690,16 +591,12 @@ pub(crate) mod tests {
         let g = geometry();
         let truth_teeth = vec![5i64; 4];
         let far_teeth = vec![5i64, 5, 5, 6];
-        let (far, chi2) =
-            refine_on_teeth(&g, &rx, &far_teeth, &Vector3::new(-0.32, 0.342, 1.70), 8)
-                .expect("the far lobe exists");
+        let (far, chi2) = refine_on_teeth(&g, &rx, &far_teeth, &Vector3::new(-0.32, 0.342, 1.70), 8).expect("the far lobe exists");
         assert!(chi2 < 1.0 && (far - tag).norm() > 1.0, "{far} {chi2}");
-        let (back, _) =
-            follow_to_teeth(&g, &rx, &far_teeth, &[0, 0, 0, -1], &far).expect("followed");
+        let (back, _) = follow_to_teeth(&g, &rx, &far_teeth, &[0, 0, 0, -1], &far).expect("followed");
         assert!((back - tag).norm() < 1e-3, "{back}");
         // And from the truth out to the far lobe.
-        let (out, _) =
-            follow_to_teeth(&g, &rx, &truth_teeth, &[0, 0, 0, 1], &tag).expect("followed");
+        let (out, _) = follow_to_teeth(&g, &rx, &truth_teeth, &[0, 0, 0, 1], &tag).expect("followed");
         assert!((out - far).norm() < 1e-3, "{out}");
     }
 
@@ -713,24 +610,11 @@ pub(crate) mod tests {
         let tag = Vector3::new(0.8, 1.6, 0.8);
         let rx = receivers(&tag, 0.003, [0, 0, 0, 1], 2.0);
         let g = geometry();
-        let levels = LobeLevels {
-            switch_nats: 10.0,
-            floor_nats: 20.0,
-            frame_cap_nats: 5.0,
-        };
+        let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
         let mut switched = None;
         for frame in 0..20 {
-            if let LobeDecision::Switch(d) = lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &rx,
-                    weight_floor: 1e-3,
-                    levels: &levels,
-                },
-                &tag,
-                |_| true,
-            ) {
+            if let LobeDecision::Switch(d) = lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true) {
                 switched = Some((frame, d));
                 break;
             }
@@ -739,13 +623,7 @@ pub(crate) mod tests {
         // Not before (B is not involved at the start) h / c = 2 frames, then 3.
         assert!(frame >= 2, "{frame}");
         let moved = tag + d;
-        let teeth: Vec<i64> = rx
-            .iter()
-            .map(|r| {
-                r.candidates
-                    .nearest_index(bistatic_distance(&moved, &g.tx_position, &r.position).0)
-            })
-            .collect();
+        let teeth: Vec<i64> = rx.iter().map(|r| r.candidates.nearest_index(bistatic_distance(&moved, &g.tx_position, &r.position).0)).collect();
         assert_ne!(teeth, vec![5; 4]);
         // The envelope's favourite is better than the old lobe.
         let l = |p: &Vector3<f64>| mixture_log_likelihood(&g, &rx, p, 1e-3).0;
@@ -757,41 +635,13 @@ pub(crate) mod tests {
         let tag = Vector3::new(0.45, 1.2, 0.6);
         let rx = receivers(&tag, 0.003, [0; 4], 1.0);
         let g = geometry();
-        let levels = LobeLevels {
-            switch_nats: 10.0,
-            floor_nats: 20.0,
-            frame_cap_nats: 5.0,
-        };
+        let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
-        assert_eq!(
-            lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &rx,
-                    weight_floor: 1e-3,
-                    levels: &levels
-                },
-                &tag,
-                |_| true
-            ),
-            LobeDecision::Stay
-        );
+        assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
         let first = lobes.spread(&tag).trace();
         // The weakest preference here is 1 nat per frame: 20 frames to the floor.
         for _ in 0..25 {
-            assert_eq!(
-                lobes.update(
-                    &LobeFrame {
-                        geometry: &g,
-                        receivers: &rx,
-                        weight_floor: 1e-3,
-                        levels: &levels
-                    },
-                    &tag,
-                    |_| true
-                ),
-                LobeDecision::Stay
-            );
+            assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
         }
         let last = lobes.spread(&tag).trace();
         assert!(last < first && last < 1e-8, "{first} -> {last}");
@@ -805,23 +655,10 @@ pub(crate) mod tests {
         let tag = Vector3::new(0.45, 1.2, 0.6);
         let rx = receivers(&tag, 0.003, [0; 4], 0.0);
         let g = geometry();
-        let levels = LobeLevels {
-            switch_nats: 10.0,
-            floor_nats: 20.0,
-            frame_cap_nats: 5.0,
-        };
+        let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
         for _ in 0..5 {
-            lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &rx,
-                    weight_floor: 1e-3,
-                    levels: &levels,
-                },
-                &tag,
-                |_| true,
-            );
+            lobes.update(&LobeFrame { geometry: &g, receivers: &rx, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         let sigma = lobes.spread(&tag).trace().sqrt();
         assert!(sigma > 0.05, "{sigma}");
@@ -831,59 +668,22 @@ pub(crate) mod tests {
     fn a_frame_without_one_receiver_neither_resets_nor_switches() {
         let tag = Vector3::new(0.8, 1.6, 0.8);
         let g = geometry();
-        let levels = LobeLevels {
-            switch_nats: 10.0,
-            floor_nats: 20.0,
-            frame_cap_nats: 5.0,
-        };
+        let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
         let right = receivers(&tag, 0.003, [0; 4], 2.0);
         for _ in 0..10 {
-            lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &right,
-                    weight_floor: 1e-3,
-                    levels: &levels,
-                },
-                &tag,
-                |_| true,
-            );
+            lobes.update(&LobeFrame { geometry: &g, receivers: &right, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         let before = lobes.strongest();
         // Three receivers that favour another lobe, for a few frames.
-        let three: Vec<Receiver> = receivers(&tag, 0.003, [1, 1, 1, 1], 50.0)
-            .into_iter()
-            .take(3)
-            .collect();
+        let three: Vec<Receiver> = receivers(&tag, 0.003, [1, 1, 1, 1], 50.0).into_iter().take(3).collect();
         for _ in 0..5 {
-            assert_eq!(
-                lobes.update(
-                    &LobeFrame {
-                        geometry: &g,
-                        receivers: &three,
-                        weight_floor: 1e-3,
-                        levels: &levels
-                    },
-                    &tag,
-                    |_| true
-                ),
-                LobeDecision::Stay
-            );
+            assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &three, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
         }
         assert_eq!(lobes.strongest(), before);
         // A receiver set that persists is adopted.
         for _ in 0..ADOPT_AFTER + 2 {
-            lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &three,
-                    weight_floor: 1e-3,
-                    levels: &levels,
-                },
-                &tag,
-                |_| true,
-            );
+            lobes.update(&LobeFrame { geometry: &g, receivers: &three, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         assert_eq!(lobes.antennas.len(), 3);
     }
@@ -892,39 +692,14 @@ pub(crate) mod tests {
     fn one_frame_cannot_switch() {
         let tag = Vector3::new(0.8, 1.6, 0.8);
         let g = geometry();
-        let levels = LobeLevels {
-            switch_nats: 10.0,
-            floor_nats: 20.0,
-            frame_cap_nats: 5.0,
-        };
+        let levels = LobeLevels { switch_nats: 10.0, floor_nats: 20.0, frame_cap_nats: 5.0 };
         let mut lobes = LobeEvidence::default();
         let right = receivers(&tag, 0.003, [0; 4], 2.0);
         let wrong = receivers(&tag, 0.003, [0, 0, 0, 1], 50.0);
         for _ in 0..10 {
-            lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &right,
-                    weight_floor: 1e-3,
-                    levels: &levels,
-                },
-                &tag,
-                |_| true,
-            );
+            lobes.update(&LobeFrame { geometry: &g, receivers: &right, weight_floor: 1e-3, levels: &levels }, &tag, |_| true);
         }
         // One frame with an overwhelming (corrupt) preference elsewhere.
-        assert_eq!(
-            lobes.update(
-                &LobeFrame {
-                    geometry: &g,
-                    receivers: &wrong,
-                    weight_floor: 1e-3,
-                    levels: &levels
-                },
-                &tag,
-                |_| true
-            ),
-            LobeDecision::Stay
-        );
+        assert_eq!(lobes.update(&LobeFrame { geometry: &g, receivers: &wrong, weight_floor: 1e-3, levels: &levels }, &tag, |_| true), LobeDecision::Stay);
     }
 }

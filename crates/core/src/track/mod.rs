@@ -14,8 +14,8 @@
 //! [`registry`]). Variants of a tracker are named constructors in
 //! [`variants`]. Parameters: [`glac_params`], [`turbotrack_params`].
 
-mod bias;
 pub mod bistatic;
+mod bias;
 mod candidates;
 mod ellipse_intersection;
 pub mod far_lobes;
@@ -25,19 +25,19 @@ pub mod glac_params;
 mod initial;
 mod key_hash;
 mod line_twins;
-pub mod lobes;
 mod read_budget;
-pub mod registry;
 pub mod resting_average;
+pub mod lobes;
+pub mod registry;
 mod rfind;
 mod turbotrack;
 pub mod turbotrack_params;
 mod variants;
 
 pub use candidates::nearest_candidate;
-pub use ellipse_intersection::EllipseIntersection;
 pub use glac::{Glac, GlacParams, Inference, Likelihood};
 pub use initial::{initial_hypotheses, InitialHypothesis, InitialState};
+pub use ellipse_intersection::EllipseIntersection;
 pub use rfind::RFind;
 pub use turbotrack::{InitialSampling, Proposal, TurboTrack, TurboTrackParams, WidebandLikelihood};
 pub use variants::GAUSSIAN_PF_SIGMA_M;
@@ -161,23 +161,12 @@ impl Estimate {
         for k in 3..6 {
             c[k * 6 + k] = f64::NAN;
         }
-        Self {
-            time_s,
-            position: [position.x, position.y, position.z],
-            velocity,
-            covariance: c,
-            hypotheses,
-            weight,
-        }
+        Self { time_s, position: [position.x, position.y, position.z], velocity, covariance: c, hypotheses, weight }
     }
 
     /// 1-sigma position uncertainty per axis, metres.
     pub fn position_sigma(&self) -> [f64; 3] {
-        [
-            self.covariance[0].sqrt(),
-            self.covariance[7].sqrt(),
-            self.covariance[14].sqrt(),
-        ]
+        [self.covariance[0].sqrt(), self.covariance[7].sqrt(), self.covariance[14].sqrt()]
     }
 }
 
@@ -263,19 +252,13 @@ pub struct Params {
 
 impl From<GlacParams> for Params {
     fn from(glac: GlacParams) -> Self {
-        Self {
-            glac,
-            ..Default::default()
-        }
+        Self { glac, ..Default::default() }
     }
 }
 
 impl From<TurboTrackParams> for Params {
     fn from(turbotrack: TurboTrackParams) -> Self {
-        Self {
-            turbotrack,
-            ..Default::default()
-        }
+        Self { turbotrack, ..Default::default() }
     }
 }
 
@@ -284,16 +267,11 @@ impl From<TurboTrackParams> for Params {
 /// the parameters that define a variant on top of `params` (GLAC sec.
 /// 5.2.2–5.2.3; TurboTrack thesis §7.2).
 pub fn make(name: &str, scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
-    let build = registry::method(name)?
-        .build
-        .ok_or_else(|| Error::NotInCore(name.to_string()))?;
+    let build = registry::method(name)?.build.ok_or_else(|| Error::NotInCore(name.to_string()))?;
     build(scene, params)
 }
 
 /// Runs a tracker over measurements (time-ordered) and collects estimates.
 pub fn run(tracker: &mut dyn Tracker, measurements: &[Measurement]) -> Vec<Estimate> {
-    measurements
-        .iter()
-        .filter_map(|m| tracker.step(m))
-        .collect()
+    measurements.iter().filter_map(|m| tracker.step(m)).collect()
 }

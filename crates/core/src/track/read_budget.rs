@@ -30,11 +30,7 @@ pub struct Budget {
 
 impl Budget {
     pub fn new(limit: u64) -> Self {
-        Self {
-            left: limit,
-            spent: 0,
-            overhead: 0,
-        }
+        Self { left: limit, spent: 0, overhead: 0 }
     }
 
     /// Unlimited (the one-shot entry points).

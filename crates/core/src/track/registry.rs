@@ -25,8 +25,7 @@ use crate::error::{Error, Result};
 use crate::params::{Schemas, Value};
 use crate::scene::Scene;
 
-#[path = "trilateration_ekf.rs"]
-mod trilateration_ekf;
+#[path = "trilateration_ekf.rs"] mod trilateration_ekf;
 
 /// The hardware a method's input comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -123,14 +122,7 @@ impl Method {
 
 /// A COTS-reader method over phase reads with the GLAC table.
 const fn cots(name: &'static str, build: Build, description: &'static str) -> Method {
-    Method {
-        name,
-        pipeline: Pipeline::Cots,
-        input: Input::Reads,
-        parameters: Parameters::Glac,
-        build: Some(build),
-        description,
-    }
+    Method { name, pipeline: Pipeline::Cots, input: Input::Reads, parameters: Parameters::Glac, build: Some(build), description }
 }
 
 /// A localization-helper method over wideband frames with the TurboTrack table.
@@ -182,10 +174,7 @@ pub const METHODS: &[Method] = &[
 
 /// The registered method `name`; an error naming the known ones otherwise.
 pub fn method(name: &str) -> Result<&'static Method> {
-    METHODS
-        .iter()
-        .find(|m| m.name == name)
-        .ok_or_else(|| Error::UnknownMethod(name.to_string(), names().join(", ")))
+    METHODS.iter().find(|m| m.name == name).ok_or_else(|| Error::UnknownMethod(name.to_string(), names().join(", ")))
 }
 
 /// Every registered name, in listing order.
@@ -218,8 +207,8 @@ mod tests {
     use super::*;
     use crate::params::{Kind, Schema};
     use crate::scene::{Antenna, Region, Role};
-    use crate::track::{GlacParams, TurboTrackParams};
     use nalgebra::Vector3;
+    use crate::track::{GlacParams, TurboTrackParams};
 
     fn core_tables() -> Vec<Schemas> {
         vec![glac_table().schemas(), turbotrack_table().schemas()]
@@ -230,12 +219,8 @@ mod tests {
         match (&schema.kind, &schema.default) {
             (Kind::Bool, Value::Bool(b)) => Value::Bool(!b),
             (Kind::Choice(c), _) => Value::Text(c.last().unwrap().clone()),
-            (Kind::Integer, Value::Integer(i)) if schema.range.contains((*i + 1) as f64) => {
-                Value::Integer(*i + 1)
-            }
-            (Kind::Float, Value::Float(x)) if schema.range.contains(x * 0.5) && *x != 0.0 => {
-                Value::Float(x * 0.5)
-            }
+            (Kind::Integer, Value::Integer(i)) if schema.range.contains((*i + 1) as f64) => Value::Integer(*i + 1),
+            (Kind::Float, Value::Float(x)) if schema.range.contains(x * 0.5) && *x != 0.0 => Value::Float(x * 0.5),
             (Kind::Float, Value::None) => Value::Float(0.5),
             _ => schema.default.clone(),
         }
@@ -248,24 +233,14 @@ mod tests {
             assert!(!all[..i].contains(n), "{n} registered twice");
         }
         for m in METHODS.iter().filter(|m| m.in_core()) {
-            assert_eq!(
-                params(m.name, &[]).unwrap(),
-                Params::default(),
-                "{}",
-                m.name
-            );
+            assert_eq!(params(m.name, &[]).unwrap(), Params::default(), "{}", m.name);
             assert_eq!(schemas(m.name).unwrap().label, m.name);
         }
     }
 
     /// A 3D scene of four antennas; a helper's when `roles` is given.
     fn scene(roles: Option<[Role; 4]>) -> Scene {
-        let positions = [
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.2],
-            [0.0, 1.0, 0.4],
-            [1.0, 1.0, 1.0],
-        ];
+        let positions = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.2], [0.0, 1.0, 0.4], [1.0, 1.0, 1.0]];
         let antennas = (0..4)
             .map(|i| Antenna {
                 id: i as i64 + 1,
@@ -274,21 +249,8 @@ mod tests {
                 role: roles.map_or(Role::TxRx, |r| r[i]),
             })
             .collect();
-        let region = Region {
-            min: Vector3::new(0.1, 0.1, 0.1),
-            max: Vector3::new(0.9, 0.9, 0.9),
-        };
-        Scene::new(
-            3,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            0.1,
-            antennas,
-            Some(region),
-            Vec::new(),
-        )
-        .unwrap()
+        let region = Region { min: Vector3::new(0.1, 0.1, 0.1), max: Vector3::new(0.9, 0.9, 0.9) };
+        Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), Vec::new()).unwrap()
     }
 
     #[test]
@@ -296,58 +258,29 @@ mod tests {
         let cots = scene(None);
         let helper = scene(Some([Role::Tx, Role::Rx, Role::Rx, Role::Rx]));
         for m in METHODS.iter().filter(|m| m.in_core()) {
-            let s = if m.pipeline == Pipeline::Helper {
-                &helper
-            } else {
-                &cots
-            };
+            let s = if m.pipeline == Pipeline::Helper { &helper } else { &cots };
             let params = params(m.name, &[]).unwrap();
-            let mut tracker = super::super::make(m.name, s, &params)
-                .unwrap_or_else(|e| panic!("{}: {e}", m.name));
+            let mut tracker = super::super::make(m.name, s, &params).unwrap_or_else(|e| panic!("{}: {e}", m.name));
             assert_eq!(tracker.stats().measurements, 0, "{}", m.name);
             tracker.reset();
         }
-        assert_eq!(
-            super::super::make("marvel", &cots, &Params::default()).err(),
-            Some(Error::NotInCore("marvel".into()))
-        );
-        assert!(matches!(
-            super::super::make("nope", &cots, &Params::default()),
-            Err(Error::UnknownMethod(..))
-        ));
+        assert_eq!(super::super::make("marvel", &cots, &Params::default()).err(), Some(Error::NotInCore("marvel".into())));
+        assert!(matches!(super::super::make("nope", &cots, &Params::default()), Err(Error::UnknownMethod(..))));
     }
 
     #[test]
     fn unknown_methods_name_the_known_ones() {
         let message = schemas("nope").unwrap_err().to_string();
-        assert!(
-            message.contains("unknown method 'nope'")
-                && message.contains("glac")
-                && message.contains("marvel"),
-            "{message}"
-        );
-        assert_eq!(
-            params("marvel", &[]).unwrap_err(),
-            Error::NotInCore("marvel".into())
-        );
+        assert!(message.contains("unknown method 'nope'") && message.contains("glac") && message.contains("marvel"), "{message}");
+        assert_eq!(params("marvel", &[]).unwrap_err(), Error::NotInCore("marvel".into()));
     }
 
     #[test]
     fn every_default_is_within_its_own_range() {
         for table in core_tables() {
             for row in &table.rows {
-                assert_eq!(
-                    row.convert(&row.default).as_ref(),
-                    Ok(&row.default),
-                    "{}: default {}",
-                    row.name,
-                    row.default
-                );
-                assert!(
-                    !row.description.is_empty() && !row.description.contains('\n'),
-                    "{}",
-                    row.name
-                );
+                assert_eq!(row.convert(&row.default).as_ref(), Ok(&row.default), "{}: default {}", row.name, row.default);
+                assert!(!row.description.is_empty() && !row.description.contains('\n'), "{}", row.name);
             }
             assert!(Schemas::from_rows(&table.label, table.rows.clone()).is_ok());
         }
@@ -355,14 +288,10 @@ mod tests {
 
     #[test]
     fn every_name_can_be_set_and_read_back() {
-        for (label, table) in [
-            ("glac", glac_table().schemas()),
-            ("turbotrack", turbotrack_table().schemas()),
-        ] {
+        for (label, table) in [("glac", glac_table().schemas()), ("turbotrack", turbotrack_table().schemas())] {
             for row in &table.rows {
                 let value = another_value(row);
-                let built = params(label, &[(row.name.clone(), value.clone())])
-                    .unwrap_or_else(|e| panic!("{}: {e}", row.name));
+                let built = params(label, &[(row.name.clone(), value.clone())]).unwrap_or_else(|e| panic!("{}: {e}", row.name));
                 let read = if label == "glac" {
                     glac_table().get(&built.glac, &row.name)
                 } else {
@@ -374,12 +303,7 @@ mod tests {
                     Value::Text(s) => s.clone(),
                     other => other.to_string(),
                 };
-                assert_eq!(
-                    row.parse(&text).unwrap(),
-                    value,
-                    "{} from {text:?}",
-                    row.name
-                );
+                assert_eq!(row.parse(&text).unwrap(), value, "{} from {text:?}", row.name);
             }
         }
     }
@@ -395,14 +319,8 @@ mod tests {
         assert_eq!(d("phase_noise_rad"), Value::None);
         assert_eq!(d("manoeuvre_q"), Value::Float(1.0));
         let turbo = turbotrack_table().schemas();
-        assert_eq!(
-            turbo.find("particles").unwrap().default,
-            Value::Integer(TurboTrackParams::default().particles as i64)
-        );
-        assert_eq!(
-            turbo.find("candidate_weighting").unwrap().default,
-            Value::Text("likelihood".into())
-        );
+        assert_eq!(turbo.find("particles").unwrap().default, Value::Integer(TurboTrackParams::default().particles as i64));
+        assert_eq!(turbo.find("candidate_weighting").unwrap().default, Value::Text("likelihood".into()));
     }
 
     #[test]
@@ -423,43 +341,21 @@ mod tests {
             match glac_table().set_text(&mut p, name, text) {
                 Err(Error::Parameter { name: n, reason }) => {
                     assert_eq!(&n, name);
-                    assert!(
-                        reason.contains(fragment) && reason.to_lowercase().contains(text),
-                        "{name}={text}: {reason}"
-                    );
+                    assert!(reason.contains(fragment) && reason.to_lowercase().contains(text), "{name}={text}: {reason}");
                 }
                 other => panic!("{name}={text}: {other:?}"),
             }
         }
         let mut p = TurboTrackParams::default();
-        assert!(turbotrack_table()
-            .set_text(&mut p, "resample_threshold", "1.5")
-            .is_err());
+        assert!(turbotrack_table().set_text(&mut p, "resample_threshold", "1.5").is_err());
         assert!(turbotrack_table().set_text(&mut p, "seed", "-1").is_err());
     }
 
     #[test]
     fn motion_and_q_commute() {
-        let a = params(
-            "glac",
-            &[
-                ("motion".into(), Value::Text("random-walk".into())),
-                ("q".into(), Value::Float(0.3)),
-            ],
-        )
-        .unwrap();
-        let b = params(
-            "glac",
-            &[
-                ("q".into(), Value::Float(0.3)),
-                ("motion".into(), Value::Text("random-walk".into())),
-            ],
-        )
-        .unwrap();
+        let a = params("glac", &[("motion".into(), Value::Text("random-walk".into())), ("q".into(), Value::Float(0.3))]).unwrap();
+        let b = params("glac", &[("q".into(), Value::Float(0.3)), ("motion".into(), Value::Text("random-walk".into()))]).unwrap();
         assert_eq!(a, b);
-        assert_eq!(
-            a.glac.motion,
-            crate::model::MotionModel::RandomWalk { q: 0.3 }
-        );
+        assert_eq!(a.glac.motion, crate::model::MotionModel::RandomWalk { q: 0.3 });
     }
 }

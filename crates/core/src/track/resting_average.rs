@@ -55,10 +55,7 @@ pub struct ChannelAverage {
 
 impl ChannelAverage {
     pub fn new(time_constant_s: f64) -> Self {
-        Self {
-            time_constant_s,
-            ..Default::default()
-        }
+        Self { time_constant_s, ..Default::default() }
     }
 
     pub fn clear(&mut self) {
@@ -75,8 +72,7 @@ impl ChannelAverage {
         if f == 0 || frame.h.len() != frame.rx.len() * f {
             return;
         }
-        if self.rx.is_empty() || frame.tx != self.tx || frame.frequencies_hz != self.frequencies_hz
-        {
+        if self.rx.is_empty() || frame.tx != self.tx || frame.frequencies_hz != self.frequencies_hz {
             self.clear();
             self.tx = frame.tx;
             self.frequencies_hz.clone_from(&frame.frequencies_hz);
@@ -96,10 +92,7 @@ impl ChannelAverage {
                     self.rx.len() - 1
                 }
             };
-            self.sums[slot]
-                .iter_mut()
-                .zip(&frame.h[r * f..(r + 1) * f])
-                .for_each(|(s, h)| *s += h);
+            self.sums[slot].iter_mut().zip(&frame.h[r * f..(r + 1) * f]).for_each(|(s, h)| *s += h);
             self.weights[slot] += 1.0;
         }
     }
@@ -114,19 +107,8 @@ impl ChannelAverage {
         if self.rx.is_empty() {
             return None;
         }
-        let h = self
-            .sums
-            .iter()
-            .zip(&self.weights)
-            .flat_map(|(sum, w)| sum.iter().map(move |h| h / *w))
-            .collect();
-        Some(WidebandFrame {
-            time_s: self.time_s,
-            tx: self.tx,
-            rx: self.rx.clone(),
-            frequencies_hz: self.frequencies_hz.clone(),
-            h,
-        })
+        let h = self.sums.iter().zip(&self.weights).flat_map(|(sum, w)| sum.iter().map(move |h| h / *w)).collect();
+        Some(WidebandFrame { time_s: self.time_s, tx: self.tx, rx: self.rx.clone(), frequencies_hz: self.frequencies_hz.clone(), h })
     }
 }
 
@@ -149,9 +131,7 @@ pub fn averaged_receivers(
     fixed_sigma_m: Option<f64>,
     near: &Vector3<f64>,
 ) -> Vec<Receiver> {
-    let Some(frame) = average.frame() else {
-        return Vec::new();
-    };
+    let Some(frame) = average.frame() else { return Vec::new() };
     let shrink = average.frames().max(1.0).sqrt().recip();
     let mut params = candidates.clone();
     params.min_sigma_m *= shrink;
@@ -162,21 +142,11 @@ pub fn averaged_receivers(
         let predicted = bistatic_distance(near, &geometry.tx_position, &position).0;
         let (lo, hi) = geometry.bounds[antenna];
         let (lo, hi) = (lo.max(predicted - SEARCH_M), hi.min(predicted + SEARCH_M));
-        if let Some(mut c) = distance_candidates(
-            &frame.frequencies_hz,
-            &frame.h[r * f..(r + 1) * f],
-            lo,
-            hi,
-            &params,
-        ) {
+        if let Some(mut c) = distance_candidates(&frame.frequencies_hz, &frame.h[r * f..(r + 1) * f], lo, hi, &params) {
             if let Some(s) = fixed_sigma_m {
                 c.sigma_m = s * shrink;
             }
-            receivers.push(Receiver {
-                antenna,
-                position,
-                candidates: c,
-            });
+            receivers.push(Receiver { antenna, position, candidates: c });
         }
     }
     receivers
@@ -185,11 +155,7 @@ pub fn averaged_receivers(
 /// The Gaussian posterior covariance of one frame's receivers at `p`, m²:
 /// `(Σ_j g_j g_jᵀ / σ_j²)⁻¹` (planar scenes: the x–y block, z left at 0).
 /// None when the geometry is singular there.
-pub fn frame_covariance(
-    geometry: &HelperGeometry,
-    receivers: &[Receiver],
-    p: &Vector3<f64>,
-) -> Option<Matrix3<f64>> {
+pub fn frame_covariance(geometry: &HelperGeometry, receivers: &[Receiver], p: &Vector3<f64>) -> Option<Matrix3<f64>> {
     let planar = geometry.dimensions == 2;
     let mut information = Matrix3::zeros();
     for rx in receivers {
@@ -207,13 +173,7 @@ mod tests {
     use super::*;
 
     fn frame(time_s: f64, value: f64) -> WidebandFrame {
-        WidebandFrame {
-            time_s,
-            tx: 0,
-            rx: vec![1],
-            frequencies_hz: vec![9e8, 9.1e8],
-            h: vec![Complex::new(value, 0.0); 2],
-        }
+        WidebandFrame { time_s, tx: 0, rx: vec![1], frequencies_hz: vec![9e8, 9.1e8], h: vec![Complex::new(value, 0.0); 2] }
     }
 
     /// The average of frames is their weighted mean, the older ones
@@ -242,31 +202,10 @@ mod tests {
     #[test]
     fn frame_covariance_inverts_the_information() {
         use crate::model::wideband::Candidates;
-        let geometry = HelperGeometry {
-            tx: 0,
-            tx_position: Vector3::new(0.0, 0.0, 0.0),
-            bounds: vec![],
-            dimensions: 3,
-            plane_z: 0.0,
-        };
-        let candidates = Candidates {
-            distances_m: vec![2.0],
-            weights: vec![1.0],
-            spacing_m: 0.33,
-            sigma_m: 0.003,
-            best: 0,
-        };
-        let at = |x: f64, y: f64, z: f64| Receiver {
-            antenna: 1,
-            position: Vector3::new(x, y, z),
-            candidates: candidates.clone(),
-        };
-        let receivers = vec![
-            at(1.0, 0.0, 0.0),
-            at(0.0, 1.0, 0.0),
-            at(-1.0, 0.0, 0.0),
-            at(0.0, 0.0, 1.0),
-        ];
+        let geometry = HelperGeometry { tx: 0, tx_position: Vector3::new(0.0, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 };
+        let candidates = Candidates { distances_m: vec![2.0], weights: vec![1.0], spacing_m: 0.33, sigma_m: 0.003, best: 0 };
+        let at = |x: f64, y: f64, z: f64| Receiver { antenna: 1, position: Vector3::new(x, y, z), candidates: candidates.clone() };
+        let receivers = vec![at(1.0, 0.0, 0.0), at(0.0, 1.0, 0.0), at(-1.0, 0.0, 0.0), at(0.0, 0.0, 1.0)];
         let p = Vector3::new(0.3, 0.8, 0.5);
         let c = frame_covariance(&geometry, &receivers, &p).unwrap();
         let mut information = Matrix3::zeros();

@@ -19,16 +19,11 @@ use crate::model::wideband::distance_candidates;
 use crate::scene::{Role, Scene};
 
 use super::bistatic::{tuple_gaussian, usable_subsets, HelperGeometry, Receiver};
-use super::{
-    Estimate, Measurement, Params, Tracker, TrackerStats, TurboTrackParams, WidebandFrame,
-};
+use super::{Estimate, Measurement, Params, Tracker, TrackerStats, TurboTrackParams, WidebandFrame};
 
 /// The registry's constructor of `rfind`.
 pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
-    Ok(Box::new(RFind::new(
-        scene.clone(),
-        params.turbotrack.clone(),
-    )?))
+    Ok(Box::new(RFind::new(scene.clone(), params.turbotrack.clone())?))
 }
 
 /// Iterations of the least-squares fit (it stops earlier once converged).
@@ -67,10 +62,7 @@ impl RFind {
             Error::Scene("a wideband tracker needs one antenna with role \"tx\" and at least 3 (2 for dimensions = 2) with role \"rx\"".into())
         })?;
         if !(params.rfind_window_s > 0.0) {
-            return Err(Error::Parameter {
-                name: "rfind_window_s".into(),
-                reason: "must be positive".into(),
-            });
+            return Err(Error::Parameter { name: "rfind_window_s".into(), reason: "must be positive".into() });
         }
         Ok(Self {
             scene,
@@ -91,11 +83,7 @@ impl RFind {
                 if !(h.re.is_finite() && h.im.is_finite()) {
                     continue;
                 }
-                let entry = self.sums.entry((antenna, bin(freq))).or_insert((
-                    Complex::new(0.0, 0.0),
-                    0,
-                    freq,
-                ));
+                let entry = self.sums.entry((antenna, bin(freq))).or_insert((Complex::new(0.0, 0.0), 0, freq));
                 entry.0 += h * sign;
                 if sign > 0.0 {
                     entry.1 += 1;
@@ -113,10 +101,7 @@ impl RFind {
             && frame.tx == self.geometry.tx
             && f > 0
             && frame.h.len() == frame.rx.len() * f
-            && frame
-                .rx
-                .iter()
-                .all(|&a| a < self.scene.antennas.len() && self.scene.antennas[a].role == Role::Rx)
+            && frame.rx.iter().all(|&a| a < self.scene.antennas.len() && self.scene.antennas[a].role == Role::Rx)
     }
 
     /// Localises from the pooled channels: the strongest candidate of each
@@ -131,17 +116,11 @@ impl RFind {
                 .map(|(_, (sum, count, f))| (*f, sum / *count as f64))
                 .unzip();
             let (lo, hi) = self.geometry.bounds[antenna];
-            if let Some(mut candidates) =
-                distance_candidates(&freqs, &h, lo, hi, &self.params.candidates)
-            {
+            if let Some(mut candidates) = distance_candidates(&freqs, &h, lo, hi, &self.params.candidates) {
                 if let Some(s) = self.params.distance_sigma_m {
                     candidates.sigma_m = s;
                 }
-                receivers.push(Receiver {
-                    antenna,
-                    position: self.scene.antennas[antenna].position,
-                    candidates,
-                });
+                receivers.push(Receiver { antenna, position: self.scene.antennas[antenna].position, candidates });
             }
         }
         if receivers.len() < self.geometry.needed() {
@@ -160,38 +139,17 @@ impl RFind {
         // paths, and its strongest teeth need not be consistent — the
         // subsets that do meet, else the region's centre; the fit below
         // then finds the position that best explains those path lengths.
-        let start = match tuple_gaussian(
-            &self.geometry,
-            &receivers,
-            &indices,
-            &subset_list,
-            &near,
-            tolerance,
-        ) {
+        let start = match tuple_gaussian(&self.geometry, &receivers, &indices, &subset_list, &near, tolerance) {
             Some(g) => g.mean,
             None => {
                 let points: Vec<Vector3<f64>> = subset_list
                     .iter()
                     .filter_map(|subset| {
-                        let positions: Vec<Vector3<f64>> =
-                            subset.iter().map(|&j| receivers[j].position).collect();
-                        let distances: Vec<f64> = subset
-                            .iter()
-                            .map(|&j| receivers[j].candidates.distance(indices[j]))
-                            .collect();
-                        bistatic_intersections(
-                            &self.geometry.tx_position,
-                            &positions,
-                            &distances,
-                            self.geometry.plane(),
-                            tolerance,
-                        )
-                        .into_iter()
-                        .min_by(|a, b| {
-                            (a - near)
-                                .norm_squared()
-                                .total_cmp(&(b - near).norm_squared())
-                        })
+                        let positions: Vec<Vector3<f64>> = subset.iter().map(|&j| receivers[j].position).collect();
+                        let distances: Vec<f64> = subset.iter().map(|&j| receivers[j].candidates.distance(indices[j])).collect();
+                        bistatic_intersections(&self.geometry.tx_position, &positions, &distances, self.geometry.plane(), tolerance)
+                            .into_iter()
+                            .min_by(|a, b| (a - near).norm_squared().total_cmp(&(b - near).norm_squared()))
                     })
                     .collect();
                 if points.is_empty() {
@@ -233,9 +191,7 @@ impl RFind {
         let mut damping = 0.0;
         for _ in 0..MAX_ITERATIONS {
             let damped = info + Matrix3::identity() * (damping * info.trace() / 3.0);
-            let Some(inverse) = damped.try_inverse() else {
-                break;
-            };
+            let Some(inverse) = damped.try_inverse() else { break };
             let dx = inverse * gradient;
             let (c, i, g) = fit(&(x + dx));
             if c.is_finite() && c <= cost {
@@ -251,9 +207,7 @@ impl RFind {
                 break;
             }
         }
-        let Some(mut covariance) = info.try_inverse() else {
-            return Err(NoFix::NoFit);
-        };
+        let Some(mut covariance) = info.try_inverse() else { return Err(NoFix::NoFit) };
         if !(x.iter().all(|v| v.is_finite()) && covariance.iter().all(|v| v.is_finite())) {
             return Err(NoFix::NoFit);
         }
@@ -279,11 +233,7 @@ impl RFind {
         self.last_time_s = frame.time_s;
         self.add(frame, 1.0);
         self.window.push_back(frame.clone());
-        while self
-            .window
-            .front()
-            .is_some_and(|f| frame.time_s - f.time_s > self.params.rfind_window_s)
-        {
+        while self.window.front().is_some_and(|f| frame.time_s - f.time_s > self.params.rfind_window_s) {
             let old = self.window.pop_front().expect("non-empty");
             self.add(&old, -1.0);
         }
@@ -308,14 +258,7 @@ impl RFind {
         if self.scene.dimensions == 2 {
             x.z = self.scene.plane_z;
         }
-        Some(Estimate::from_position(
-            frame.time_s,
-            &x,
-            &p,
-            [f64::NAN; 3],
-            1,
-            1.0,
-        ))
+        Some(Estimate::from_position(frame.time_s, &x, &p, [f64::NAN; 3], 1, 1.0))
     }
 }
 

@@ -36,20 +36,17 @@
 use std::collections::HashMap;
 
 // Declared in the registry (`track::registry::trilateration_ekf`): paths from the crate root.
+use crate::track::candidates::nearest_candidate;
+use crate::track::initial::{initial_covariance, initial_hypotheses};
+use crate::track::{Estimate, GlacParams, Measurement, Params, PhaseRead, Tracker, TrackerStats};
 use crate::error::{Error, Result};
 use crate::filter::{apply_scalar, innovation, log_gaussian, predict};
 use crate::model::{range, StateMatrix, StateVector};
 use crate::scene::Scene;
-use crate::track::candidates::nearest_candidate;
-use crate::track::initial::{initial_covariance, initial_hypotheses};
-use crate::track::{Estimate, GlacParams, Measurement, Params, PhaseRead, Tracker, TrackerStats};
 
 /// The registry's constructor of `trilateration-ekf` (GLAC's parameter table).
 pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
-    Ok(Box::new(TrilaterationEkf::new(
-        scene.clone(),
-        params.glac.clone(),
-    )?))
+    Ok(Box::new(TrilaterationEkf::new(scene.clone(), params.glac.clone())?))
 }
 
 /// One filter with its phase tracks.
@@ -83,11 +80,7 @@ impl Filter {
     fn step(&mut self, m: &Read, params: &GlacParams, axes: usize) -> bool {
         let dt = m.time_s - self.time_s;
         if dt > 0.0 {
-            predict(
-                &mut self.x,
-                &mut self.p,
-                &params.motion.transition(dt, axes),
-            );
+            predict(&mut self.x, &mut self.p, &params.motion.transition(dt, axes));
             self.time_s = m.time_s;
         }
         let (h, jacobian) = range(&self.x, &m.position, axes, true);
@@ -131,10 +124,7 @@ impl TrilaterationEkf {
             if v > 0.0 && v.is_finite() {
                 Ok(())
             } else {
-                Err(Error::Parameter {
-                    name: name.into(),
-                    reason: format!("must be positive, got {v}"),
-                })
+                Err(Error::Parameter { name: name.into(), reason: format!("must be positive, got {v}") })
             }
         };
         positive("gate_sigmas", params.gate_sigmas)?;
@@ -157,9 +147,7 @@ impl TrilaterationEkf {
     }
 
     fn phase_noise(&self) -> f64 {
-        self.params
-            .phase_noise_rad
-            .unwrap_or(self.scene.phase_noise_rad)
+        self.params.phase_noise_rad.unwrap_or(self.scene.phase_noise_rad)
     }
 
     /// R (m²) of one read's range on carrier `frequency_hz`.
@@ -180,9 +168,7 @@ impl TrilaterationEkf {
             time_s: m.time_s,
             position: self.scene.antennas[m.antenna].position,
             key: (m.antenna, (m.frequency_hz / 1e3).round() as i64),
-            residue: self
-                .scene
-                .distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
+            residue: self.scene.distance_residue(m.antenna, m.frequency_hz, m.phase_rad),
             spacing: self.scene.candidate_spacing(m.frequency_hz),
             r: self.range_variance(m.frequency_hz),
         }
@@ -209,23 +195,14 @@ impl TrilaterationEkf {
         }
         let range_sigma = self.range_variance(self.buffer[0].frequency_hz).sqrt();
         let with_velocity = self.params.motion.has_velocity();
-        let Some((t_x, initial)) = initial_hypotheses(
-            &self.scene,
-            &self.buffer,
-            &self.params.initial,
-            range_sigma,
-            with_velocity,
-        ) else {
+        let Some((t_x, initial)) = initial_hypotheses(&self.scene, &self.buffer, &self.params.initial, range_sigma, with_velocity)
+        else {
             // No position explains the reads yet: slide the window.
             let keep_from = last - self.params.init_max_window_s;
             self.buffer.retain(|m| m.time_s >= keep_from);
             return;
         };
-        let v_sigma = if with_velocity {
-            self.params.init_velocity_sigma_m_s
-        } else {
-            0.0
-        };
+        let v_sigma = if with_velocity { self.params.init_velocity_sigma_m_s } else { 0.0 };
         let p = initial_covariance(self.axes, self.params.init_position_sigma_m, v_sigma);
         self.filters = initial
             .iter()
@@ -238,20 +215,10 @@ impl TrilaterationEkf {
                 if !with_velocity {
                     x.fixed_rows_mut::<3>(3).fill(0.0);
                 }
-                Filter {
-                    x,
-                    p,
-                    time_s: t_x,
-                    residual_m: HashMap::new(),
-                    consecutive_outliers: 0,
-                    log_likelihood: h.log_likelihood,
-                }
+                Filter { x, p, time_s: t_x, residual_m: HashMap::new(), consecutive_outliers: 0, log_likelihood: h.log_likelihood }
             })
             .collect();
-        let replay: Vec<PhaseRead> = std::mem::take(&mut self.buffer)
-            .into_iter()
-            .filter(|m| m.time_s > t_x)
-            .collect();
+        let replay: Vec<PhaseRead> = std::mem::take(&mut self.buffer).into_iter().filter(|m| m.time_s > t_x).collect();
         for m in &replay {
             self.track(m);
         }
@@ -281,34 +248,24 @@ impl TrilaterationEkf {
 
     /// Drops the filters the reads have ruled out (step 1); fixed when one is left.
     fn resolve(&mut self) {
-        let (lost, margin) = (
-            self.params.max_consecutive_outliers,
-            self.params.region_margin_m,
-        );
+        let (lost, margin) = (self.params.max_consecutive_outliers, self.params.region_margin_m);
         let (scene, axes) = (&self.scene, self.axes);
         self.filters.retain(|f| {
             let p = nalgebra::Vector3::new(f.x[0], f.x[1], f.x[2]);
-            f.consecutive_outliers <= lost
-                && scene
-                    .region
-                    .as_ref()
-                    .is_none_or(|r| r.contains(&p, margin, axes))
+            f.consecutive_outliers <= lost && scene.region.as_ref().is_none_or(|r| r.contains(&p, margin, axes))
         });
         if self.filters.is_empty() {
             self.restart();
             return;
         }
-        self.filters
-            .sort_by(|a, b| b.log_likelihood.total_cmp(&a.log_likelihood));
+        self.filters.sort_by(|a, b| b.log_likelihood.total_cmp(&a.log_likelihood));
         let best = self.filters[0].log_likelihood;
         let floor = best + self.params.quick_stop.ln();
         self.filters.retain(|f| f.log_likelihood >= floor);
         let merge = self.params.merge_distance_m;
         let mut kept: Vec<Filter> = Vec::with_capacity(self.filters.len());
         for f in self.filters.drain(..) {
-            let near = kept
-                .iter()
-                .any(|k| (k.x.fixed_rows::<3>(0) - f.x.fixed_rows::<3>(0)).norm() < merge);
+            let near = kept.iter().any(|k| (k.x.fixed_rows::<3>(0) - f.x.fixed_rows::<3>(0)).norm() < merge);
             if !near {
                 kept.push(f);
             }
@@ -324,25 +281,14 @@ impl TrilaterationEkf {
         }
         let f = &self.filters[0];
         let with_velocity = self.params.motion.has_velocity();
-        let velocity = if with_velocity {
-            [f.x[3], f.x[4], f.x[5]]
-        } else {
-            [f64::NAN; 3]
-        };
+        let velocity = if with_velocity { [f.x[3], f.x[4], f.x[5]] } else { [f64::NAN; 3] };
         let mut covariance = Estimate::covariance_from(&f.p);
         if !with_velocity {
             for k in 3..6 {
                 covariance[k * 6 + k] = f64::NAN;
             }
         }
-        Some(Estimate {
-            time_s,
-            position: [f.x[0], f.x[1], f.x[2]],
-            velocity,
-            covariance,
-            hypotheses: 1,
-            weight: 1.0,
-        })
+        Some(Estimate { time_s, position: [f.x[0], f.x[1], f.x[2]], velocity, covariance, hypotheses: 1, weight: 1.0 })
     }
 
     fn step_read(&mut self, m: &PhaseRead) -> Option<Estimate> {
@@ -399,18 +345,15 @@ impl Tracker for TrilaterationEkf {
 
     fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
         let best = self.filters.first().map_or(0.0, |f| f.log_likelihood);
-        self.filters
-            .iter()
-            .map(|f| ([f.x[0], f.x[1], f.x[2]], f.log_likelihood - best))
-            .collect()
+        self.filters.iter().map(|f| ([f.x[0], f.x[1], f.x[2]], f.log_likelihood - best)).collect()
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scene::{Antenna, Region};
     use nalgebra::Vector3;
+    use crate::scene::{Antenna, Region};
     use rand::rngs::StdRng;
     use rand::{RngExt, SeedableRng};
     use rand_distr::StandardNormal;
@@ -422,48 +365,19 @@ mod tests {
 
     /// The glac-3d-walls layout: two antennas on each of two walls, no four in a plane.
     fn scene() -> Scene {
-        let positions = [
-            [0.0, 0.3, 0.2],
-            [0.0, 0.9, 1.1],
-            [0.4, 0.0, 1.2],
-            [1.0, 0.0, 0.2],
-        ];
+        let positions = [[0.0, 0.3, 0.2], [0.0, 0.9, 1.1], [0.4, 0.0, 1.2], [1.0, 0.0, 0.2]];
         let antennas = positions
             .iter()
             .enumerate()
-            .map(|(i, p)| Antenna {
-                id: i as i64 + 1,
-                position: Vector3::from(*p),
-                phase_offset_rad: 0.3 * i as f64,
-                role: Default::default(),
-            })
+            .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::from(*p), phase_offset_rad: 0.3 * i as f64, role: Default::default() })
             .collect();
-        let region = Region {
-            min: Vector3::new(0.05, 0.05, 0.1),
-            max: Vector3::new(1.2, 1.2, 1.4),
-        };
-        Scene::new(
-            3,
-            0.0,
-            1.0,
-            std::f64::consts::TAU,
-            0.1,
-            antennas,
-            Some(region),
-            vec![],
-        )
-        .unwrap()
+        let region = Region { min: Vector3::new(0.05, 0.05, 0.1), max: Vector3::new(1.2, 1.2, 1.4) };
+        Scene::new(3, 0.0, 1.0, std::f64::consts::TAU, 0.1, antennas, Some(region), vec![]).unwrap()
     }
 
     /// Reads at 120 /s round-robin over the antennas along `path`, with
     /// 0.1 rad white phase noise, hopping over `channels` (Hz) every 8 reads.
-    fn reads(
-        scene: &Scene,
-        path: Path,
-        duration_s: f64,
-        seed: u64,
-        channels: &[f64],
-    ) -> Vec<PhaseRead> {
+    fn reads(scene: &Scene, path: Path, duration_s: f64, seed: u64, channels: &[f64]) -> Vec<PhaseRead> {
         let mut rng = StdRng::seed_from_u64(seed);
         let n = (duration_s * 120.0) as usize;
         (0..n)
@@ -473,35 +387,19 @@ mod tests {
                 let d = (path(t) - scene.antennas[a].position).norm();
                 let noise: f64 = rng.sample(StandardNormal);
                 let f = channels[(k / 8) % channels.len()];
-                let phase = crate::angle::wrap(
-                    scene.ideal_phase(a, f, d) + 0.1 * noise,
-                    std::f64::consts::TAU,
-                );
-                PhaseRead {
-                    time_s: t,
-                    antenna: a,
-                    frequency_hz: f,
-                    phase_rad: phase,
-                }
+                let phase = crate::angle::wrap(scene.ideal_phase(a, f, d) + 0.1 * noise, std::f64::consts::TAU);
+                PhaseRead { time_s: t, antenna: a, frequency_hz: f, phase_rad: phase }
             })
             .collect()
     }
 
     /// Errors (m) and per-axis normalised squared errors of the estimates after `settle_s`.
-    fn run(
-        path: Path,
-        duration_s: f64,
-        settle_s: f64,
-        seed: u64,
-        channels: &[f64],
-    ) -> (Vec<f64>, [f64; 3], TrackerStats) {
+    fn run(path: Path, duration_s: f64, settle_s: f64, seed: u64, channels: &[f64]) -> (Vec<f64>, [f64; 3], TrackerStats) {
         let scene = scene();
         let mut tracker = TrilaterationEkf::new(scene.clone(), GlacParams::default()).unwrap();
         let (mut errors, mut nees, mut rows) = (Vec::new(), [0.0; 3], 0.0);
         for m in reads(&scene, path, duration_s, seed, channels) {
-            let Some(e) = tracker.step(&Measurement::Phase(m)) else {
-                continue;
-            };
+            let Some(e) = tracker.step(&Measurement::Phase(m)) else { continue };
             if e.time_s < settle_s {
                 continue;
             }
@@ -529,38 +427,19 @@ mod tests {
         let (errors, nees, stats) = run(|_| Vector3::new(0.5, 0.4, 0.6), 8.0, 4.0, 1, &channels);
         // The constant-velocity model keeps a static tag's sigma at a few
         // millimetres (q = 0.02 m²/s³ at 120 reads/s): the error follows it.
-        assert!(
-            median(errors.clone()) < 5e-3,
-            "median error {} m",
-            median(errors.clone())
-        );
-        assert!(
-            errors.iter().all(|&e| e < 0.015),
-            "worst {}",
-            errors.iter().copied().fold(0.0, f64::max)
-        );
-        assert!(
-            nees.iter().all(|&n| n > 0.3 && n < 2.0),
-            "NEES per axis {nees:?}"
-        );
-        assert_eq!(
-            (stats.reinitialisations, stats.invalid, stats.out_of_order),
-            (0, 0, 0)
-        );
+        assert!(median(errors.clone()) < 5e-3, "median error {} m", median(errors.clone()));
+        assert!(errors.iter().all(|&e| e < 0.015), "worst {}", errors.iter().copied().fold(0.0, f64::max));
+        assert!(nees.iter().all(|&n| n > 0.3 && n < 2.0), "NEES per axis {nees:?}");
+        assert_eq!((stats.reinitialisations, stats.invalid, stats.out_of_order), (0, 0, 0));
     }
 
     /// A tag moving 1.5 m (many ambiguity steps of 16 cm) stays locked:
     /// the phase tracks unwrap every step.
     #[test]
     fn a_moving_tag_is_unwrapped_over_many_wavelengths() {
-        let path: Path =
-            |t| Vector3::new(0.3 + 0.1 * t, 0.3 + 0.08 * t, 0.5 + 0.05 * (1.3 * t).sin());
+        let path: Path = |t| Vector3::new(0.3 + 0.1 * t, 0.3 + 0.08 * t, 0.5 + 0.05 * (1.3 * t).sin());
         let (errors, nees, stats) = run(path, 8.0, 3.0, 2, &[F]);
-        assert!(
-            median(errors.clone()) < 3e-3,
-            "median error {} m",
-            median(errors)
-        );
+        assert!(median(errors.clone()) < 3e-3, "median error {} m", median(errors));
         assert!(nees.iter().all(|&n| n < 3.0), "NEES per axis {nees:?}");
         assert_eq!(stats.reinitialisations, 0);
         assert!(stats.filter_updates > 800, "{stats:?}");
@@ -572,33 +451,17 @@ mod tests {
         let mut tracker = TrilaterationEkf::new(scene.clone(), GlacParams::default()).unwrap();
         let path: Path = |t| Vector3::new(0.3 + 0.1 * t, 0.3 + 0.08 * t, 0.5);
         let reads = reads(&scene, path, 6.0, 3, &[F]);
-        let first: Vec<bool> = reads[..10]
-            .iter()
-            .map(|m| tracker.step(&Measurement::Phase(*m)).is_some())
-            .collect();
-        assert!(
-            first.iter().all(|&e| !e),
-            "an estimate before the first fix"
-        );
+        let first: Vec<bool> = reads[..10].iter().map(|m| tracker.step(&Measurement::Phase(*m)).is_some()).collect();
+        assert!(first.iter().all(|&e| !e), "an estimate before the first fix");
         for m in &reads[10..] {
             tracker.step(&Measurement::Phase(*m));
         }
-        let late = PhaseRead {
-            time_s: 0.0,
-            ..reads[0]
-        };
+        let late = PhaseRead { time_s: 0.0, ..reads[0] };
         assert!(tracker.step(&Measurement::Phase(late)).is_none());
-        let unknown = PhaseRead {
-            antenna: 9,
-            time_s: 2.0,
-            ..reads[0]
-        };
+        let unknown = PhaseRead { antenna: 9, time_s: 2.0, ..reads[0] };
         assert!(tracker.step(&Measurement::Phase(unknown)).is_none());
         let s = tracker.stats();
-        assert_eq!(
-            (s.out_of_order, s.invalid, s.measurements),
-            (1, 1, reads.len() as u64 + 2)
-        );
+        assert_eq!((s.out_of_order, s.invalid, s.measurements), (1, 1, reads.len() as u64 + 2));
         assert!(s.initialising >= 36 && s.initialising < 500, "{s:?}");
         assert!(s.max_hypotheses > 1, "{s:?}");
         assert_eq!(tracker.hypotheses().len(), 1);
@@ -606,13 +469,7 @@ mod tests {
 
     #[test]
     fn rejects_invalid_parameters() {
-        let bad = GlacParams {
-            gate_sigmas: 0.0,
-            ..GlacParams::default()
-        };
-        assert!(matches!(
-            TrilaterationEkf::new(scene(), bad),
-            Err(Error::Parameter { .. })
-        ));
+        let bad = GlacParams { gate_sigmas: 0.0, ..GlacParams::default() };
+        assert!(matches!(TrilaterationEkf::new(scene(), bad), Err(Error::Parameter { .. })));
     }
 }

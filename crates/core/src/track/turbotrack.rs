@@ -58,25 +58,19 @@ use crate::model::wideband::CandidateParams;
 use crate::scene::Scene;
 
 use super::bistatic::{
-    calibration_covariance, frame_receivers, log_normal, mixture_log_likelihood_with,
-    tuple_gaussian, tuple_gaussian_lenient, usable_subsets, Decline, HelperGeometry, MixtureLogs,
-    PositionGaussian, Receiver,
+    calibration_covariance, frame_receivers, log_normal, mixture_log_likelihood_with, tuple_gaussian, tuple_gaussian_lenient, usable_subsets, Decline, HelperGeometry,
+    MixtureLogs, PositionGaussian, Receiver,
 };
-use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
 use super::key_hash::KeyMap;
-use super::lobes::{
-    mixture_spread, refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels,
-};
+use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
 use super::resting_average::{averaged_receivers, frame_covariance, ChannelAverage};
+use super::lobes::{mixture_spread, refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
 /// The registry's constructor of `turbotrack`: Algorithm 1 with the
 /// parameters as given (the §7.2 baselines: [`super::variants`]).
 pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
-    Ok(Box::new(TurboTrack::new(
-        scene.clone(),
-        params.turbotrack.clone(),
-    )?))
+    Ok(Box::new(TurboTrack::new(scene.clone(), params.turbotrack.clone())?))
 }
 
 /// The observation model used to weight particles.
@@ -251,12 +245,7 @@ impl Default for TurboTrackParams {
 
 impl TurboTrackParams {
     fn validate(&self, scene: &Scene) -> Result<()> {
-        let bad = |name: &str, reason: &str| {
-            Err(Error::Parameter {
-                name: name.into(),
-                reason: reason.into(),
-            })
-        };
+        let bad = |name: &str, reason: &str| Err(Error::Parameter { name: name.into(), reason: reason.into() });
         if self.particles == 0 {
             return bad("particles", "must be at least 1");
         }
@@ -284,10 +273,7 @@ impl TurboTrackParams {
             }
         }
         if self.initial_sampling == InitialSampling::Uniform && scene.region.is_none() {
-            return bad(
-                "initial_sampling",
-                "uniform sampling needs a [region] in the scene",
-            );
+            return bad("initial_sampling", "uniform sampling needs a [region] in the scene");
         }
         if HelperGeometry::new(scene).is_none() {
             return Err(Error::Scene(
@@ -365,12 +351,7 @@ pub struct TurboTrack {
 /// The cluster proposal of Gaussian `g` (its inverse covariance `s_inv`)
 /// under a random-walk step of inverse covariance `sigma_v_inv`: the
 /// product of the two Gaussians (planar scenes keep z out of it).
-fn cluster_proposal(
-    g: &PositionGaussian,
-    s_inv: &Matrix3<f64>,
-    sigma_v_inv: &Matrix3<f64>,
-    dims: usize,
-) -> Option<ClusterProposal> {
+fn cluster_proposal(g: &PositionGaussian, s_inv: &Matrix3<f64>, sigma_v_inv: &Matrix3<f64>, dims: usize) -> Option<ClusterProposal> {
     let mut p_inv = sigma_v_inv + s_inv;
     if dims == 2 {
         p_inv[(2, 2)] = 1.0;
@@ -381,27 +362,14 @@ fn cluster_proposal(
     }
     let pm = p_inv.try_inverse()?;
     let l = pm.cholesky()?.l();
-    let log_det_p = if dims == 3 {
-        pm.determinant().ln()
-    } else {
-        (pm[(0, 0)] * pm[(1, 1)] - pm[(0, 1)] * pm[(1, 0)]).ln()
-    };
-    Some(ClusterProposal {
-        a: pm * sigma_v_inv,
-        b: pm * (s_inv * g.mean),
-        l,
-        p_inv,
-        log_det_p,
-        centroid: g.mean,
-    })
+    let log_det_p = if dims == 3 { pm.determinant().ln() } else { (pm[(0, 0)] * pm[(1, 1)] - pm[(0, 1)] * pm[(1, 0)]).ln() };
+    Some(ClusterProposal { a: pm * sigma_v_inv, b: pm * (s_inv * g.mean), l, p_inv, log_det_p, centroid: g.mean })
 }
 
 /// Packs a candidate-index tuple into a hash key (8 bits per receiver,
 /// offset so small negative indices fit; up to 8 receivers).
 fn pack(indices: &[i64]) -> u64 {
-    indices.iter().fold(0u64, |key, &n| {
-        (key << 8) | ((n + 128).clamp(0, 255) as u64)
-    })
+    indices.iter().fold(0u64, |key, &n| (key << 8) | ((n + 128).clamp(0, 255) as u64))
 }
 
 fn log_gaussian3(r: &Vector3<f64>, inverse: &Matrix3<f64>, log_det: f64, dims: usize) -> f64 {
@@ -419,12 +387,7 @@ impl TurboTrack {
             positions: Vec::new(),
             log_weights: Vec::new(),
             modes: Vec::new(),
-            receive_positions: scene
-                .antennas
-                .iter()
-                .filter(|a| a.role == crate::scene::Role::Rx)
-                .map(|a| a.position)
-                .collect(),
+            receive_positions: scene.antennas.iter().filter(|a| a.role == crate::scene::Role::Rx).map(|a| a.position).collect(),
             history: VecDeque::new(),
             recent: VecDeque::new(),
             last_time_s: f64::NEG_INFINITY,
@@ -453,9 +416,7 @@ impl TurboTrack {
     /// of the current highest-weight particle over the kept history, as
     /// (time s, position m), oldest first.
     pub fn map_trajectory(&self) -> Vec<(f64, [f64; 3])> {
-        let Some(mut index) = self.best_particle() else {
-            return Vec::new();
-        };
+        let Some(mut index) = self.best_particle() else { return Vec::new() };
         let mut out = Vec::with_capacity(self.history.len());
         for (t, positions, parents) in self.history.iter().rev() {
             let p = positions[index];
@@ -467,20 +428,13 @@ impl TurboTrack {
     }
 
     fn best_particle(&self) -> Option<usize> {
-        self.log_weights
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1.total_cmp(b.1))
-            .map(|(i, _)| i)
+        self.log_weights.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i)
     }
 
     /// The motion-mode chain's stationary share of static particles,
     /// entry / (entry + exit) (0 when particles never turn static).
     fn static_share(&self) -> f64 {
-        let (entry, exit) = (
-            self.params.static_entry_probability,
-            self.params.static_exit_probability,
-        );
+        let (entry, exit) = (self.params.static_entry_probability, self.params.static_exit_probability);
         if entry > 0.0 {
             entry / (entry + exit)
         } else {
@@ -489,16 +443,12 @@ impl TurboTrack {
     }
 
     fn in_region(&self, p: &Vector3<f64>) -> bool {
-        self.scene
-            .region
-            .as_ref()
-            .is_none_or(|r| r.contains(p, self.params.region_margin_m, self.scene.dimensions))
+        self.scene.region.as_ref().is_none_or(|r| r.contains(p, self.params.region_margin_m, self.scene.dimensions))
     }
 
     /// Applies the fixed σ_w if configured.
     fn receivers(&self, frame: &WidebandFrame) -> std::result::Result<Vec<Receiver>, Decline> {
-        let mut receivers =
-            frame_receivers(&self.scene, &self.geometry, frame, &self.params.candidates)?;
+        let mut receivers = frame_receivers(&self.scene, &self.geometry, frame, &self.params.candidates)?;
         if let Some(s) = self.params.distance_sigma_m {
             receivers.iter_mut().for_each(|r| r.candidates.sigma_m = s);
         }
@@ -508,29 +458,17 @@ impl TurboTrack {
     /// Log-likelihood of a position under the configured observation model,
     /// and the χ² of the nearest candidates.
     /// `logs`: this frame's [`MixtureLogs`] (the mixture's logarithms, tabulated once).
-    fn log_likelihood(
-        &self,
-        receivers: &[Receiver],
-        logs: &MixtureLogs,
-        p: &Vector3<f64>,
-    ) -> (f64, f64) {
+    fn log_likelihood(&self, receivers: &[Receiver], logs: &MixtureLogs, p: &Vector3<f64>) -> (f64, f64) {
         if !self.in_region(p) {
             return (f64::NEG_INFINITY, f64::INFINITY);
         }
         match self.params.likelihood {
-            WidebandLikelihood::Mixture => {
-                mixture_log_likelihood_with(&self.geometry, receivers, logs, p)
-            }
+            WidebandLikelihood::Mixture => mixture_log_likelihood_with(&self.geometry, receivers, logs, p),
             WidebandLikelihood::SingleGaussian { sigma_m } => {
                 let mut log_l = 0.0;
                 let mut chi2 = 0.0;
                 for rx in receivers {
-                    let d = crate::geometry::bistatic_distance(
-                        p,
-                        &self.geometry.tx_position,
-                        &rx.position,
-                    )
-                    .0;
+                    let d = crate::geometry::bistatic_distance(p, &self.geometry.tx_position, &rx.position).0;
                     let centre = rx.candidates.distances_m[rx.candidates.best];
                     log_l += log_normal(d, centre, sigma_m);
                     chi2 += ((d - centre) / sigma_m).powi(2);
@@ -546,16 +484,8 @@ impl TurboTrack {
 
     /// Standard-normal draw in the tracked dimensions (z stays 0 in a plane).
     fn normal3(&mut self) -> Vector3<f64> {
-        let z = if self.scene.dimensions == 3 {
-            self.rng.sample(StandardNormal)
-        } else {
-            0.0
-        };
-        Vector3::new(
-            self.rng.sample(StandardNormal),
-            self.rng.sample(StandardNormal),
-            z,
-        )
+        let z = if self.scene.dimensions == 3 { self.rng.sample(StandardNormal) } else { 0.0 };
+        Vector3::new(self.rng.sample(StandardNormal), self.rng.sample(StandardNormal), z)
     }
 
     /// Transition covariance Σ_v for a step of `dt` seconds (random walk:
@@ -564,11 +494,7 @@ impl TurboTrack {
     /// a unit z variance that is never sampled.
     fn transition(&self, dt: f64, resting: bool) -> Matrix3<f64> {
         let scale = (dt / self.params.reference_interval_s).clamp(0.25, 1e4);
-        let sigma = if resting {
-            self.params.static_sigma_m
-        } else {
-            self.params.transition_sigma_m
-        };
+        let sigma = if resting { self.params.static_sigma_m } else { self.params.transition_sigma_m };
         let v = sigma.powi(2) * scale;
         let vz = if self.scene.dimensions == 3 { v } else { 1.0 };
         Matrix3::from_diagonal(&Vector3::new(v, v, vz))
@@ -590,8 +516,7 @@ impl TurboTrack {
             for _ in 0..n {
                 let mut p = Vector3::zeros();
                 for k in 0..3 {
-                    p[k] =
-                        region.min[k] + self.rng.random::<f64>() * (region.max[k] - region.min[k]);
+                    p[k] = region.min[k] + self.rng.random::<f64>() * (region.max[k] - region.min[k]);
                 }
                 if self.scene.dimensions == 2 {
                     p.z = self.scene.plane_z;
@@ -609,11 +534,7 @@ impl TurboTrack {
             self.last_far_search_s = time_s;
             if self.lobe_test() {
                 // The filter's own lobe is among them: the first update merges it.
-                self.far.offer(
-                    components.iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean),
-                    0.0,
-                    None,
-                );
+                self.far.offer(components.iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean), 0.0, None);
             }
             // q₀ = Σ w̄_s N(μ_s, Σ_s); precompute inverses for q₀(x).
             let total: f64 = components.iter().map(|c| c.1).sum();
@@ -623,11 +544,7 @@ impl TurboTrack {
                 .filter_map(|(g, w)| {
                     let chol = g.covariance.cholesky()?;
                     let inv = chol.inverse();
-                    let log_det = if dims == 3 {
-                        g.covariance.determinant().ln()
-                    } else {
-                        g.covariance.fixed_view::<2, 2>(0, 0).determinant().ln()
-                    };
+                    let log_det = if dims == 3 { g.covariance.determinant().ln() } else { g.covariance.fixed_view::<2, 2>(0, 0).determinant().ln() };
                     Some((g.mean, chol.l(), inv, log_det, (w / total).ln()))
                 })
                 .collect();
@@ -648,12 +565,7 @@ impl TurboTrack {
                 .collect();
             for i in 0..n {
                 let target = (i as f64 + u) / n as f64;
-                chosen.push(
-                    cumulative
-                        .iter()
-                        .position(|&c| c >= target)
-                        .unwrap_or(cumulative.len() - 1),
-                );
+                chosen.push(cumulative.iter().position(|&c| c >= target).unwrap_or(cumulative.len() - 1));
             }
             for &c in &chosen {
                 let (mean, l, ..) = prepared[c];
@@ -666,9 +578,7 @@ impl TurboTrack {
                     let terms: Vec<f64> = prepared
                         .iter()
                         .zip(&log_component)
-                        .map(|((m, _, inv, log_det, _), lw)| {
-                            lw + log_gaussian3(&(p - m), inv, *log_det, dims)
-                        })
+                        .map(|((m, _, inv, log_det, _), lw)| lw + log_gaussian3(&(p - m), inv, *log_det, dims))
                         .collect();
                     let max = terms.iter().copied().fold(f64::NEG_INFINITY, f64::max);
                     max + terms.iter().map(|t| (t - max).exp()).sum::<f64>().ln()
@@ -682,17 +592,14 @@ impl TurboTrack {
         // rest, spread evenly over the draw; the first frames' weights choose.
         let share = self.static_share();
         let count = self.positions.len();
-        self.modes = (0..count)
-            .map(|i| ((i as f64 + 0.5) / count as f64) < share)
-            .collect();
+        self.modes = (0..count).map(|i| ((i as f64 + 0.5) / count as f64) < share).collect();
         if normalise_log_weights(&mut self.log_weights) == f64::NEG_INFINITY {
             self.positions.clear();
             self.log_weights.clear();
             self.modes.clear();
             return false;
         }
-        self.history
-            .push_back((time_s, self.positions.clone(), (0..n).collect()));
+        self.history.push_back((time_s, self.positions.clone(), (0..n).collect()));
         self.initialised = true;
         true
     }
@@ -705,13 +612,8 @@ impl TurboTrack {
     fn initial_components(&self, receivers: &[Receiver]) -> Vec<(PositionGaussian, f64)> {
         let subset_list = self.subset_list(receivers);
         let logs = MixtureLogs::new(receivers, self.params.weight_floor);
-        let Some(base_set) = subset_list.first().cloned() else {
-            return Vec::new();
-        };
-        let single = matches!(
-            self.params.likelihood,
-            WidebandLikelihood::SingleGaussian { .. }
-        );
+        let Some(base_set) = subset_list.first().cloned() else { return Vec::new() };
+        let single = matches!(self.params.likelihood, WidebandLikelihood::SingleGaussian { .. });
         let base: Vec<Vec<i64>> = base_set
             .iter()
             .map(|&j| {
@@ -726,20 +628,12 @@ impl TurboTrack {
         // Cartesian product of the base receivers' candidate indices.
         let mut combos: Vec<Vec<i64>> = vec![Vec::new()];
         for options in &base {
-            combos = combos
-                .into_iter()
-                .flat_map(|c| options.iter().map(move |&o| [c.clone(), vec![o]].concat()))
-                .collect();
+            combos = combos.into_iter().flat_map(|c| options.iter().map(move |&o| [c.clone(), vec![o]].concat())).collect();
         }
-        let positions: Vec<Vector3<f64>> =
-            base_set.iter().map(|&j| receivers[j].position).collect();
+        let positions: Vec<Vector3<f64>> = base_set.iter().map(|&j| receivers[j].position).collect();
         let mut tuples: KeyMap<(Vec<i64>, Vector3<f64>)> = KeyMap::default();
         for combo in combos {
-            let distances: Vec<f64> = combo
-                .iter()
-                .zip(&base_set)
-                .map(|(&n, &j)| receivers[j].candidates.distance(n))
-                .collect();
+            let distances: Vec<f64> = combo.iter().zip(&base_set).map(|(&n, &j)| receivers[j].candidates.distance(n)).collect();
             for p in crate::geometry::bistatic_intersections(
                 &self.geometry.tx_position,
                 &positions,
@@ -753,12 +647,7 @@ impl TurboTrack {
                 let mut indices: Vec<i64> = receivers
                     .iter()
                     .map(|rx| {
-                        let d = crate::geometry::bistatic_distance(
-                            &p,
-                            &self.geometry.tx_position,
-                            &rx.position,
-                        )
-                        .0;
+                        let d = crate::geometry::bistatic_distance(&p, &self.geometry.tx_position, &rx.position).0;
                         if single {
                             rx.candidates.best as i64
                         } else {
@@ -785,30 +674,13 @@ impl TurboTrack {
         // their fit. The single-Gaussian baseline (gaussian-pf) keeps the
         // thesis's rule, `perimeter_threshold_m` doubled up to 3 times when
         // no tuple survives: it is the §7.2(a) comparison as published.
-        let component = |indices: &[i64],
-                         seed: &Vector3<f64>,
-                         threshold: f64|
-         -> Option<(f64, (PositionGaussian, f64))> {
+        let component = |indices: &[i64], seed: &Vector3<f64>, threshold: f64| -> Option<(f64, (PositionGaussian, f64))> {
             let tolerance = self.params.intersection_tolerance_m;
             let mut g = if single {
-                let g = tuple_gaussian(
-                    &self.geometry,
-                    receivers,
-                    indices,
-                    &subset_list,
-                    seed,
-                    tolerance,
-                )?;
+                let g = tuple_gaussian(&self.geometry, receivers, indices, &subset_list, seed, tolerance)?;
                 (g.perimeter_m <= threshold).then_some(g)?
             } else {
-                let mut g = tuple_gaussian_lenient(
-                    &self.geometry,
-                    receivers,
-                    indices,
-                    &subset_list,
-                    seed,
-                    tolerance,
-                )?;
+                let mut g = tuple_gaussian_lenient(&self.geometry, receivers, indices, &subset_list, seed, tolerance)?;
                 let (fit, chi2) = refine_on_teeth(&self.geometry, receivers, indices, &g.mean, 3)?;
                 (chi2 <= self.params.outlier_chi2).then_some(())?;
                 g.mean = fit;
@@ -817,11 +689,7 @@ impl TurboTrack {
             if !self.in_region(&g.mean) {
                 return None;
             }
-            let w: f64 = indices
-                .iter()
-                .zip(receivers)
-                .map(|(&n, r)| r.candidates.weight(n, self.params.weight_floor))
-                .product();
+            let w: f64 = indices.iter().zip(receivers).map(|(&n, r)| r.candidates.weight(n, self.params.weight_floor)).product();
             if let WidebandLikelihood::SingleGaussian { sigma_m } = self.params.likelihood {
                 // The broad baseline starts as broad as its likelihood.
                 g.covariance += Matrix3::identity() * sigma_m * sigma_m;
@@ -831,17 +699,10 @@ impl TurboTrack {
             // is nearly flat over a 100 MHz envelope).
             Some((self.log_likelihood(receivers, &logs, &g.mean).0, (g, w)))
         };
-        let mut threshold = if single {
-            self.params.perimeter_threshold_m
-        } else {
-            f64::INFINITY
-        };
+        let mut threshold = if single { self.params.perimeter_threshold_m } else { f64::INFINITY };
         let mut scored: Vec<(f64, (PositionGaussian, f64))> = Vec::new();
         for _ in 0..4 {
-            scored = tuples
-                .values()
-                .filter_map(|(indices, seed)| component(indices, seed, threshold))
-                .collect();
+            scored = tuples.values().filter_map(|(indices, seed)| component(indices, seed, threshold)).collect();
             if !scored.is_empty() || !single {
                 break;
             }
@@ -862,11 +723,7 @@ impl TurboTrack {
             let sigma_v = self.transition(dt, resting);
             let inverse = sigma_v.try_inverse().expect("diagonal, positive");
             let chol = sigma_v.cholesky().expect("diagonal, positive").l();
-            let log_det = if dims == 3 {
-                sigma_v.determinant().ln()
-            } else {
-                (sigma_v[(0, 0)] * sigma_v[(1, 1)]).ln()
-            };
+            let log_det = if dims == 3 { sigma_v.determinant().ln() } else { (sigma_v[(0, 0)] * sigma_v[(1, 1)]).ln() };
             (inverse, chol, log_det)
         });
         let subset_list = self.subset_list(receivers);
@@ -878,10 +735,7 @@ impl TurboTrack {
         // prior, the mode's probability cancels in the weight.
         let steps = (dt / self.params.reference_interval_s).max(0.0);
         let over_dt = |p: f64| 1.0 - (1.0 - p).powf(steps);
-        let (entry, exit) = (
-            over_dt(self.params.static_entry_probability),
-            over_dt(self.params.static_exit_probability),
-        );
+        let (entry, exit) = (over_dt(self.params.static_entry_probability), over_dt(self.params.static_exit_probability));
         let mut new_modes = self.modes.clone();
         if entry > 0.0 {
             for mode in new_modes.iter_mut() {
@@ -899,31 +753,20 @@ impl TurboTrack {
         for i in 0..n {
             let p = self.positions[i];
             for (j, rx) in receivers.iter().enumerate() {
-                let d = crate::geometry::bistatic_distance(
-                    &p,
-                    &self.geometry.tx_position,
-                    &rx.position,
-                )
-                .0;
+                let d = crate::geometry::bistatic_distance(&p, &self.geometry.tx_position, &rx.position).0;
                 indices[j] = rx.candidates.nearest_index(d);
             }
             let key = pack(&indices);
             self.scratch_keys.push(key);
             if self.params.proposal == Proposal::NearOptimal && !tuples.contains_key(&key) {
-                let proposal = tuple_gaussian(
-                    &self.geometry,
-                    receivers,
-                    &indices,
-                    &subset_list,
-                    &p,
-                    self.params.intersection_tolerance_m,
-                )
-                .and_then(|g| {
-                    let s_inv = g.covariance.try_inverse()?;
-                    let moving = cluster_proposal(&g, &s_inv, &motion[0].0, dims)?;
-                    let resting = cluster_proposal(&g, &s_inv, &motion[1].0, dims)?;
-                    Some([moving, resting])
-                });
+                let proposal =
+                    tuple_gaussian(&self.geometry, receivers, &indices, &subset_list, &p, self.params.intersection_tolerance_m)
+                        .and_then(|g| {
+                            let s_inv = g.covariance.try_inverse()?;
+                            let moving = cluster_proposal(&g, &s_inv, &motion[0].0, dims)?;
+                            let resting = cluster_proposal(&g, &s_inv, &motion[1].0, dims)?;
+                            Some([moving, resting])
+                        });
                 tuples.insert(key, proposal);
             }
         }
@@ -938,25 +781,24 @@ impl TurboTrack {
             let mode = usize::from(new_modes[i]);
             let (sigma_v_inv, sigma_v_chol, log_det_v) = &motion[mode];
             let z = self.normal3();
-            let (mut x, log_correction) =
-                match tuples.get(&self.scratch_keys[i]).and_then(|c| c.as_ref()) {
-                    Some(proposals) => {
-                        let c = &proposals[mode];
-                        let mean = c.a * prev + c.b;
-                        let x = mean + c.l * z;
-                        let mut r_prior = x - prev;
-                        let mut r_prop = x - mean;
-                        if dims == 2 {
-                            r_prior.z = 0.0;
-                            r_prop.z = 0.0;
-                        }
-                        let log_prior = log_gaussian3(&r_prior, sigma_v_inv, *log_det_v, dims);
-                        let log_prop = log_gaussian3(&r_prop, &c.p_inv, c.log_det_p, dims);
-                        (x, log_prior - log_prop)
+            let (mut x, log_correction) = match tuples.get(&self.scratch_keys[i]).and_then(|c| c.as_ref()) {
+                Some(proposals) => {
+                    let c = &proposals[mode];
+                    let mean = c.a * prev + c.b;
+                    let x = mean + c.l * z;
+                    let mut r_prior = x - prev;
+                    let mut r_prop = x - mean;
+                    if dims == 2 {
+                        r_prior.z = 0.0;
+                        r_prop.z = 0.0;
                     }
-                    // Bootstrap: sampled from the prior, which cancels.
-                    None => (prev + sigma_v_chol * z, 0.0),
-                };
+                    let log_prior = log_gaussian3(&r_prior, sigma_v_inv, *log_det_v, dims);
+                    let log_prop = log_gaussian3(&r_prop, &c.p_inv, c.log_det_p, dims);
+                    (x, log_prior - log_prop)
+                }
+                // Bootstrap: sampled from the prior, which cancels.
+                None => (prev + sigma_v_chol * z, 0.0),
+            };
             if dims == 2 {
                 x.z = self.scene.plane_z;
             }
@@ -976,8 +818,7 @@ impl TurboTrack {
                 let key = self.scratch_keys[best];
                 match tuples.get(&key) {
                     Some(Some(c)) => {
-                        (c[0].centroid - self.positions[best]).norm()
-                            > self.params.outlier_jump_m + self.params.max_speed_m_s * dt
+                        (c[0].centroid - self.positions[best]).norm() > self.params.outlier_jump_m + self.params.max_speed_m_s * dt
                     }
                     _ => false,
                 }
@@ -1005,8 +846,7 @@ impl TurboTrack {
             let uniform = -(n as f64).ln();
             self.log_weights.iter_mut().for_each(|w| *w = uniform);
         }
-        self.history
-            .push_back((time_s, self.positions.clone(), parents));
+        self.history.push_back((time_s, self.positions.clone(), parents));
         while self.history.len() > self.params.history_frames.max(1) {
             self.history.pop_front();
         }
@@ -1026,12 +866,7 @@ impl TurboTrack {
             return;
         }
         let (mut static_weight, mut mean) = (0.0, Vector3::zeros());
-        for ((p, lw), &resting) in self
-            .positions
-            .iter()
-            .zip(&self.log_weights)
-            .zip(&self.modes)
-        {
+        for ((p, lw), &resting) in self.positions.iter().zip(&self.log_weights).zip(&self.modes) {
             if resting {
                 let w = lw.exp();
                 static_weight += w;
@@ -1043,46 +878,25 @@ impl TurboTrack {
             return;
         }
         mean /= static_weight;
-        let receivers = averaged_receivers(
-            &self.scene,
-            &self.geometry,
-            &self.average,
-            &self.params.candidates,
-            self.params.distance_sigma_m,
-            &mean,
-        );
+        let receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &self.params.candidates, self.params.distance_sigma_m, &mean);
         if receivers.len() < self.geometry.needed() {
             return;
         }
         let teeth: Vec<i64> = receivers
             .iter()
-            .map(|rx| {
-                rx.candidates.nearest_index(
-                    crate::geometry::bistatic_distance(
-                        &mean,
-                        &self.geometry.tx_position,
-                        &rx.position,
-                    )
-                    .0,
-                )
-            })
+            .map(|rx| rx.candidates.nearest_index(crate::geometry::bistatic_distance(&mean, &self.geometry.tx_position, &rx.position).0))
             .collect();
-        let Some((fit, _)) = refine_on_teeth(&self.geometry, &receivers, &teeth, &mean, 3) else {
-            return;
-        };
+        let Some((fit, _)) = refine_on_teeth(&self.geometry, &receivers, &teeth, &mean, 3) else { return };
         if (fit - mean).norm() > self.mode_radius() || !self.in_region(&fit) {
             return;
         }
-        let Some(covariance) = frame_covariance(&self.geometry, &receivers, &fit) else {
-            return;
-        };
+        let Some(covariance) = frame_covariance(&self.geometry, &receivers, &fit) else { return };
         self.resting = Some((fit, covariance));
         // Every `far_lobe_search_s`, and whenever the average has doubled
         // since the last search (early in a rest each search is worth twice
         // the frames of the one before).
         let frames = self.average.frames();
-        let due = frame.time_s - self.last_resting_search_s >= self.params.far_lobe_search_s
-            || frames >= 2.0 * self.resting_search_frames;
+        let due = frame.time_s - self.last_resting_search_s >= self.params.far_lobe_search_s || frames >= 2.0 * self.resting_search_frames;
         if self.lobe_test() && frames >= RESTING_LOBE_FRAMES && due {
             self.last_resting_search_s = frame.time_s;
             self.resting_search_frames = frames;
@@ -1107,50 +921,25 @@ impl TurboTrack {
     fn search_resting_lobes(&mut self, fit: &Vector3<f64>) {
         let frames = self.average.frames();
         let mut candidates = self.params.candidates.clone();
-        candidates.min_relative_weight = candidates
-            .min_relative_weight
-            .min(RESTING_LOBE_RELATIVE_WEIGHT);
-        let mut receivers = averaged_receivers(
-            &self.scene,
-            &self.geometry,
-            &self.average,
-            &candidates,
-            self.params.distance_sigma_m,
-            fit,
-        );
+        candidates.min_relative_weight = candidates.min_relative_weight.min(RESTING_LOBE_RELATIVE_WEIGHT);
+        let mut receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &candidates, self.params.distance_sigma_m, fit);
         if receivers.len() < self.geometry.needed() {
             return;
         }
         // The calibration residual (a bias per receiver, departure 14) does
         // not average away: lobes are compared with it in each receiver's σ.
         let calibration = self.params.calibration_sigma_m;
-        receivers
-            .iter_mut()
-            .for_each(|r| r.candidates.sigma_m = r.candidates.sigma_m.hypot(calibration));
+        receivers.iter_mut().for_each(|r| r.candidates.sigma_m = r.candidates.sigma_m.hypot(calibration));
         let floor = self.params.weight_floor / frames;
-        let ll = |x: &Vector3<f64>| {
-            crate::track::bistatic::mixture_log_likelihood(&self.geometry, &receivers, x, floor).0
-        };
+        let ll = |x: &Vector3<f64>| crate::track::bistatic::mixture_log_likelihood(&self.geometry, &receivers, x, floor).0;
         let at_fit = ll(fit);
         let mut others: Vec<(Vector3<f64>, f64)> = Vec::new();
-        for (g, _) in self
-            .initial_components(&receivers)
-            .iter()
-            .take(FAR_LOBE_SLOTS + 1)
-        {
-            if (g.mean - fit).norm() > self.mode_radius()
-                && others
-                    .iter()
-                    .all(|o| (o.0 - g.mean).norm() > self.mode_radius())
-            {
+        for (g, _) in self.initial_components(&receivers).iter().take(FAR_LOBE_SLOTS + 1) {
+            if (g.mean - fit).norm() > self.mode_radius() && others.iter().all(|o| (o.0 - g.mean).norm() > self.mode_radius()) {
                 others.push((g.mean, ll(&g.mean) - at_fit));
             }
         }
-        let best = others
-            .iter()
-            .enumerate()
-            .max_by(|a, b| a.1 .1.total_cmp(&b.1 .1))
-            .map(|(i, o)| (i, *o));
+        let best = others.iter().enumerate().max_by(|a, b| a.1 .1.total_cmp(&b.1 .1)).map(|(i, o)| (i, *o));
         if let Some((i, (position, llr))) = best.filter(|b| b.1 .1 > self.params.lobe_switch_nats) {
             // Re-based on the new lobe; the lobe left joins the others.
             others.remove(i);
@@ -1179,8 +968,7 @@ impl TurboTrack {
     /// Whether the lobe test runs: the mixture likelihood (the broad
     /// single-Gaussian baseline has no lobes) and a finite switch level.
     fn lobe_test(&self) -> bool {
-        matches!(self.params.likelihood, WidebandLikelihood::Mixture)
-            && self.params.lobe_switch_nats.is_finite()
+        matches!(self.params.likelihood, WidebandLikelihood::Mixture) && self.params.lobe_switch_nats.is_finite()
     }
 
     /// The lobe test on an accepted frame (`lobes.rs`): the displacement
@@ -1188,22 +976,8 @@ impl TurboTrack {
     fn test_lobes(&mut self, receivers: &[Receiver], mean: &Vector3<f64>) -> Option<Vector3<f64>> {
         let levels = self.lobe_levels();
         let (scene, margin) = (&self.scene, self.params.region_margin_m);
-        let in_region = |p: &Vector3<f64>| {
-            scene
-                .region
-                .as_ref()
-                .is_none_or(|r| r.contains(p, margin, scene.dimensions))
-        };
-        match self.lobes.update(
-            &LobeFrame {
-                geometry: &self.geometry,
-                receivers,
-                weight_floor: self.params.weight_floor,
-                levels: &levels,
-            },
-            mean,
-            in_region,
-        ) {
+        let in_region = |p: &Vector3<f64>| scene.region.as_ref().is_none_or(|r| r.contains(p, margin, scene.dimensions));
+        match self.lobes.update(&LobeFrame { geometry: &self.geometry, receivers, weight_floor: self.params.weight_floor, levels: &levels }, mean, in_region) {
             LobeDecision::Stay => None,
             LobeDecision::Switch(d) => Some(d),
         }
@@ -1221,41 +995,16 @@ impl TurboTrack {
     /// outliers included (a filter on a wrong lobe sees mostly outliers):
     /// first the periodic global search, then the alternatives' evidence.
     /// The displacement to an alternative that won.
-    fn test_far_lobes(
-        &mut self,
-        time_s: f64,
-        receivers: &[Receiver],
-        mean: &Vector3<f64>,
-    ) -> Option<Vector3<f64>> {
+    fn test_far_lobes(&mut self, time_s: f64, receivers: &[Receiver], mean: &Vector3<f64>) -> Option<Vector3<f64>> {
         let levels = self.lobe_levels();
         if time_s - self.last_far_search_s >= self.params.far_lobe_search_s {
             self.last_far_search_s = time_s;
-            let found: Vec<Vector3<f64>> = self
-                .initial_components(receivers)
-                .iter()
-                .take(FAR_LOBE_SLOTS + 1)
-                .map(|c| c.0.mean)
-                .collect();
-            self.far
-                .offer(found, levels.frame_cap_nats - levels.floor_nats, Some(mean));
+            let found: Vec<Vector3<f64>> = self.initial_components(receivers).iter().take(FAR_LOBE_SLOTS + 1).map(|c| c.0.mean).collect();
+            self.far.offer(found, levels.frame_cap_nats - levels.floor_nats, Some(mean));
         }
         let (scene, margin) = (&self.scene, self.params.region_margin_m);
-        let into_region = |p: &Vector3<f64>| {
-            scene
-                .region
-                .as_ref()
-                .map_or(*p, |r| r.clamp(p, margin, scene.dimensions))
-        };
-        match self.far.update(
-            &LobeFrame {
-                geometry: &self.geometry,
-                receivers,
-                weight_floor: self.params.weight_floor,
-                levels: &levels,
-            },
-            mean,
-            into_region,
-        ) {
+        let into_region = |p: &Vector3<f64>| scene.region.as_ref().map_or(*p, |r| r.clamp(p, margin, scene.dimensions));
+        match self.far.update(&LobeFrame { geometry: &self.geometry, receivers, weight_floor: self.params.weight_floor, levels: &levels }, mean, into_region) {
             LobeDecision::Stay => None,
             LobeDecision::Switch(d) => Some(d),
         }
@@ -1283,8 +1032,7 @@ impl TurboTrack {
 
     fn estimate(&mut self, time_s: f64, receivers: Option<&[Receiver]>) -> Option<Estimate> {
         let best = self.best_particle()?;
-        let (mut mean, mut covariance, mut weight) =
-            mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+        let (mut mean, mut covariance, mut weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
         if self.resting_lobes.is_some() {
             // At rest the average decides the lobe (`search_resting_lobes`);
             // the per-frame tests pause and start afresh when the tag moves.
@@ -1296,20 +1044,17 @@ impl TurboTrack {
                 if let Some(r) = self.resting.as_mut() {
                     r.0 += d;
                 }
-                (mean, covariance, weight) =
-                    mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+                (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
             }
         } else if let Some(receivers) = receivers.filter(|_| self.lobe_test()) {
             // Another lobe won: the whole cloud moves there.
             if let Some(d) = self.test_lobes(receivers, &mean) {
                 self.move_cloud(&d);
-                (mean, covariance, weight) =
-                    mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+                (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
             }
             if let Some(d) = self.test_far_lobes(time_s, receivers, &mean) {
                 self.move_cloud(&d);
-                (mean, covariance, weight) =
-                    mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
+                (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
             }
         }
         if let Some((fit, fit_covariance)) = self.resting.take() {
@@ -1319,9 +1064,7 @@ impl TurboTrack {
             // enough for the static mode to keep the weight: the average
             // lags it and starts over.
             let d = fit - mean;
-            let consistent = (covariance + fit_covariance)
-                .try_inverse()
-                .is_some_and(|inverse| d.dot(&(inverse * d)) <= RESTING_CONSISTENCY_CHI2);
+            let consistent = (covariance + fit_covariance).try_inverse().is_some_and(|inverse| d.dot(&(inverse * d)) <= RESTING_CONSISTENCY_CHI2);
             if consistent {
                 // The tag rests: every frame since, through their average.
                 mean = fit;
@@ -1342,32 +1085,16 @@ impl TurboTrack {
             }
         }
         if self.params.calibration_sigma_m > 0.0 {
-            if let Some(c) = calibration_covariance(
-                &self.geometry,
-                &self.receive_positions,
-                &mean,
-                self.params.calibration_sigma_m,
-            ) {
+            if let Some(c) = calibration_covariance(&self.geometry, &self.receive_positions, &mean, self.params.calibration_sigma_m) {
                 covariance += c;
             }
         }
         self.recent.push_back((time_s, mean));
-        while self
-            .recent
-            .front()
-            .is_some_and(|(t, _)| time_s - t > self.params.velocity_window_s)
-        {
+        while self.recent.front().is_some_and(|(t, _)| time_s - t > self.params.velocity_window_s) {
             self.recent.pop_front();
         }
         let velocity = slope(&self.recent);
-        let e = Estimate::from_position(
-            time_s,
-            &mean,
-            &covariance,
-            [velocity.x, velocity.y, velocity.z],
-            self.positions.len(),
-            weight,
-        );
+        let e = Estimate::from_position(time_s, &mean, &covariance, [velocity.x, velocity.y, velocity.z], self.positions.len(), weight);
         self.last_estimate = Some(e.clone());
         Some(e)
     }
@@ -1398,10 +1125,7 @@ impl TurboTrack {
 
     /// Forgets the particles and lobes; returns the last estimate's position, m.
     fn restart(&mut self) -> Option<Vector3<f64>> {
-        let before = self
-            .last_estimate
-            .as_ref()
-            .map(|e| Vector3::from(e.position));
+        let before = self.last_estimate.as_ref().map(|e| Vector3::from(e.position));
         self.initialised = false;
         self.positions.clear();
         self.log_weights.clear();
@@ -1460,11 +1184,7 @@ impl TurboTrack {
         if self.lobe_test() && self.resting_lobes.is_none() {
             // A filter on a wrong far lobe sees mostly outliers: the far
             // alternatives are tested on them too.
-            if let Some(position) = self
-                .last_estimate
-                .as_ref()
-                .map(|e| Vector3::from(e.position))
-            {
+            if let Some(position) = self.last_estimate.as_ref().map(|e| Vector3::from(e.position)) {
                 if let Some(d) = self.test_far_lobes(frame.time_s, &receivers, &position) {
                     self.move_cloud(&d);
                     self.consecutive_outliers = 0;
@@ -1510,18 +1230,14 @@ const RESTING_LOBE_FRAMES: f64 = 30.0;
 /// to the envelope's peak (one frame keeps those above half of it).
 const RESTING_LOBE_RELATIVE_WEIGHT: f64 = 0.05;
 
+
 /// Frames (effective, after forgetting) the resting average needs before
 /// its fit is the estimate: 10 frames lift a frame's SNR by 10 dB.
 const RESTING_MIN_FRAMES: f64 = 10.0;
 
 /// Weighted mean and covariance (m, m²) of the particles within `radius`
 /// of particle `best`, and their total weight.
-fn mode_mean(
-    positions: &[Vector3<f64>],
-    log_weights: &[f64],
-    best: usize,
-    radius: f64,
-) -> (Vector3<f64>, Matrix3<f64>, f64) {
+fn mode_mean(positions: &[Vector3<f64>], log_weights: &[f64], best: usize, radius: f64) -> (Vector3<f64>, Matrix3<f64>, f64) {
     let centre = positions[best];
     let mut total = 0.0;
     let mut mean = Vector3::zeros();
@@ -1559,11 +1275,7 @@ fn slope(samples: &VecDeque<(f64, Vector3<f64>)>) -> Vector3<f64> {
     if stt <= 0.0 {
         return Vector3::zeros();
     }
-    samples
-        .iter()
-        .map(|s| (s.1 - p_mean) * (s.0 - t_mean))
-        .sum::<Vector3<f64>>()
-        / stt
+    samples.iter().map(|s| (s.1 - p_mean) * (s.0 - t_mean)).sum::<Vector3<f64>>() / stt
 }
 
 impl Tracker for TurboTrack {
@@ -1587,11 +1299,7 @@ impl Tracker for TurboTrack {
     }
 
     fn hypotheses(&self) -> Vec<([f64; 3], f64)> {
-        self.positions
-            .iter()
-            .zip(&self.log_weights)
-            .map(|(p, w)| ([p.x, p.y, p.z], *w))
-            .collect()
+        self.positions.iter().zip(&self.log_weights).map(|(p, w)| ([p.x, p.y, p.z], *w)).collect()
     }
 
     fn trajectory(&self) -> Vec<(f64, [f64; 3])> {
@@ -1614,12 +1322,7 @@ mod tests {
     /// Frames at 300 /s of a tag on `path` (docs/formats.md §5 convention:
     /// `exp(−j 2π f d / c)`), 20 subcarriers over 100 MHz, complex noise of
     /// rms 0.1 relative to the channel.
-    fn frames(
-        scene: &Scene,
-        path: impl Fn(f64) -> Vector3<f64>,
-        duration_s: f64,
-        seed: u64,
-    ) -> Vec<(WidebandFrame, Vector3<f64>)> {
+    fn frames(scene: &Scene, path: impl Fn(f64) -> Vector3<f64>, duration_s: f64, seed: u64) -> Vec<(WidebandFrame, Vector3<f64>)> {
         noisy_frames(scene, path, duration_s, seed, 0.1)
     }
 
@@ -1644,40 +1347,18 @@ mod tests {
                 for &r in &rx {
                     let d = (p - tx).norm() + (p - scene.antennas[r].position).norm();
                     for &f in &frequencies {
-                        let noise: (f64, f64) = (
-                            StandardNormal.sample(&mut rng),
-                            StandardNormal.sample(&mut rng),
-                        );
-                        let clean = Complex::from_polar(
-                            1.0,
-                            -std::f64::consts::TAU * f * d / SPEED_OF_LIGHT,
-                        );
+                        let noise: (f64, f64) = (StandardNormal.sample(&mut rng), StandardNormal.sample(&mut rng));
+                        let clean = Complex::from_polar(1.0, -std::f64::consts::TAU * f * d / SPEED_OF_LIGHT);
                         h.push(clean + Complex::new(noise.0, noise.1) * (noise_rms / 2f64.sqrt()));
                     }
                 }
-                (
-                    WidebandFrame {
-                        time_s: t,
-                        tx: 0,
-                        rx: rx.clone(),
-                        frequencies_hz: frequencies.clone(),
-                        h,
-                    },
-                    p,
-                )
+                (WidebandFrame { time_s: t, tx: 0, rx: rx.clone(), frequencies_hz: frequencies.clone(), h }, p)
             })
             .collect()
     }
 
     fn tracker() -> TurboTrack {
-        TurboTrack::new(
-            scene(),
-            TurboTrackParams {
-                particles: 2_000,
-                ..TurboTrackParams::default()
-            },
-        )
-        .unwrap()
+        TurboTrack::new(scene(), TurboTrackParams { particles: 2_000, ..TurboTrackParams::default() }).unwrap()
     }
 
     #[test]
@@ -1690,10 +1371,7 @@ mod tests {
             if let Some(e) = tracker.step(&Measurement::Wideband(frame)) {
                 if t >= 1.0 {
                     errors.push((Vector3::from(e.position) - p).norm());
-                    assert!(
-                        e.position_sigma().iter().all(|s| s.is_finite() && *s > 0.0),
-                        "{e:?}"
-                    );
+                    assert!(e.position_sigma().iter().all(|s| s.is_finite() && *s > 0.0), "{e:?}");
                 }
             }
         }
@@ -1701,11 +1379,7 @@ mod tests {
         errors.sort_by(f64::total_cmp);
         let median = errors[errors.len() / 2];
         assert!(median < 3e-3, "median error {median} m");
-        assert!(
-            errors[errors.len() * 9 / 10] < 6e-3,
-            "p90 {} m",
-            errors[errors.len() * 9 / 10]
-        );
+        assert!(errors[errors.len() * 9 / 10] < 6e-3, "p90 {} m", errors[errors.len() * 9 / 10]);
     }
 
     /// The smoothed (MAP) trajectory is causal bookkeeping of the frames
@@ -1724,17 +1398,10 @@ mod tests {
         let trajectory = tracker.trajectory();
         assert!(trajectory.len() > 100);
         assert!(trajectory.windows(2).all(|w| w[0].0 < w[1].0));
-        let mut smoothed: Vec<f64> = trajectory
-            .iter()
-            .filter(|(t, _)| *t >= 1.0)
-            .map(|(t, p)| (Vector3::from(*p) - path(*t)).norm())
-            .collect();
+        let mut smoothed: Vec<f64> =
+            trajectory.iter().filter(|(t, _)| *t >= 1.0).map(|(t, p)| (Vector3::from(*p) - path(*t)).norm()).collect();
         smoothed.sort_by(f64::total_cmp);
-        assert!(
-            !smoothed.is_empty() && smoothed[smoothed.len() / 2] < 0.01,
-            "smoothed median error {:?} m",
-            smoothed.get(smoothed.len() / 2)
-        );
+        assert!(!smoothed.is_empty() && smoothed[smoothed.len() / 2] < 0.01, "smoothed median error {:?} m", smoothed.get(smoothed.len() / 2));
     }
 
     #[test]
@@ -1744,34 +1411,19 @@ mod tests {
         for (f, _) in &frames[..60] {
             tracker.step(&Measurement::Wideband(f.clone()));
         }
-        let late = WidebandFrame {
-            time_s: 0.0,
-            ..frames[60].0.clone()
-        };
+        let late = WidebandFrame { time_s: 0.0, ..frames[60].0.clone() };
         assert!(tracker.step(&Measurement::Wideband(late)).is_none());
-        let read = super::super::PhaseRead {
-            time_s: 1.0,
-            antenna: 1,
-            frequency_hz: 915e6,
-            phase_rad: 0.1,
-        };
+        let read = super::super::PhaseRead { time_s: 1.0, antenna: 1, frequency_hz: 915e6, phase_rad: 0.1 };
         assert!(tracker.step(&Measurement::Phase(read)).is_none());
         let s = tracker.stats();
         assert_eq!((s.measurements, s.out_of_order, s.invalid), (62, 1, 1));
         tracker.reset();
         assert_eq!(tracker.stats().measurements, 62, "reset keeps the counters");
-        assert!(
-            tracker.trajectory().is_empty(),
-            "reset forgets the trajectory"
-        );
+        assert!(tracker.trajectory().is_empty(), "reset forgets the trajectory");
     }
 
     /// Median 3D error (m) of the estimates from `from_s` on.
-    fn median_error(
-        tracker: &mut TurboTrack,
-        frames: Vec<(WidebandFrame, Vector3<f64>)>,
-        from_s: f64,
-    ) -> f64 {
+    fn median_error(tracker: &mut TurboTrack, frames: Vec<(WidebandFrame, Vector3<f64>)>, from_s: f64) -> f64 {
         let mut errors = Vec::new();
         for (frame, p) in frames {
             let t = frame.time_s;
@@ -1792,37 +1444,18 @@ mod tests {
     fn the_static_mode_averages_a_tag_at_rest() {
         let truth = Vector3::new(0.5, 1.2, 0.8);
         let run = |entry: f64| {
-            let params = TurboTrackParams {
-                particles: 300,
-                static_entry_probability: entry,
-                ..TurboTrackParams::default()
-            };
+            let params = TurboTrackParams { particles: 300, static_entry_probability: entry, ..TurboTrackParams::default() };
             let mut tracker = TurboTrack::new(scene(), params).unwrap();
-            let error = median_error(
-                &mut tracker,
-                noisy_frames(&scene(), |_| truth, 3.0, 11, 1.0),
-                1.0,
-            );
-            let static_weight: f64 = tracker
-                .modes
-                .iter()
-                .zip(&tracker.log_weights)
-                .filter(|(m, _)| **m)
-                .map(|(_, w)| w.exp())
-                .sum();
+            let error = median_error(&mut tracker, noisy_frames(&scene(), |_| truth, 3.0, 11, 1.0), 1.0);
+            let static_weight: f64 =
+                tracker.modes.iter().zip(&tracker.log_weights).filter(|(m, _)| **m).map(|(_, w)| w.exp()).sum();
             (error, static_weight)
         };
         let ((with_mode, static_weight), (single, none)) = (run(0.01), run(0.0));
-        assert!(
-            with_mode < 0.75 * single,
-            "static mode {with_mode} m against the single random walk {single} m"
-        );
+        assert!(with_mode < 0.75 * single, "static mode {with_mode} m against the single random walk {single} m");
         // The prior share of static particles is 0.01 / 0.21 ≈ 5 %: the
         // weights, not the prior, put the tag at rest.
-        assert!(
-            static_weight > 0.2,
-            "weight on static particles {static_weight}"
-        );
+        assert!(static_weight > 0.2, "weight on static particles {static_weight}");
         assert_eq!(none, 0.0);
     }
 
@@ -1851,16 +1484,10 @@ mod tests {
     fn calibration_covariance_matches_finite_differences() {
         let s = scene();
         let geometry = HelperGeometry::new(&s).unwrap();
-        let rx: Vec<Vector3<f64>> = s
-            .antennas
-            .iter()
-            .filter(|a| a.role == Role::Rx)
-            .map(|a| a.position)
-            .collect();
+        let rx: Vec<Vector3<f64>> = s.antennas.iter().filter(|a| a.role == Role::Rx).map(|a| a.position).collect();
         let sigma = 0.004;
         let p = Vector3::new(0.7, 1.1, 0.6);
-        let path =
-            |q: &Vector3<f64>, r: &Vector3<f64>| (q - geometry.tx_position).norm() + (q - r).norm();
+        let path = |q: &Vector3<f64>, r: &Vector3<f64>| (q - geometry.tx_position).norm() + (q - r).norm();
         let mut information = Matrix3::zeros();
         for r in &rx {
             let h = 1e-6;
@@ -1873,18 +1500,9 @@ mod tests {
         }
         let expected = information.try_inverse().unwrap() * sigma * sigma;
         let c = calibration_covariance(&geometry, &rx, &p, sigma).unwrap();
-        assert!(
-            (c - expected).norm() < 1e-6 * expected.norm(),
-            "{c} against {expected}"
-        );
-        let low =
-            calibration_covariance(&geometry, &rx, &Vector3::new(0.7, 1.1, 0.15), sigma).unwrap();
-        assert!(
-            low[(2, 2)] > 4.0 * c[(2, 2)],
-            "z variance {} near the plane against {}",
-            low[(2, 2)],
-            c[(2, 2)]
-        );
+        assert!((c - expected).norm() < 1e-6 * expected.norm(), "{c} against {expected}");
+        let low = calibration_covariance(&geometry, &rx, &Vector3::new(0.7, 1.1, 0.15), sigma).unwrap();
+        assert!(low[(2, 2)] > 4.0 * c[(2, 2)], "z variance {} near the plane against {}", low[(2, 2)], c[(2, 2)]);
         let planar = HelperGeometry::new(&Scene::plus_helper(2, 0.0)).unwrap();
         let c2 = calibration_covariance(&planar, &rx, &Vector3::new(0.7, 1.1, 0.0), sigma).unwrap();
         assert_eq!([c2[(2, 2)], c2[(0, 2)], c2[(2, 1)]], [0.0; 3]);
@@ -1894,27 +1512,12 @@ mod tests {
     #[test]
     fn rejects_invalid_mode_parameters() {
         for params in [
-            TurboTrackParams {
-                static_sigma_m: 0.0,
-                ..TurboTrackParams::default()
-            },
-            TurboTrackParams {
-                static_entry_probability: 1.0,
-                ..TurboTrackParams::default()
-            },
-            TurboTrackParams {
-                static_exit_probability: 0.0,
-                ..TurboTrackParams::default()
-            },
-            TurboTrackParams {
-                calibration_sigma_m: -1e-3,
-                ..TurboTrackParams::default()
-            },
+            TurboTrackParams { static_sigma_m: 0.0, ..TurboTrackParams::default() },
+            TurboTrackParams { static_entry_probability: 1.0, ..TurboTrackParams::default() },
+            TurboTrackParams { static_exit_probability: 0.0, ..TurboTrackParams::default() },
+            TurboTrackParams { calibration_sigma_m: -1e-3, ..TurboTrackParams::default() },
         ] {
-            assert!(matches!(
-                TurboTrack::new(scene(), params),
-                Err(Error::Parameter { .. })
-            ));
+            assert!(matches!(TurboTrack::new(scene(), params), Err(Error::Parameter { .. })));
         }
     }
 
@@ -1922,9 +1525,6 @@ mod tests {
     fn a_scene_without_a_transmitter_is_rejected() {
         let mut s = scene();
         s.antennas.iter_mut().for_each(|a| a.role = Role::TxRx);
-        assert!(matches!(
-            TurboTrack::new(s, TurboTrackParams::default()),
-            Err(Error::Scene(_))
-        ));
+        assert!(matches!(TurboTrack::new(s, TurboTrackParams::default()), Err(Error::Scene(_))));
     }
 }

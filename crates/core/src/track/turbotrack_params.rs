@@ -12,16 +12,10 @@ use crate::model::wideband::CandidateWeighting;
 use crate::params::{choice, float, integer, optional_float, Bound, Range, Table};
 
 /// `(0, 1]`: the likelihood temper κ.
-const TEMPER: Range = Range {
-    low: Bound::Exclusive(0.0),
-    high: Bound::Inclusive(1.0),
-};
+const TEMPER: Range = Range { low: Bound::Exclusive(0.0), high: Bound::Inclusive(1.0) };
 
 /// `(0, inf]`: a level that `inf` switches off.
-const POSITIVE_OR_OFF: Range = Range {
-    low: Bound::Exclusive(0.0),
-    high: Bound::Inclusive(f64::INFINITY),
-};
+const POSITIVE_OR_OFF: Range = Range { low: Bound::Exclusive(0.0), high: Bound::Inclusive(f64::INFINITY) };
 
 /// The table of TurboTrack and its variants.
 pub fn turbotrack_table() -> Table<TurboTrackParams> {

@@ -4,10 +4,7 @@
 //! ([`super::registry::METHODS`]) names these constructors; the base
 //! methods' own are `build` in their files.
 
-use super::{
-    Glac, GlacParams, Inference, InitialSampling, Params, Proposal, Tracker, TurboTrack,
-    WidebandLikelihood,
-};
+use super::{Glac, GlacParams, Inference, InitialSampling, Params, Proposal, Tracker, TurboTrack, WidebandLikelihood};
 use crate::error::Result;
 use crate::model::wideband::CandidateWeighting;
 use crate::scene::Scene;
@@ -18,11 +15,7 @@ use crate::scene::Scene;
 /// wavelength-scale ambiguity.
 pub const GAUSSIAN_PF_SIGMA_M: f64 = 0.3;
 
-fn glac_with(
-    scene: &Scene,
-    params: &Params,
-    variant: impl FnOnce(&mut GlacParams),
-) -> Result<Box<dyn Tracker>> {
+fn glac_with(scene: &Scene, params: &Params, variant: impl FnOnce(&mut GlacParams)) -> Result<Box<dyn Tracker>> {
     let mut p = params.glac.clone();
     variant(&mut p);
     Ok(Box::new(Glac::new(scene.clone(), p)?))
@@ -58,9 +51,7 @@ pub fn gaussian_pf(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
     let mut w = params.turbotrack.clone();
     // §7.2(a): one broad Gaussian around the strongest candidate,
     // a bootstrap (prior) proposal.
-    w.likelihood = WidebandLikelihood::SingleGaussian {
-        sigma_m: GAUSSIAN_PF_SIGMA_M,
-    };
+    w.likelihood = WidebandLikelihood::SingleGaussian { sigma_m: GAUSSIAN_PF_SIGMA_M };
     w.proposal = Proposal::Prior;
     // §7.2(a): the strongest candidate by FFT amplitude.
     w.candidates.weighting = CandidateWeighting::Amplitude;

@@ -23,14 +23,7 @@ pub struct HelperOptions {
 
 impl Default for HelperOptions {
     fn default() -> Self {
-        Self {
-            dimensions: 3,
-            speed: 0.2,
-            duration_s: 5.0,
-            frame_rate: 300.0,
-            noise: 0.1,
-            centre: Vector3::new(0.5, 1.2, 0.8),
-        }
+        Self { dimensions: 3, speed: 0.2, duration_s: 5.0, frame_rate: 300.0, noise: 0.1, centre: Vector3::new(0.5, 1.2, 0.8) }
     }
 }
 
@@ -43,10 +36,7 @@ pub fn subcarriers() -> Vec<f64> {
 }
 
 /// Frames and the true position at each.
-pub fn simulate_frames(
-    o: &HelperOptions,
-    seed: u64,
-) -> (Scene, Vec<WidebandFrame>, Vec<Vector3<f64>>) {
+pub fn simulate_frames(o: &HelperOptions, seed: u64) -> (Scene, Vec<WidebandFrame>, Vec<Vector3<f64>>) {
     let scene = helper_scene(o.dimensions, o.centre.z);
     let mut rng = StdRng::seed_from_u64(seed);
     let freqs = subcarriers();
@@ -57,11 +47,7 @@ pub fn simulate_frames(
     let mut t = 0.0;
     // Figure-eight of half-width a: peak speed ≈ a ω √(1 + 4)/... choose ω for the speed.
     let a = 0.3;
-    let omega = if o.speed > 0.0 {
-        o.speed / (a * 5f64.sqrt())
-    } else {
-        0.0
-    };
+    let omega = if o.speed > 0.0 { o.speed / (a * 5f64.sqrt()) } else { 0.0 };
     let phase0: f64 = rng.random::<f64>() * std::f64::consts::TAU;
     while t < o.duration_s {
         let th = omega * t + phase0;
@@ -74,20 +60,11 @@ pub fn simulate_frames(
             let d = (p - tx).norm() + (p - scene.antennas[r].position).norm();
             for &f in &freqs {
                 let (s, c) = (std::f64::consts::TAU * f * d / SPEED_OF_LIGHT).sin_cos();
-                let noise = Complex::new(
-                    rng.sample::<f64, _>(StandardNormal),
-                    rng.sample::<f64, _>(StandardNormal),
-                ) * (o.noise / 2f64.sqrt());
+                let noise = Complex::new(rng.sample::<f64, _>(StandardNormal), rng.sample::<f64, _>(StandardNormal)) * (o.noise / 2f64.sqrt());
                 h.push(Complex::new(c, -s) + noise);
             }
         }
-        frames.push(WidebandFrame {
-            time_s: t,
-            tx: 0,
-            rx: rx.clone(),
-            frequencies_hz: freqs.clone(),
-            h,
-        });
+        frames.push(WidebandFrame { time_s: t, tx: 0, rx: rx.clone(), frequencies_hz: freqs.clone(), h });
         truths.push(p);
         t += (0.5 + rng.random::<f64>()) / o.frame_rate;
     }

@@ -30,11 +30,7 @@ pub(super) fn encode(m: usize, trext: bool, bits: &[u8], end: bool) -> Vec<u8> {
                 phase = -phase;
             }
             for c in 0..m {
-                let subcarrier: i8 = if (half * m + c).is_multiple_of(2) {
-                    1
-                } else {
-                    -1
-                };
+                let subcarrier: i8 = if (half * m + c).is_multiple_of(2) { 1 } else { -1 };
                 chips.push(u8::from(phase * subcarrier > 0));
             }
         }
@@ -58,11 +54,7 @@ mod tests {
                     .iter()
                     .enumerate()
                     .map(|(c, &l)| {
-                        let sub = if ((h % 2) * m + c).is_multiple_of(2) {
-                            1
-                        } else {
-                            -1
-                        };
+                        let sub = if ((h % 2) * m + c).is_multiple_of(2) { 1 } else { -1 };
                         sub * if l == 1 { 1 } else { -1 }
                     })
                     .sum();
@@ -82,26 +74,13 @@ mod tests {
             let chips = encode(m, false, &bits, true);
             assert_eq!(chips.len(), (4 + 6 + 6 + 1) * 2 * m);
             let halves = baseband(&chips, m);
-            let all: Vec<u8> = [0, 0, 0, 0, 0, 1, 0, 1, 1, 1]
-                .iter()
-                .chain(&bits)
-                .chain(&[1])
-                .copied()
-                .collect();
+            let all: Vec<u8> = [0, 0, 0, 0, 0, 1, 0, 1, 1, 1].iter().chain(&bits).chain(&[1]).copied().collect();
             for (i, &bit) in all.iter().enumerate() {
                 let (a, b) = (halves[2 * i], halves[2 * i + 1]);
-                assert_eq!(
-                    a != b,
-                    bit == 1,
-                    "M={m} bit {i}: mid-bit inversion iff data-1"
-                );
+                assert_eq!(a != b, bit == 1, "M={m} bit {i}: mid-bit inversion iff data-1");
                 if i > 0 {
                     let boundary = halves[2 * i - 1] != a;
-                    assert_eq!(
-                        boundary,
-                        all[i - 1] == 0 && bit == 0,
-                        "M={m} boundary before bit {i}"
-                    );
+                    assert_eq!(boundary, all[i - 1] == 0 && bit == 0, "M={m} boundary before bit {i}");
                 }
             }
         }

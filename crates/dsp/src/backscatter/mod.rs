@@ -37,9 +37,7 @@ impl Encoding {
             "miller2" | "m2" => Ok(Encoding::Miller(2)),
             "miller4" | "m4" => Ok(Encoding::Miller(4)),
             "miller8" | "m8" => Ok(Encoding::Miller(8)),
-            other => Err(Error::BadConfig(format!(
-                "unknown encoding '{other}' (fm0, miller2, miller4, miller8)"
-            ))),
+            other => Err(Error::BadConfig(format!("unknown encoding '{other}' (fm0, miller2, miller4, miller8)"))),
         }
     }
 
@@ -58,9 +56,7 @@ impl Encoding {
     pub fn validate(&self) -> Result<()> {
         match self {
             Encoding::Fm0 | Encoding::Miller(2 | 4 | 8) => Ok(()),
-            Encoding::Miller(m) => Err(Error::BadConfig(format!(
-                "Miller M must be 2, 4 or 8, got {m}"
-            ))),
+            Encoding::Miller(m) => Err(Error::BadConfig(format!("Miller M must be 2, 4 or 8, got {m}"))),
         }
     }
 
@@ -104,12 +100,7 @@ mod tests {
 
     #[test]
     fn names_round_trip_and_bad_m_is_rejected() {
-        for e in [
-            Encoding::Fm0,
-            Encoding::Miller(2),
-            Encoding::Miller(4),
-            Encoding::Miller(8),
-        ] {
+        for e in [Encoding::Fm0, Encoding::Miller(2), Encoding::Miller(4), Encoding::Miller(8)] {
             assert_eq!(Encoding::parse(e.name()).unwrap(), e);
         }
         assert!(Encoding::parse("miller3").is_err());
@@ -120,29 +111,15 @@ mod tests {
     fn preamble_lengths() {
         assert_eq!(preamble_chips(Encoding::Fm0, false).unwrap().len(), 12);
         assert_eq!(preamble_chips(Encoding::Fm0, true).unwrap().len(), 36);
-        assert_eq!(
-            preamble_chips(Encoding::Miller(4), false).unwrap().len(),
-            10 * 8
-        );
-        assert_eq!(
-            preamble_chips(Encoding::Miller(2), true).unwrap().len(),
-            22 * 4
-        );
-        assert_eq!(
-            reply_chips(Encoding::Fm0, false, &[1, 0, 1]).unwrap().len(),
-            12 + 6 + 2
-        );
+        assert_eq!(preamble_chips(Encoding::Miller(4), false).unwrap().len(), 10 * 8);
+        assert_eq!(preamble_chips(Encoding::Miller(2), true).unwrap().len(), 22 * 4);
+        assert_eq!(reply_chips(Encoding::Fm0, false, &[1, 0, 1]).unwrap().len(), 12 + 6 + 2);
     }
 
     #[test]
     fn no_state_is_shorter_than_one_chip_and_none_longer_than_two() {
         // The design rule relies on the shortest constant state being one chip.
-        for e in [
-            Encoding::Fm0,
-            Encoding::Miller(2),
-            Encoding::Miller(4),
-            Encoding::Miller(8),
-        ] {
+        for e in [Encoding::Fm0, Encoding::Miller(2), Encoding::Miller(4), Encoding::Miller(8)] {
             let chips = reply_chips(e, true, &[1, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0, 1]).unwrap();
             let mut run = 1;
             for w in chips.windows(2) {

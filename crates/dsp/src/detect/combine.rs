@@ -52,9 +52,7 @@ pub fn combined_projection(h: &ChannelMatrix, block: usize, out: &mut Vec<f64>) 
     let zero = Complex64::new(0.0, 0.0);
     let mut mean = vec![zero; f_count];
     for n in (0..h.symbols).filter(|&n| h.valid[n]) {
-        mean.iter_mut()
-            .zip(h.row(n))
-            .for_each(|(m, &v)| *m += widen(v));
+        mean.iter_mut().zip(h.row(n)).for_each(|(m, &v)| *m += widen(v));
     }
     mean.iter_mut().for_each(|m| *m /= valid as f64);
     // Block sums of the centred rows.
@@ -77,12 +75,7 @@ pub fn combined_projection(h: &ChannelMatrix, block: usize, out: &mut Vec<f64>) 
     let projections: Vec<Complex64> = (0..h.symbols)
         .map(|n| {
             if h.valid[n] {
-                h.row(n)
-                    .iter()
-                    .zip(&mean)
-                    .zip(&v)
-                    .map(|((&x, m), w)| w.conj() * (widen(x) - m))
-                    .sum()
+                h.row(n).iter().zip(&mean).zip(&v).map(|((&x, m), w)| w.conj() * (widen(x) - m)).sum()
             } else {
                 zero
             }
@@ -137,12 +130,7 @@ pub fn combined_projection_from_sums(
         return;
     };
     // offset = vᴴ H̄ with H̄ = T(r + x̄).
-    let absolute: Vec<Complex64> = sums
-        .reference
-        .iter()
-        .zip(&mean_x)
-        .map(|(r, x)| r + x)
-        .collect();
+    let absolute: Vec<Complex64> = sums.reference.iter().zip(&mean_x).map(|(r, x)| r + x).collect();
     let mut mean_h = vec![zero; f_count];
     transform.apply(&absolute, &mut mean_h);
     let offset: Complex64 = v.iter().zip(&mean_h).map(|(v, h)| v.conj() * h).sum();
@@ -150,13 +138,7 @@ pub fn combined_projection_from_sums(
     let projections: Vec<Complex64> = as_floats(&sums.samples)
         .chunks_exact(2 * n)
         .zip(&sums.valid)
-        .map(|(y, &ok)| {
-            if ok {
-                widen(filter.dot(y)) - offset
-            } else {
-                zero
-            }
-        })
+        .map(|(y, &ok)| if ok { widen(filter.dot(y)) - offset } else { zero })
         .collect();
     real_part_after_rotation(&projections, &sums.valid, out);
 }
@@ -174,10 +156,7 @@ struct RealFilter {
 
 impl RealFilter {
     fn new(w: &[Complex32]) -> Self {
-        Self {
-            a: w.iter().flat_map(|w| [w.re, -w.im]).collect(),
-            b: w.iter().flat_map(|w| [w.im, w.re]).collect(),
-        }
+        Self { a: w.iter().flat_map(|w| [w.re, -w.im]).collect(), b: w.iter().flat_map(|w| [w.im, w.re]).collect() }
     }
 
     /// `Σ_t w(t) y(t)` for interleaved `y`, in eight independent lanes per
@@ -186,11 +165,7 @@ impl RealFilter {
     fn dot(&self, y: &[f32]) -> Complex32 {
         const L: usize = 8;
         let (mut re, mut im) = ([0.0f32; L], [0.0f32; L]);
-        let (ac, bc, yc) = (
-            self.a.chunks_exact(L),
-            self.b.chunks_exact(L),
-            y.chunks_exact(L),
-        );
+        let (ac, bc, yc) = (self.a.chunks_exact(L), self.b.chunks_exact(L), y.chunks_exact(L));
         let (a_rest, b_rest, y_rest) = (ac.remainder(), bc.remainder(), yc.remainder());
         for ((a, b), y) in ac.zip(bc).zip(yc) {
             for l in 0..L {
@@ -231,10 +206,8 @@ fn dot_conj(x: &[Complex64], y: &[Complex64]) -> Complex64 {
 fn dominant_direction(blocks: &[Complex64], f_count: usize) -> Option<Vec<Complex64>> {
     let zero = Complex64::new(0.0, 0.0);
     let norm = |x: &[Complex64]| x.iter().map(|v| v.norm_sqr()).sum::<f64>().sqrt();
-    let mut v: Vec<Complex64> = blocks
-        .chunks_exact(f_count)
-        .max_by(|a, b| norm(a).total_cmp(&norm(b)))
-        .map(|b| b.to_vec())?;
+    let mut v: Vec<Complex64> =
+        blocks.chunks_exact(f_count).max_by(|a, b| norm(a).total_cmp(&norm(b))).map(|b| b.to_vec())?;
     let mut next = vec![zero; f_count];
     let mut previous: Option<Vec<Complex64>> = None;
     for _ in 0..6 {
@@ -245,19 +218,14 @@ fn dominant_direction(blocks: &[Complex64], f_count: usize) -> Option<Vec<Comple
         v.iter_mut().for_each(|x| *x /= length);
         // Converged (the direction no longer turns): a reply's modulation
         // dominates the noise by far, so this usually stops after 2–3 steps.
-        if previous
-            .as_ref()
-            .is_some_and(|p| dot_conj(p, &v).norm() > 1.0 - 1e-8)
-        {
+        if previous.as_ref().is_some_and(|p| dot_conj(p, &v).norm() > 1.0 - 1e-8) {
             return Some(v);
         }
         previous = Some(v.clone());
         next.iter_mut().for_each(|x| *x = zero);
         for b in blocks.chunks_exact(f_count) {
             let coefficient = dot_conj(b, &v);
-            next.iter_mut()
-                .zip(b)
-                .for_each(|(o, x)| *o += x * coefficient);
+            next.iter_mut().zip(b).for_each(|(o, x)| *o += x * coefficient);
         }
         std::mem::swap(&mut v, &mut next);
     }
@@ -274,12 +242,7 @@ fn dominant_direction(blocks: &[Complex64], f_count: usize) -> Option<Vec<Comple
 fn real_part_after_rotation(projections: &[Complex64], valid: &[bool], out: &mut Vec<f64>) {
     let square: Complex64 = projections.iter().map(|u| u * u).sum();
     let rotation = Complex64::from_polar(1.0, -0.5 * square.arg());
-    out.extend(
-        projections
-            .iter()
-            .zip(valid)
-            .map(|(u, &ok)| if ok { (u * rotation).re } else { f64::NAN }),
-    );
+    out.extend(projections.iter().zip(valid).map(|(u, &ok)| if ok { (u * rotation).re } else { f64::NAN }));
 }
 
 /// Centred moving average of `width` symbols (NaN values skipped; NaN
@@ -335,14 +298,11 @@ mod tests {
 
     #[test]
     fn projection_follows_the_state_up_to_sign_and_scale() {
-        let s: Vec<Complex64> = (0..19)
-            .map(|f| Complex64::from_polar(100.0, 0.3 * f as f64))
-            .collect();
+        let s: Vec<Complex64> = (0..19).map(|f| Complex64::from_polar(100.0, 0.3 * f as f64)).collect();
         // The tag channel's phase relative to S makes a full turn: the paper's
         // magnitude sum nearly cancels, the projection does not.
-        let t: Vec<Complex64> = (0..19)
-            .map(|f| Complex64::from_polar(1.0, 0.3 * f as f64 + 0.33 * f as f64 + 0.2))
-            .collect();
+        let t: Vec<Complex64> =
+            (0..19).map(|f| Complex64::from_polar(1.0, 0.3 * f as f64 + 0.33 * f as f64 + 0.2)).collect();
         let states: Vec<u8> = (0..400).map(|n| ((n / 37) % 2) as u8).collect();
         let mut h = modulated(&states, &s, &t);
         h.valid[5] = false;
@@ -363,18 +323,12 @@ mod tests {
         // Full separation: |T| √19 between the states, nothing else varies
         // (up to the single-precision rounding of |S| = 100: ulp 8e-6).
         assert!((gap - 19f64.sqrt()).abs() < 1e-4, "{gap}");
-        assert!(
-            high.iter().all(|v| (v - high[0]).abs() < 1e-4)
-                && low.iter().all(|v| (v - low[0]).abs() < 1e-4)
-        );
+        assert!(high.iter().all(|v| (v - high[0]).abs() < 1e-4) && low.iter().all(|v| (v - low[0]).abs() < 1e-4));
 
         let mut m = Vec::new();
         combined_magnitude(&h, &mut m);
         let paper_gap = (m[0] - m[37]).abs();
-        assert!(
-            paper_gap < 0.3 * gap,
-            "paper {paper_gap} vs projection {gap}"
-        );
+        assert!(paper_gap < 0.3 * gap, "paper {paper_gap} vs projection {gap}");
     }
 
     #[test]

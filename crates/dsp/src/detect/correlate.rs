@@ -32,9 +32,7 @@ impl FeatureSums {
         let finite = feature.iter().filter(|v| v.is_finite());
         let count = finite.clone().count();
         if count == 0 {
-            return Err(Error::NonFinite(
-                "the detection feature has no finite value".into(),
-            ));
+            return Err(Error::NonFinite("the detection feature has no finite value".into()));
         }
         let mean = finite.sum::<f64>() / count as f64;
         self.sum.clear();
@@ -68,10 +66,7 @@ impl FeatureSums {
     fn at(&self, x: f64) -> (f64, f64) {
         let (i, frac) = self.locate(x);
         let (s0, q0) = (self.sum[i], self.sum_sq[i]);
-        (
-            s0 + frac * (self.sum[i + 1] - s0),
-            q0 + frac * (self.sum_sq[i + 1] - q0),
-        )
+        (s0 + frac * (self.sum[i + 1] - s0), q0 + frac * (self.sum_sq[i + 1] - q0))
     }
 
     /// `Σ u` over symbols `[0, x)` (the hot path of the correlation).
@@ -114,29 +109,16 @@ impl Template {
     pub fn new(levels: Vec<u8>) -> Result<Self> {
         let k = levels.len();
         let mean = levels.iter().map(|&c| c as f64).sum::<f64>() / k.max(1) as f64;
-        let spread = levels
-            .iter()
-            .map(|&c| (c as f64 - mean).powi(2))
-            .sum::<f64>();
+        let spread = levels.iter().map(|&c| (c as f64 - mean).powi(2)).sum::<f64>();
         if k == 0 || spread <= 0.0 {
-            return Err(Error::BadConfig(
-                "a preamble template needs both chip levels".into(),
-            ));
+            return Err(Error::BadConfig("a preamble template needs both chip levels".into()));
         }
-        let centred = |i: Option<usize>| {
-            i.and_then(|i| levels.get(i))
-                .map_or(0.0, |&c| c as f64 - mean)
-        };
+        let centred = |i: Option<usize>| i.and_then(|i| levels.get(i)).map_or(0.0, |&c| c as f64 - mean);
         let steps = (0..=k)
             .map(|j| (j, centred(j.checked_sub(1)) - centred(Some(j))))
             .filter(|&(_, w)| w != 0.0)
             .collect();
-        Ok(Self {
-            levels,
-            mean,
-            spread,
-            steps,
-        })
+        Ok(Self { levels, mean, spread, steps })
     }
 
     /// Number of chips.
@@ -165,12 +147,7 @@ impl Template {
 /// feature's scale and offset; its sign says whether the feature is high
 /// or low in level-1 chips. Returns 0 when the span leaves the feature or
 /// the feature does not vary over it. Cost `O(K)`.
-pub fn normalised_correlation(
-    sums: &FeatureSums,
-    template: &Template,
-    start: f64,
-    chip_symbols: f64,
-) -> f64 {
+pub fn normalised_correlation(sums: &FeatureSums, template: &Template, start: f64, chip_symbols: f64) -> f64 {
     let k = template.len();
     let end = start + k as f64 * chip_symbols;
     if start < 0.0 || end > sums.len() as f64 + 1e-9 || chip_symbols <= 0.0 {
@@ -205,14 +182,7 @@ pub fn normalised_correlation(
 mod tests {
     use super::*;
 
-    fn waveform(
-        levels: &[u8],
-        chip: f64,
-        offset: f64,
-        len: usize,
-        gain: f64,
-        bias: f64,
-    ) -> Vec<f64> {
+    fn waveform(levels: &[u8], chip: f64, offset: f64, len: usize, gain: f64, bias: f64) -> Vec<f64> {
         (0..len)
             .map(|n| {
                 let x = (n as f64 + 0.5 - offset) / chip;
@@ -262,15 +232,9 @@ mod tests {
     #[test]
     fn boundary_weights_give_the_chip_by_chip_numerator() {
         // The regrouped numerator against Σ_i (c_i − c̄)(S(b_{i+1}) − S(b_i)).
-        let feature: Vec<f64> = (0..300)
-            .map(|n| ((n * 37 % 101) as f64).sin() * 3.0 + n as f64 * 0.01)
-            .collect();
+        let feature: Vec<f64> = (0..300).map(|n| ((n * 37 % 101) as f64).sin() * 3.0 + n as f64 * 0.01).collect();
         let sums = FeatureSums::new(&feature).unwrap();
-        for levels in [
-            vec![1u8, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1],
-            vec![0, 1],
-            vec![1, 0, 1, 1, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0],
-        ] {
+        for levels in [vec![1u8, 1, 0, 1, 0, 0, 1, 0, 0, 0, 1, 1], vec![0, 1], vec![1, 0, 1, 1, 1, 0, 0, 1, 0, 1, 1, 0, 0, 0]] {
             let template = Template::new(levels.clone()).unwrap();
             let mean = levels.iter().map(|&c| c as f64).sum::<f64>() / levels.len() as f64;
             for (start, chip) in [(3.0, 7.25), (10.4, 11.0), (0.0, 20.5)] {
@@ -279,21 +243,16 @@ mod tests {
                     .enumerate()
                     .map(|(i, &c)| {
                         (c as f64 - mean)
-                            * (sums.sum_at(start + (i + 1) as f64 * chip)
-                                - sums.sum_at(start + i as f64 * chip))
+                            * (sums.sum_at(start + (i + 1) as f64 * chip) - sums.sum_at(start + i as f64 * chip))
                     })
                     .sum();
                 let k = levels.len() as f64;
                 let (first, first_sq) = sums.at(start);
                 let (last, last_sq) = sums.at(start + k * chip);
                 let variance = (last_sq - first_sq) - (last - first).powi(2) / (k * chip);
-                let expected =
-                    (direct / (chip * template.spread * variance).sqrt()).clamp(-1.0, 1.0);
+                let expected = (direct / (chip * template.spread * variance).sqrt()).clamp(-1.0, 1.0);
                 let got = normalised_correlation(&sums, &template, start, chip);
-                assert!(
-                    (got - expected).abs() < 1e-12,
-                    "{levels:?} {start} {chip}: {got} vs {expected}"
-                );
+                assert!((got - expected).abs() < 1e-12, "{levels:?} {start} {chip}: {got} vs {expected}");
             }
         }
     }

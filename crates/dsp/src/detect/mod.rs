@@ -25,13 +25,9 @@ mod combine;
 mod correlate;
 mod search;
 
-pub use combine::{
-    combined_magnitude, combined_projection, combined_projection_from_sums, moving_average,
-};
+pub use combine::{combined_magnitude, combined_projection, combined_projection_from_sums, moving_average};
 pub use correlate::{normalised_correlation, FeatureSums, Template};
-pub use search::{
-    detect_on_grid, detect_preamble, refine_detection, CoarseGrid, Detection, DetectionOptions,
-};
+pub use search::{detect_on_grid, detect_preamble, refine_detection, CoarseGrid, Detection, DetectionOptions};
 
 use crate::error::{Error, Result};
 
@@ -51,9 +47,7 @@ impl Feature {
         match name.trim().to_ascii_lowercase().as_str() {
             "magnitude" | "combined-magnitude" => Ok(Feature::CombinedMagnitude),
             "projection" => Ok(Feature::Projection),
-            other => Err(Error::BadConfig(format!(
-                "unknown detection feature '{other}' (magnitude, projection)"
-            ))),
+            other => Err(Error::BadConfig(format!("unknown detection feature '{other}' (magnitude, projection)"))),
         }
     }
 

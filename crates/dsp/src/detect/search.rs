@@ -16,10 +16,7 @@ pub struct DetectionOptions {
 
 impl Default for DetectionOptions {
     fn default() -> Self {
-        Self {
-            threshold: 0.5,
-            blf_tolerance: 0.05,
-        }
+        Self { threshold: 0.5, blf_tolerance: 0.05 }
     }
 }
 
@@ -44,10 +41,7 @@ pub struct Detection {
 }
 
 fn score<F: AsRef<FeatureSums>>(features: &[F], template: &Template, start: f64, chip: f64) -> f64 {
-    let sum: f64 = features
-        .iter()
-        .map(|f| normalised_correlation(f.as_ref(), template, start, chip).powi(2))
-        .sum();
+    let sum: f64 = features.iter().map(|f| normalised_correlation(f.as_ref(), template, start, chip).powi(2)).sum();
     (sum / features.len() as f64).sqrt()
 }
 
@@ -79,44 +73,24 @@ pub fn detect_preamble<F: AsRef<FeatureSums>>(
     options: &DetectionOptions,
 ) -> Result<Detection> {
     if !(options.threshold > 0.0 && options.threshold <= 1.0) {
-        return Err(Error::BadConfig(format!(
-            "threshold must be in (0, 1], got {}",
-            options.threshold
-        )));
+        return Err(Error::BadConfig(format!("threshold must be in (0, 1], got {}", options.threshold)));
     }
     if !(options.blf_tolerance >= 0.0 && options.blf_tolerance < 0.5) {
-        return Err(Error::BadConfig(format!(
-            "blf_tolerance must be in [0, 0.5), got {}",
-            options.blf_tolerance
-        )));
+        return Err(Error::BadConfig(format!("blf_tolerance must be in [0, 0.5), got {}", options.blf_tolerance)));
     }
     if !(nominal_chip_symbols.is_finite() && nominal_chip_symbols > 0.0) {
-        return Err(Error::BadConfig(format!(
-            "chip length must be positive, got {nominal_chip_symbols}"
-        )));
+        return Err(Error::BadConfig(format!("chip length must be positive, got {nominal_chip_symbols}")));
     }
     if features.is_empty() {
         return Err(Error::Shape("no detection feature given".into()));
     }
     let symbols = features.iter().map(|f| f.as_ref().len()).min().unwrap_or(0);
-    let grid = CoarseGrid::new(
-        symbols,
-        template.len(),
-        nominal_chip_symbols,
-        options.blf_tolerance,
-    );
+    let grid = CoarseGrid::new(symbols, template.len(), nominal_chip_symbols, options.blf_tolerance);
     let mut summed = vec![0.0; grid.len()];
     for feature in features {
         grid.add_scores(feature.as_ref(), template, &mut summed);
     }
-    detect_on_grid(
-        features,
-        template,
-        nominal_chip_symbols,
-        options,
-        &grid,
-        &summed,
-    )
+    detect_on_grid(features, template, nominal_chip_symbols, options, &grid, &summed)
 }
 
 /// Stage 1 of [`detect_preamble`]: the alignments searched, scales
@@ -142,12 +116,7 @@ pub struct CoarseGrid {
 }
 
 impl CoarseGrid {
-    pub fn new(
-        symbols: usize,
-        template_len: usize,
-        nominal_chip_symbols: f64,
-        blf_tolerance: f64,
-    ) -> Self {
+    pub fn new(symbols: usize, template_len: usize, nominal_chip_symbols: f64, blf_tolerance: f64) -> Self {
         let k = template_len as f64;
         let step1 = 1.0 / (2.0 * k);
         let reach = (blf_tolerance / step1).floor() as i64;
@@ -164,14 +133,7 @@ impl CoarseGrid {
             points.extend((0..=centres).map(|c| (half + c as f64 * centre_step, scale)));
         }
         let needed = (k * nominal_chip_symbols / (1.0 + blf_tolerance)).ceil() as usize;
-        Self {
-            symbols,
-            template_len,
-            nominal_chip_symbols,
-            points,
-            fine_scale_step: step1 / 4.0,
-            needed,
-        }
+        Self { symbols, template_len, nominal_chip_symbols, points, fine_scale_step: step1 / 4.0, needed }
     }
 
     /// Alignments searched.
@@ -219,28 +181,14 @@ pub fn detect_on_grid<F: AsRef<FeatureSums>>(
         }
     }
     let Some((_, centre, scale)) = best else {
-        return Err(Error::TooShort {
-            what: "preamble search (symbols in the window)",
-            needed: grid.needed,
-            got: grid.symbols,
-        });
+        return Err(Error::TooShort { what: "preamble search (symbols in the window)", needed: grid.needed, got: grid.symbols });
     };
 
     // Stage 2: finer around the coarse point.
     let start = centre - k * nominal_chip_symbols / scale / 2.0;
-    let detection = refine_detection(
-        features,
-        template,
-        nominal_chip_symbols,
-        start,
-        scale,
-        grid.fine_scale_step,
-    );
+    let detection = refine_detection(features, template, nominal_chip_symbols, start, scale, grid.fine_scale_step);
     if detection.score < options.threshold {
-        return Err(Error::NoPreamble {
-            score: detection.score,
-            threshold: options.threshold,
-        });
+        return Err(Error::NoPreamble { score: detection.score, threshold: options.threshold });
     }
     Ok(detection)
 }
@@ -284,23 +232,11 @@ pub fn refine_detection<F: AsRef<FeatureSums>>(
 ) -> Detection {
     let symbols = features.iter().map(|f| f.as_ref().len()).min().unwrap_or(0) as f64;
     let k = template.len() as f64;
-    let eval = |centre: f64, scale: f64| {
-        centred_score(
-            features,
-            template,
-            nominal_chip_symbols,
-            centre,
-            scale,
-            symbols,
-        )
-    };
+    let eval =
+        |centre: f64, scale: f64| centred_score(features, template, nominal_chip_symbols, centre, scale, symbols);
     let chip = nominal_chip_symbols / scale;
     let step = (chip / 16.0).min(0.5);
-    let mut best = (
-        eval(start + k * chip / 2.0, scale),
-        start + k * chip / 2.0,
-        scale,
-    );
+    let mut best = (eval(start + k * chip / 2.0, scale), start + k * chip / 2.0, scale);
     let sweep_centres = |best: &mut (f64, f64, f64), reach: i64| {
         let (_, centre, scale) = *best;
         for l in -reach..=reach {
@@ -334,10 +270,7 @@ pub fn refine_detection<F: AsRef<FeatureSums>>(
         chip_symbols: chip,
         blf_scale: scale,
         score: top.max(0.0),
-        correlations: features
-            .iter()
-            .map(|f| normalised_correlation(f.as_ref(), template, start, chip))
-            .collect(),
+        correlations: features.iter().map(|f| normalised_correlation(f.as_ref(), template, start, chip)).collect(),
         scale_uncertainty: scale_step / 2.0,
     }
 }
@@ -348,38 +281,21 @@ mod tests {
 
     /// A feature: level·gain + bias between `offset` and the end of the
     /// chips, deterministic pseudo-noise of amplitude `noise`.
-    fn feature(
-        levels: &[u8],
-        chip: f64,
-        offset: f64,
-        len: usize,
-        gain: f64,
-        noise: f64,
-        seed: u64,
-    ) -> Vec<f64> {
+    fn feature(levels: &[u8], chip: f64, offset: f64, len: usize, gain: f64, noise: f64, seed: u64) -> Vec<f64> {
         let mut state = seed;
         (0..len)
             .map(|n| {
-                state = state
-                    .wrapping_mul(6364136223846793005)
-                    .wrapping_add(1442695040888963407);
+                state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
                 let r = ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 2.0 * 3f64.sqrt();
                 let x = (n as f64 + 0.5 - offset) / chip;
-                let level = if x >= 0.0 && x < levels.len() as f64 {
-                    levels[x as usize] as f64
-                } else {
-                    0.0
-                };
+                let level = if x >= 0.0 && x < levels.len() as f64 { levels[x as usize] as f64 } else { 0.0 };
                 5.0 + gain * level + noise * r
             })
             .collect()
     }
 
     fn fm0_template() -> Template {
-        Template::new(
-            crate::backscatter::preamble_chips(crate::backscatter::Encoding::Fm0, false).unwrap(),
-        )
-        .unwrap()
+        Template::new(crate::backscatter::preamble_chips(crate::backscatter::Encoding::Fm0, false).unwrap()).unwrap()
     }
 
     #[test]
@@ -387,27 +303,14 @@ mod tests {
         let template = fm0_template();
         let mut reply = template.levels.clone();
         reply.extend([0, 1, 1, 0, 0, 1, 0, 1, 1, 0]);
-        for (gain, scale, offset) in [
-            (1.0f64, 1.0, 100.0),
-            (-3e-3, 1.03, 57.3),
-            (40.0, 0.97, 210.8),
-        ] {
+        for (gain, scale, offset) in [(1.0f64, 1.0, 100.0), (-3e-3, 1.03, 57.3), (40.0, 0.97, 210.8)] {
             let true_chip = 62.5 / scale;
             let noise = 0.5 * gain.abs(); // per-symbol SNR 6 dB
             let u = feature(&reply, true_chip, offset, 1500, gain, noise, 9);
             let sums = FeatureSums::new(&u).unwrap();
-            let d =
-                detect_preamble(&[sums], &template, 62.5, &DetectionOptions::default()).unwrap();
-            assert!(
-                (d.start_symbol - offset).abs() < 2.0,
-                "start {} vs {offset}",
-                d.start_symbol
-            );
-            assert!(
-                (d.blf_scale - scale).abs() < 0.006,
-                "scale {} vs {scale}",
-                d.blf_scale
-            );
+            let d = detect_preamble(&[sums], &template, 62.5, &DetectionOptions::default()).unwrap();
+            assert!((d.start_symbol - offset).abs() < 2.0, "start {} vs {offset}", d.start_symbol);
+            assert!((d.blf_scale - scale).abs() < 0.006, "scale {} vs {scale}", d.blf_scale);
             // Expected ρ = √(S/(S+N)): template variance 35/144 against noise 1/4 → 0.70.
             assert!(d.score > 0.6, "{}", d.score);
             assert_eq!(d.correlations[0] > 0.0, gain > 0.0);
@@ -419,29 +322,14 @@ mod tests {
         let template = fm0_template();
         let u = feature(&[0], 62.5, 1e9, 1500, 1.0, 1.0, 4);
         let sums = FeatureSums::new(&u).unwrap();
-        let e = detect_preamble(
-            std::slice::from_ref(&sums),
-            &template,
-            62.5,
-            &DetectionOptions::default(),
-        )
-        .unwrap_err();
-        assert!(
-            matches!(e, Error::NoPreamble { score, .. } if score < 0.3),
-            "{e}"
-        );
-        let short = FeatureSums::new(&u[..600]).unwrap();
         let e =
-            detect_preamble(&[short], &template, 62.5, &DetectionOptions::default()).unwrap_err();
+            detect_preamble(std::slice::from_ref(&sums), &template, 62.5, &DetectionOptions::default()).unwrap_err();
+        assert!(matches!(e, Error::NoPreamble { score, .. } if score < 0.3), "{e}");
+        let short = FeatureSums::new(&u[..600]).unwrap();
+        let e = detect_preamble(&[short], &template, 62.5, &DetectionOptions::default()).unwrap_err();
         assert!(matches!(e, Error::TooShort { .. }), "{e}");
-        let bad = DetectionOptions {
-            threshold: 0.0,
-            ..Default::default()
-        };
-        assert!(matches!(
-            detect_preamble(&[sums], &template, 62.5, &bad),
-            Err(Error::BadConfig(_))
-        ));
+        let bad = DetectionOptions { threshold: 0.0, ..Default::default() };
+        assert!(matches!(detect_preamble(&[sums], &template, 62.5, &bad), Err(Error::BadConfig(_))));
     }
 
     #[test]
@@ -449,13 +337,10 @@ mod tests {
         // Two antennas of opposite feature sign, one silent: still found.
         let template = fm0_template();
         let a = FeatureSums::new(&feature(&template.levels, 20.0, 33.0, 400, 1.0, 0.3, 1)).unwrap();
-        let b =
-            FeatureSums::new(&feature(&template.levels, 20.0, 33.0, 400, -2.0, 0.6, 2)).unwrap();
+        let b = FeatureSums::new(&feature(&template.levels, 20.0, 33.0, 400, -2.0, 0.6, 2)).unwrap();
         let c = FeatureSums::new(&feature(&[0], 20.0, 1e9, 400, 1.0, 1.0, 3)).unwrap();
         let d = detect_preamble(&[a, b, c], &template, 20.0, &DetectionOptions::default()).unwrap();
         assert!((d.start_symbol - 33.0).abs() < 1.0);
-        assert!(
-            d.correlations[0] > 0.8 && d.correlations[1] < -0.8 && d.correlations[2].abs() < 0.3
-        );
+        assert!(d.correlations[0] > 0.8 && d.correlations[1] < -0.8 && d.correlations[2].abs() < 0.3);
     }
 }

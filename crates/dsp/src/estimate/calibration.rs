@@ -8,12 +8,7 @@ use crate::SPEED_OF_LIGHT;
 pub fn path_channel(frequencies_hz: &[f64], path_length_m: f64, amplitude: f64) -> Vec<Complex64> {
     frequencies_hz
         .iter()
-        .map(|f| {
-            Complex64::from_polar(
-                amplitude,
-                -std::f64::consts::TAU * f * path_length_m / SPEED_OF_LIGHT,
-            )
-        })
+        .map(|f| Complex64::from_polar(amplitude, -std::f64::consts::TAU * f * path_length_m / SPEED_OF_LIGHT))
         .collect()
 }
 
@@ -68,10 +63,7 @@ impl Calibration {
             return Err(Error::BadCalibration("no calibration reply".into()));
         }
         if let Some(m) = measured.iter().find(|m| m.len() != size) {
-            return Err(Error::Shape(format!(
-                "a calibration reply has {} values, expected {size}",
-                m.len()
-            )));
+            return Err(Error::Shape(format!("a calibration reply has {} values, expected {size}", m.len())));
         }
         let mut mean = vec![Complex64::new(0.0, 0.0); size];
         let first = measured[0];
@@ -83,9 +75,7 @@ impl Calibration {
                 .map(|(a, b)| (a * b.conj()).re)
                 .sum();
             let sign = if overlap < 0.0 { -1.0 } else { 1.0 };
-            mean.iter_mut()
-                .zip(m.iter())
-                .for_each(|(s, v)| *s += v * sign);
+            mean.iter_mut().zip(m.iter()).for_each(|(s, v)| *s += v * sign);
         }
         let count = measured.len() as f64;
         let mut correction = Vec::with_capacity(size);
@@ -101,11 +91,7 @@ impl Calibration {
             }
             correction.push(c);
         }
-        Ok(Self {
-            antennas,
-            subcarriers,
-            correction,
-        })
+        Ok(Self { antennas, subcarriers, correction })
     }
 
     /// Applies the correction in place to a tag channel
@@ -119,9 +105,7 @@ impl Calibration {
                 self.subcarriers
             )));
         }
-        h.iter_mut()
-            .zip(&self.correction)
-            .for_each(|(v, c)| *v *= c);
+        h.iter_mut().zip(&self.correction).for_each(|(v, c)| *v *= c);
         Ok(())
     }
 }
@@ -133,22 +117,15 @@ mod tests {
     #[test]
     fn removes_the_hardware_response_at_another_position() {
         let f: Vec<f64> = (0..19).map(|k| 865e6 + 5e6 * k as f64).collect();
-        let hardware: Vec<Complex64> = (0..2 * 19)
-            .map(|i| Complex64::from_polar(0.3 + 0.01 * i as f64, 0.4 * i as f64 - 1.0))
-            .collect();
+        let hardware: Vec<Complex64> =
+            (0..2 * 19).map(|i| Complex64::from_polar(0.3 + 0.01 * i as f64, 0.4 * i as f64 - 1.0)).collect();
         let gamma = Complex64::from_polar(0.2, 2.5);
         let distances_cal = [2.0, 2.4];
         let distances_new = [3.1, 2.2];
-        let channel = |d: &[f64; 2]| -> Vec<Complex64> {
-            d.iter()
-                .flat_map(|&d| path_channel(&f, d, 1.0 / d))
-                .collect()
-        };
+        let channel =
+            |d: &[f64; 2]| -> Vec<Complex64> { d.iter().flat_map(|&d| path_channel(&f, d, 1.0 / d)).collect() };
         let measure = |h: &[Complex64], sign: f64| -> Vec<Complex64> {
-            h.iter()
-                .zip(&hardware)
-                .map(|(h, g)| h * g * gamma * sign)
-                .collect()
+            h.iter().zip(&hardware).map(|(h, g)| h * g * gamma * sign).collect()
         };
         let reference = channel(&distances_cal);
         let a = measure(&reference, 1.0);
@@ -172,18 +149,9 @@ mod tests {
         let r = vec![Complex64::new(1.0, 0.0); 4];
         let zero = vec![Complex64::new(0.0, 0.0); 4];
         let e = Calibration::from_measurements(&[&zero], &r, 2, 2).unwrap_err();
-        assert!(
-            matches!(&e, Error::BadCalibration(m) if m.starts_with("rx 0 subcarrier 0")),
-            "{e}"
-        );
-        assert!(matches!(
-            Calibration::from_measurements(&[&r[..3]], &r, 2, 2),
-            Err(Error::Shape(_))
-        ));
-        assert!(matches!(
-            Calibration::from_measurements(&[], &r, 2, 2),
-            Err(Error::BadCalibration(_))
-        ));
+        assert!(matches!(&e, Error::BadCalibration(m) if m.starts_with("rx 0 subcarrier 0")), "{e}");
+        assert!(matches!(Calibration::from_measurements(&[&r[..3]], &r, 2, 2), Err(Error::Shape(_))));
+        assert!(matches!(Calibration::from_measurements(&[], &r, 2, 2), Err(Error::BadCalibration(_))));
         let cal = Calibration::from_measurements(&[&r], &r, 2, 2).unwrap();
         assert!(cal.apply(&mut [Complex64::new(1.0, 0.0)]).is_err());
     }

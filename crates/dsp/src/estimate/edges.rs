@@ -62,12 +62,7 @@ impl ChipGrid {
 /// the rest is [`SymbolState::Outside`]. Chips after the first unknown one
 /// still count if known. Invalid symbols are [`SymbolState::Invalid`]
 /// whatever else holds. Cost `O(symbols + chips)`.
-pub fn symbol_states(
-    grid: &ChipGrid,
-    levels: &[Option<u8>],
-    valid: &[bool],
-    out: &mut Vec<SymbolState>,
-) {
+pub fn symbol_states(grid: &ChipGrid, levels: &[Option<u8>], valid: &[bool], out: &mut Vec<SymbolState>) {
     let symbols = valid.len();
     out.clear();
     out.resize(symbols, SymbolState::Outside);
@@ -95,11 +90,7 @@ pub fn symbol_states(
                 }
                 let from = grid.boundary(i) + grid.guard(i);
                 let to = grid.boundary(j) - grid.guard(j);
-                let state = if level == 0 {
-                    SymbolState::Low
-                } else {
-                    SymbolState::High
-                };
+                let state = if level == 0 { SymbolState::Low } else { SymbolState::High };
                 let first = from.ceil().max(0.0) as usize;
                 let stop = ((to - 1.0).floor() + 1.0).max(0.0) as usize; // n + 1 ≤ to
                 for s in out.iter_mut().take(stop.min(symbols)).skip(first) {
@@ -203,10 +194,7 @@ mod tests {
         let mut out = Vec::new();
         symbol_states(&g, &levels, &[true; 60], &mut out);
         // Chip 0: [0+1, 10−1.5] → symbols 1..=7 (7); chip 5: [50+3.5, 60−4] → 54, 55 (2).
-        let first = out[..10]
-            .iter()
-            .filter(|&&s| s == SymbolState::High)
-            .count();
+        let first = out[..10].iter().filter(|&&s| s == SymbolState::High).count();
         let last = out[50..].iter().filter(|&&s| s == SymbolState::Low).count();
         assert_eq!((first, last), (7, 2));
     }

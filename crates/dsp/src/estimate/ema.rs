@@ -30,16 +30,9 @@ impl Ema {
     /// smoothing).
     pub fn new(alpha: f64) -> Result<Self> {
         if !(alpha > 0.0 && alpha <= 1.0) {
-            return Err(Error::BadConfig(format!(
-                "EMA alpha must be in (0, 1], got {alpha}"
-            )));
+            return Err(Error::BadConfig(format!("EMA alpha must be in (0, 1], got {alpha}")));
         }
-        Ok(Self {
-            alpha,
-            state: Vec::new(),
-            updates: 0,
-            flips: 0,
-        })
+        Ok(Self { alpha, state: Vec::new(), updates: 0, flips: 0 })
     }
 
     /// Adds one reply's channel (any fixed length, e.g. rx × subcarriers)
@@ -51,11 +44,7 @@ impl Ema {
             return Ok(&self.state);
         }
         if h.len() != self.state.len() {
-            return Err(Error::Shape(format!(
-                "EMA holds {} values, update has {}",
-                self.state.len(),
-                h.len()
-            )));
+            return Err(Error::Shape(format!("EMA holds {} values, update has {}", self.state.len(), h.len())));
         }
         let overlap: f64 = h
             .iter()
@@ -73,11 +62,7 @@ impl Ema {
             if !v.is_finite() {
                 continue;
             }
-            *s = if s.is_finite() {
-                *s * (1.0 - self.alpha) + v * (sign * self.alpha)
-            } else {
-                v * sign
-            };
+            *s = if s.is_finite() { *s * (1.0 - self.alpha) + v * (sign * self.alpha) } else { v * sign };
         }
         self.updates += 1;
         Ok(&self.state)
@@ -113,10 +98,7 @@ mod tests {
         assert_eq!(s, vec![Complex64::new(3.0, 0.0), Complex64::new(0.0, 2.0)]);
         // A negated reply is flipped back before averaging.
         let c = [Complex64::new(-3.0, 0.0), Complex64::new(0.0, -2.0)];
-        assert_eq!(
-            ema.update(&c).unwrap(),
-            &[Complex64::new(3.0, 0.0), Complex64::new(0.0, 2.0)]
-        );
+        assert_eq!(ema.update(&c).unwrap(), &[Complex64::new(3.0, 0.0), Complex64::new(0.0, 2.0)]);
         assert_eq!((ema.updates(), ema.flips()), (3, 1));
         assert!(ema.update(&a[..1]).is_err());
         assert!(Ema::new(0.0).is_err() && Ema::new(1.5).is_err());
@@ -131,9 +113,7 @@ mod tests {
         let mut squares = 0.0;
         let count = 20000;
         for i in 0..count + 100 {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             let noise = if (state >> 33) & 1 == 1 { 1.0 } else { -1.0 };
             let out = ema.update(&[Complex64::new(10.0 + noise, 0.0)]).unwrap()[0];
             if i >= 100 {
@@ -141,9 +121,6 @@ mod tests {
             }
         }
         let variance = squares / count as f64;
-        assert!(
-            (variance / (alpha / (2.0 - alpha)) - 1.0).abs() < 0.1,
-            "{variance}"
-        );
+        assert!((variance / (alpha / (2.0 - alpha)) - 1.0).abs() < 0.1, "{variance}");
     }
 }

@@ -84,19 +84,13 @@ impl SymbolSums {
         let available = window.len().saturating_sub(first_sample);
         let symbols = available.checked_div(n).unwrap_or(0);
         if symbols == 0 {
-            return Err(Error::TooShort {
-                what: "demodulation (samples from the first symbol)",
-                needed: n,
-                got: available,
-            });
+            return Err(Error::TooShort { what: "demodulation (samples from the first symbol)", needed: n, got: available });
         }
         self.symbols = symbols;
         self.n = n;
         let window = &window[first_sample..first_sample + symbols * n];
         let Some(first) = window.chunks_exact(n).position(|y| finite(as_floats(y))) else {
-            return Err(Error::NonFinite(format!(
-                "all {symbols} symbols of the window have non-finite samples"
-            )));
+            return Err(Error::NonFinite(format!("all {symbols} symbols of the window have non-finite samples")));
         };
         let reference32: Vec<Complex32> = window[first * n..(first + 1) * n].to_vec();
         self.reference.clear();
@@ -142,12 +136,7 @@ impl SymbolSums {
             let ok = finite(y);
             self.valid.push(ok);
             if ok {
-                for (((b, e), &v), r) in block
-                    .iter_mut()
-                    .zip(block_energy.iter_mut())
-                    .zip(y)
-                    .zip(reference)
-                {
+                for (((b, e), &v), r) in block.iter_mut().zip(block_energy.iter_mut()).zip(y).zip(reference) {
                     let x = v - r;
                     *b += x;
                     *e += x * x;
@@ -157,12 +146,7 @@ impl SymbolSums {
         }
         // The samples (zeros for invalid symbols): one copy, then clear the few invalid ones.
         self.samples.extend_from_slice(window);
-        for (y, _) in self
-            .samples
-            .chunks_exact_mut(n)
-            .zip(&self.valid)
-            .filter(|(_, &ok)| !ok)
-        {
+        for (y, _) in self.samples.chunks_exact_mut(n).zip(&self.valid).filter(|(_, &ok)| !ok) {
             y.iter_mut().for_each(|v| *v = Complex32::new(0.0, 0.0));
         }
         if symbols % Self::STRIDE == 0 {
@@ -208,13 +192,7 @@ impl SymbolSums {
 
     /// Adds `Σ_{s ∈ from..to, valid} x_s` (`N` values) to `sum` and, when
     /// given, `Σ ‖x_s‖²` to `energy`; returns the number of valid symbols.
-    pub fn add_interval(
-        &self,
-        from: usize,
-        to: usize,
-        sum: &mut [Complex64],
-        mut energy: Option<&mut f64>,
-    ) -> usize {
+    pub fn add_interval(&self, from: usize, to: usize, sum: &mut [Complex64], mut energy: Option<&mut f64>) -> usize {
         let (a, b) = (from.min(self.symbols), to.min(self.symbols));
         if b <= a {
             return 0;
@@ -227,9 +205,7 @@ impl SymbolSums {
             self.add_rows(a, first_block * stride, sum, energy.as_deref_mut());
             let n = self.n;
             let (lo, hi) = (first_block * n, last_block * n);
-            sum.iter_mut()
-                .zip(self.sum[lo..lo + n].iter().zip(&self.sum[hi..hi + n]))
-                .for_each(|(s, (l, h))| *s += h - l);
+            sum.iter_mut().zip(self.sum[lo..lo + n].iter().zip(&self.sum[hi..hi + n])).for_each(|(s, (l, h))| *s += h - l);
             if let Some(e) = energy.as_deref_mut() {
                 *e += self.energy[last_block] - self.energy[first_block];
             }
@@ -253,12 +229,7 @@ impl SymbolSums {
             }
             if energy.is_some() {
                 let (yc, rc) = (y.chunks_exact(8), reference.chunks_exact(8));
-                rest += yc
-                    .remainder()
-                    .iter()
-                    .zip(rc.remainder())
-                    .map(|(&v, &r)| (v as f64 - r).powi(2))
-                    .sum::<f64>();
+                rest += yc.remainder().iter().zip(rc.remainder()).map(|(&v, &r)| (v as f64 - r).powi(2)).sum::<f64>();
                 for (y8, r8) in yc.zip(rc) {
                     for l in 0..8 {
                         let x = y8[l] as f64 - r8[l];
@@ -279,12 +250,7 @@ mod tests {
 
     fn window(symbols: usize, n: usize) -> Vec<Complex32> {
         (0..symbols * n + 3)
-            .map(|i| {
-                Complex32::new(
-                    1e3 + (i % n) as f32 + 0.01 * (i / n) as f32,
-                    ((i * 7) % 11) as f32 * 0.1,
-                )
-            })
+            .map(|i| Complex32::new(1e3 + (i % n) as f32 + 0.01 * (i / n) as f32, ((i * 7) % 11) as f32 * 0.1))
             .collect()
     }
 
@@ -299,10 +265,7 @@ mod tests {
         sums.reset(&w, 2, n).unwrap();
         assert_eq!(sums.symbols, 45);
         assert!(!sums.valid[0] && !sums.valid[17] && sums.valid[1]);
-        assert_eq!(
-            sums.reference,
-            sums.row(1).iter().map(|&v| widen(v)).collect::<Vec<_>>()
-        );
+        assert_eq!(sums.reference, sums.row(1).iter().map(|&v| widen(v)).collect::<Vec<_>>());
         for a in 0..46 {
             for b in a..46 {
                 let mut s = vec![Complex64::new(0.0, 0.0); n];
@@ -312,20 +275,11 @@ mod tests {
                 assert_eq!(m, rows.len());
                 let mut direct_e = 0.0;
                 for t in 0..n {
-                    let d: Complex64 = rows
-                        .iter()
-                        .map(|&k| widen(w[2 + k * n + t]) - sums.reference[t])
-                        .sum();
-                    direct_e += rows
-                        .iter()
-                        .map(|&k| (widen(w[2 + k * n + t]) - sums.reference[t]).norm_sqr())
-                        .sum::<f64>();
+                    let d: Complex64 = rows.iter().map(|&k| widen(w[2 + k * n + t]) - sums.reference[t]).sum();
+                    direct_e += rows.iter().map(|&k| (widen(w[2 + k * n + t]) - sums.reference[t]).norm_sqr()).sum::<f64>();
                     assert!((s[t] - d).norm() < 1e-6 * (1.0 + d.norm()), "{a}..{b}");
                 }
-                assert!(
-                    (e - direct_e).abs() < 1e-4 * (1.0 + direct_e),
-                    "{a}..{b}: {e} vs {direct_e}"
-                );
+                assert!((e - direct_e).abs() < 1e-4 * (1.0 + direct_e), "{a}..{b}: {e} vs {direct_e}");
             }
         }
         sums.truncate(4);
@@ -335,10 +289,7 @@ mod tests {
     #[test]
     fn too_short_and_all_non_finite_windows_are_errors() {
         let mut sums = SymbolSums::default();
-        assert!(matches!(
-            sums.reset(&window(1, 8)[..7], 0, 8),
-            Err(Error::TooShort { .. })
-        ));
+        assert!(matches!(sums.reset(&window(1, 8)[..7], 0, 8), Err(Error::TooShort { .. })));
         let nan = vec![Complex32::new(f32::NAN, 0.0); 32];
         assert!(matches!(sums.reset(&nan, 0, 8), Err(Error::NonFinite(_))));
     }

@@ -1,8 +1,8 @@
 use num_complex::Complex64;
 
 use super::{SymbolState, SymbolSums};
-use crate::error::{Error, Result};
 use crate::ofdm::ChannelTransform;
+use crate::error::{Error, Result};
 use crate::ofdm::{widen, ChannelMatrix};
 
 /// One antenna's tag channel from one reply.
@@ -35,11 +35,7 @@ pub struct TagChannel {
 /// no symbol.
 pub fn tag_channel(h: &ChannelMatrix, states: &[SymbolState]) -> Result<TagChannel> {
     if states.len() != h.symbols {
-        return Err(Error::Shape(format!(
-            "{} states for {} symbols",
-            states.len(),
-            h.symbols
-        )));
+        return Err(Error::Shape(format!("{} states for {} symbols", states.len(), h.symbols)));
     }
     let f_count = h.subcarriers;
     let zero = Complex64::new(0.0, 0.0);
@@ -54,9 +50,7 @@ pub fn tag_channel(h: &ChannelMatrix, states: &[SymbolState]) -> Result<TagChann
         if !h.valid[n] {
             continue;
         }
-        sum.iter_mut()
-            .zip(h.row(n))
-            .for_each(|(s, &v)| *s += widen(v));
+        sum.iter_mut().zip(h.row(n)).for_each(|(s, &v)| *s += widen(v));
         *count += 1;
     }
     if high == 0 || low == 0 {
@@ -73,35 +67,14 @@ pub fn tag_channel(h: &ChannelMatrix, states: &[SymbolState]) -> Result<TagChann
             SymbolState::Low if h.valid[n] => &mean_low,
             _ => continue,
         };
-        scatter
-            .iter_mut()
-            .zip(h.row(n))
-            .zip(mean)
-            .for_each(|((s, &v), m)| *s += (widen(v) - m).norm_sqr());
+        scatter.iter_mut().zip(h.row(n)).zip(mean).for_each(|((s, &v), m)| *s += (widen(v) - m).norm_sqr());
     }
     let dof = (high + low) as f64 - 2.0;
     let factor = 1.0 / high as f64 + 1.0 / low as f64;
     Ok(TagChannel {
-        h: mean_high
-            .iter()
-            .zip(&mean_low)
-            .map(|(a, b)| a - b)
-            .collect(),
-        variance: scatter
-            .iter()
-            .map(|s| {
-                if dof > 0.0 {
-                    s / dof * factor
-                } else {
-                    f64::INFINITY
-                }
-            })
-            .collect(),
-        midpoint: mean_high
-            .iter()
-            .zip(&mean_low)
-            .map(|(a, b)| (a + b) * 0.5)
-            .collect(),
+        h: mean_high.iter().zip(&mean_low).map(|(a, b)| a - b).collect(),
+        variance: scatter.iter().map(|s| if dof > 0.0 { s / dof * factor } else { f64::INFINITY }).collect(),
+        midpoint: mean_high.iter().zip(&mean_low).map(|(a, b)| (a + b) * 0.5).collect(),
         high,
         low,
     })
@@ -124,11 +97,7 @@ pub fn tag_channel_from_sums(
     transform: &mut ChannelTransform,
 ) -> Result<TagChannel> {
     if states.len() != sums.symbols {
-        return Err(Error::Shape(format!(
-            "{} states for {} symbols",
-            states.len(),
-            sums.symbols
-        )));
+        return Err(Error::Shape(format!("{} states for {} symbols", states.len(), sums.symbols)));
     }
     let n = sums.n;
     let zero = Complex64::new(0.0, 0.0);
@@ -143,12 +112,8 @@ pub fn tag_channel_from_sums(
             end += 1;
         }
         match state {
-            SymbolState::High => {
-                high += sums.add_interval(s, end, &mut sum_high, Some(&mut energy_high))
-            }
-            SymbolState::Low => {
-                low += sums.add_interval(s, end, &mut sum_low, Some(&mut energy_low))
-            }
+            SymbolState::High => high += sums.add_interval(s, end, &mut sum_high, Some(&mut energy_high)),
+            SymbolState::Low => low += sums.add_interval(s, end, &mut sum_low, Some(&mut energy_low)),
             _ => {}
         }
         s = end;
@@ -158,19 +123,10 @@ pub fn tag_channel_from_sums(
     }
     let (nh, nl) = (high as f64, low as f64);
     let norm = |v: &[Complex64]| v.iter().map(|x| x.norm_sqr()).sum::<f64>();
-    let scatter =
-        ((energy_high - norm(&sum_high) / nh) + (energy_low - norm(&sum_low) / nl)).max(0.0);
-    let difference: Vec<Complex64> = sum_high
-        .iter()
-        .zip(&sum_low)
-        .map(|(a, b)| a / nh - b / nl)
-        .collect();
-    let middle: Vec<Complex64> = sum_high
-        .iter()
-        .zip(&sum_low)
-        .zip(&sums.reference)
-        .map(|((a, b), r)| r + (a / nh + b / nl) * 0.5)
-        .collect();
+    let scatter = ((energy_high - norm(&sum_high) / nh) + (energy_low - norm(&sum_low) / nl)).max(0.0);
+    let difference: Vec<Complex64> = sum_high.iter().zip(&sum_low).map(|(a, b)| a / nh - b / nl).collect();
+    let middle: Vec<Complex64> =
+        sum_high.iter().zip(&sum_low).zip(&sums.reference).map(|((a, b), r)| r + (a / nh + b / nl) * 0.5).collect();
     let f_count = transform.subcarriers();
     let mut h = vec![zero; f_count];
     let mut midpoint = vec![zero; f_count];
@@ -178,18 +134,8 @@ pub fn tag_channel_from_sums(
     transform.apply(&middle, &mut midpoint);
     let dof = nh + nl - 2.0;
     let factor = 1.0 / nh + 1.0 / nl;
-    let per_bin = if dof > 0.0 {
-        scatter / n as f64 / dof * factor
-    } else {
-        f64::INFINITY
-    };
-    Ok(TagChannel {
-        h,
-        variance: vec![per_bin; f_count],
-        midpoint,
-        high,
-        low,
-    })
+    let per_bin = if dof > 0.0 { scatter / n as f64 / dof * factor } else { f64::INFINITY };
+    Ok(TagChannel { h, variance: vec![per_bin; f_count], midpoint, high, low })
 }
 
 #[cfg(test)]
@@ -199,12 +145,8 @@ mod tests {
 
     #[test]
     fn recovers_a_known_channel_exactly_without_noise() {
-        let s: Vec<Complex64> = (0..5)
-            .map(|f| Complex64::from_polar(1e3, f as f64))
-            .collect();
-        let t: Vec<Complex64> = (0..5)
-            .map(|f| Complex64::from_polar(1e-2, -0.7 * f as f64))
-            .collect();
+        let s: Vec<Complex64> = (0..5).map(|f| Complex64::from_polar(1e3, f as f64)).collect();
+        let t: Vec<Complex64> = (0..5).map(|f| Complex64::from_polar(1e-2, -0.7 * f as f64)).collect();
         let states: Vec<SymbolState> = (0..50)
             .map(|n| match n % 10 {
                 0 => SymbolState::Edge,
@@ -249,9 +191,7 @@ mod tests {
         let symbol = KnownSymbol::generate(20, 2).unwrap();
         let mut state = 7u64;
         let mut noise = || {
-            state = state
-                .wrapping_mul(6364136223846793005)
-                .wrapping_add(1442695040888963407);
+            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
             ((state >> 11) as f64 / (1u64 << 53) as f64 - 0.5) * 0.6
         };
         let symbols = 400;
@@ -267,26 +207,14 @@ mod tests {
         let window: Vec<Complex32> = (0..symbols * 20)
             .map(|i| {
                 let (n, t) = (i / 20, i % 20);
-                let on = if states[n] == SymbolState::High {
-                    1.0
-                } else {
-                    0.0
-                };
-                let v = Complex64::from_polar(1e3, 0.7 * t as f64)
-                    + Complex64::from_polar(on, -0.4 * t as f64)
+                let on = if states[n] == SymbolState::High { 1.0 } else { 0.0 };
+                let v = Complex64::from_polar(1e3, 0.7 * t as f64) + Complex64::from_polar(on, -0.4 * t as f64)
                     + Complex64::new(noise(), noise());
-                if n == 77 {
-                    Complex32::new(f32::NAN, 0.0)
-                } else {
-                    Complex32::new(v.re as f32, v.im as f32)
-                }
+                if n == 77 { Complex32::new(f32::NAN, 0.0) } else { Complex32::new(v.re as f32, v.im as f32) }
             })
             .collect();
         let mut h = ChannelMatrix::default();
-        Demodulator::new(&config, &symbol)
-            .unwrap()
-            .demodulate(&window, 0, &mut h)
-            .unwrap();
+        Demodulator::new(&config, &symbol).unwrap().demodulate(&window, 0, &mut h).unwrap();
         let direct = tag_channel(&h, &states).unwrap();
         let mut sums = SymbolSums::default();
         sums.reset(&window, 0, 20).unwrap();
@@ -295,42 +223,19 @@ mod tests {
         assert_eq!((fast.high, fast.low), (direct.high, direct.low));
         let pooled = direct.variance.iter().sum::<f64>() / direct.variance.len() as f64;
         for f in 0..19 {
-            assert!(
-                (fast.h[f] - direct.h[f]).norm() < 1e-3,
-                "{f}: {} vs {}",
-                fast.h[f],
-                direct.h[f]
-            );
-            assert!(
-                (fast.midpoint[f] - direct.midpoint[f]).norm()
-                    < 1e-2 * (1.0 + direct.midpoint[f].norm() * 1e-3),
-                "{f}"
-            );
+            assert!((fast.h[f] - direct.h[f]).norm() < 1e-3, "{f}: {} vs {}", fast.h[f], direct.h[f]);
+            assert!((fast.midpoint[f] - direct.midpoint[f]).norm() < 1e-2 * (1.0 + direct.midpoint[f].norm() * 1e-3), "{f}");
             // White noise: the pooled variance is every subcarrier's, within its scatter.
-            assert!(
-                (fast.variance[f] / pooled - 1.0).abs() < 0.15,
-                "{f}: {} vs {pooled}",
-                fast.variance[f]
-            );
+            assert!((fast.variance[f] / pooled - 1.0).abs() < 0.15, "{f}: {} vs {pooled}", fast.variance[f]);
         }
-        assert!(matches!(
-            tag_channel_from_sums(&sums, &states[1..], &mut transform),
-            Err(Error::Shape(_))
-        ));
+        assert!(matches!(tag_channel_from_sums(&sums, &states[1..], &mut transform), Err(Error::Shape(_))));
     }
 
     #[test]
     fn a_missing_state_is_an_error() {
         let h = ChannelMatrix::new(3, 2);
-        let e = tag_channel(
-            &h,
-            &[SymbolState::High, SymbolState::Edge, SymbolState::High],
-        )
-        .unwrap_err();
+        let e = tag_channel(&h, &[SymbolState::High, SymbolState::Edge, SymbolState::High]).unwrap_err();
         assert_eq!(e, Error::NoCleanSymbols { high: 2, low: 0 });
-        assert!(matches!(
-            tag_channel(&h, &[SymbolState::High]),
-            Err(Error::Shape(_))
-        ));
+        assert!(matches!(tag_channel(&h, &[SymbolState::High]), Err(Error::Shape(_))));
     }
 }

@@ -22,28 +22,18 @@ impl ChirpConfig {
     /// beyond scaling).
     pub fn new(spreading_factor: u32, bandwidth_hz: f64) -> Result<Self> {
         if !(6..=12).contains(&spreading_factor) {
-            return Err(Error::BadConfig(format!(
-                "LoRa spreading factor must be 6..=12, got {spreading_factor}"
-            )));
+            return Err(Error::BadConfig(format!("LoRa spreading factor must be 6..=12, got {spreading_factor}")));
         }
         if !(bandwidth_hz > 0.0 && bandwidth_hz.is_finite()) {
-            return Err(Error::BadConfig(format!(
-                "chirp bandwidth must be > 0 Hz, got {bandwidth_hz}"
-            )));
+            return Err(Error::BadConfig(format!("chirp bandwidth must be > 0 Hz, got {bandwidth_hz}")));
         }
-        Ok(Self {
-            spreading_factor,
-            bandwidth_hz,
-        })
+        Ok(Self { spreading_factor, bandwidth_hz })
     }
 
     /// The Marvel default: SF 12, BW 500 kHz, `T = 8.192 ms`
     /// (docs/marvel.md section 5).
     pub fn marvel() -> Self {
-        Self {
-            spreading_factor: 12,
-            bandwidth_hz: 500e3,
-        }
+        Self { spreading_factor: 12, bandwidth_hz: 500e3 }
     }
 
     pub fn spreading_factor(&self) -> u32 {
@@ -140,10 +130,7 @@ pub fn downchirp(spreading_factor: u32, bandwidth_hz: f64) -> Result<Vec<Complex
 /// `Complex64` samples narrowed to `cf32` (the recordings' sample type), for
 /// simulators and tests.
 pub fn to_cf32(samples: &[Complex64]) -> Vec<Complex32> {
-    samples
-        .iter()
-        .map(|c| Complex32::new(c.re as f32, c.im as f32))
-        .collect()
+    samples.iter().map(|c| Complex32::new(c.re as f32, c.im as f32)).collect()
 }
 
 #[cfg(test)]
@@ -183,10 +170,7 @@ mod tests {
             }
             // Dechirping an undelayed upchirp gives DC exactly.
             let down = c.downchirp();
-            assert!(up
-                .iter()
-                .zip(&down)
-                .all(|(u, d)| (u * d - Complex64::new(1.0, 0.0)).norm() < 1e-12));
+            assert!(up.iter().zip(&down).all(|(u, d)| (u * d - Complex64::new(1.0, 0.0)).norm() < 1e-12));
         }
     }
 }

@@ -137,9 +137,7 @@ pub fn estimate_clock_error(
     for &(a, b) in pairs {
         for t in [a, b] {
             if t >= 4 || seen[t] {
-                return Err(Error::BadConfig(format!(
-                    "pairs {pairs:?} must partition tags 0..4"
-                )));
+                return Err(Error::BadConfig(format!("pairs {pairs:?} must partition tags 0..4")));
             }
             seen[t] = true;
         }
@@ -147,16 +145,10 @@ pub fn estimate_clock_error(
     let sbar = |p: (usize, usize)| 0.5 * (shifts_hz[p.0] + shifts_hz[p.1]);
     let ds = sbar(pairs[1]) - sbar(pairs[0]);
     if ds == 0.0 || !ds.is_finite() {
-        return Err(Error::BadConfig(
-            "the two pairs' mean shifts must differ to separate the CFO".into(),
-        ));
+        return Err(Error::BadConfig("the two pairs' mean shifts must differ to separate the CFO".into()));
     }
     if peaks_hz.is_empty() {
-        return Err(Error::TooShort {
-            what: "clock error fit",
-            needed: 1,
-            got: 0,
-        });
+        return Err(Error::TooShort { what: "clock error fit", needed: 1, got: 0 });
     }
     if peaks_hz.iter().flatten().any(|x| !x.is_finite()) {
         return Err(Error::NonFinite("peak frequencies".into()));
@@ -176,19 +168,10 @@ pub fn estimate_clock_error(
     let clock_error = estimates.iter().map(|e| e.0).sum::<f64>() / n;
     let timing_hz = estimates.iter().map(|e| e.1).sum::<f64>() / n;
     let sigma = (estimates.len() > 1).then(|| {
-        let var = estimates
-            .iter()
-            .map(|e| (e.0 - clock_error).powi(2))
-            .sum::<f64>()
-            / (n - 1.0);
+        let var = estimates.iter().map(|e| (e.0 - clock_error).powi(2)).sum::<f64>() / (n - 1.0);
         (var / n).sqrt()
     });
-    Ok(ClockEstimate {
-        clock_error,
-        sigma,
-        timing_hz,
-        observations: estimates.len(),
-    })
+    Ok(ClockEstimate { clock_error, sigma, timing_hz, observations: estimates.len() })
 }
 
 #[cfg(test)]
@@ -234,8 +217,7 @@ mod tests {
                 v[1] * t + r[1][0] * tag[0] + r[1][2] * tag[2],
                 v[2] * t + r[2][0] * tag[0] + r[2][2] * tag[2],
             ];
-            2.0 * ((p[0] - rho[0]).powi(2) + (p[1] - rho[1]).powi(2) + (p[2] - rho[2]).powi(2))
-                .sqrt()
+            2.0 * ((p[0] - rho[0]).powi(2) + (p[1] - rho[1]).powi(2) + (p[2] - rho[2]).powi(2)).sqrt()
         };
         let h = 1e-5;
         let fd = -915e6 / SPEED_OF_LIGHT * (path(h) - path(-h)) / (2.0 * h);
@@ -261,12 +243,7 @@ mod tests {
             .map(|o| {
                 let d = delay_frequency_hz(&chirp, (100.0 + o as f64) * 1e-9);
                 let (gx, gy) = (0.2 - 0.05 * o as f64, -0.13);
-                [
-                    eps * 1e6 + d + gx,
-                    eps * 2e6 + d - gx,
-                    eps * 3e6 + d + gy,
-                    eps * 4e6 + d - gy,
-                ]
+                [eps * 1e6 + d + gx, eps * 2e6 + d - gx, eps * 3e6 + d + gy, eps * 4e6 + d - gy]
             })
             .collect();
         let e = estimate_clock_error(&shifts, &pairs, &rows).unwrap();
@@ -275,8 +252,6 @@ mod tests {
         assert!((e.timing_hz - delay_frequency_hz(&chirp, 102.5e-9)).abs() < 1e-9);
         assert!(estimate_clock_error(&shifts, &[(0, 1), (1, 3)], &rows).is_err());
         assert!(estimate_clock_error(&shifts, &pairs, &[]).is_err());
-        assert!(
-            (delay_from_frequency_s(&chirp, delay_frequency_hz(&chirp, 3e-7)) - 3e-7).abs() < 1e-20
-        );
+        assert!((delay_from_frequency_s(&chirp, delay_frequency_hz(&chirp, 3e-7)) - 3e-7).abs() < 1e-20);
     }
 }

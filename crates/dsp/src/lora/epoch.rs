@@ -38,19 +38,13 @@
 //! starts at its own first sample (`t_j = chirp_starts_s[j]`).
 
 use super::chirp::ChirpConfig;
-use super::doppler::{
-    cfo_hz, delay_from_frequency_s, pair_half_difference, pair_mean, translational_doppler_hz,
-};
+use super::doppler::{cfo_hz, delay_from_frequency_s, pair_half_difference, pair_mean, translational_doppler_hz};
 use super::geometry::{add, cross, dot, mat_vec, normalize, split_yaw, Mat3, Vec3};
 use super::heading::{solve_yaw, HeadingConfig, HeadingEstimate, PairObservation, YawGeometry};
-use super::music::{
-    combine_angles, music, AngleCombine, ArrayGeometry, MusicConfig, MusicEstimate,
-};
+use super::music::{combine_angles, music, AngleCombine, ArrayGeometry, MusicConfig, MusicEstimate};
 use super::peak::{Peak, PeakFinder, PeakOptions, Sample};
 use super::phase::{channel_phase, PhaseCorrection};
-use super::range::{
-    estimate_range, group_deviations_m, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect,
-};
+use super::range::{estimate_range, group_deviations_m, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect};
 use crate::error::{Error, Result};
 use crate::SPEED_OF_LIGHT;
 
@@ -156,32 +150,18 @@ impl EpochConfig {
             channels_hz,
             chirp_starts_s: [0.0, t],
             tag_shifts_hz: [1e6, 2e6, 3e6, 4e6],
-            tag_positions: [
-                [d / 2.0, 0.0, h],
-                [-d / 2.0, 0.0, h],
-                [0.0, d / 2.0, h],
-                [0.0, -d / 2.0, h],
-            ],
+            tag_positions: [[d / 2.0, 0.0, h], [-d / 2.0, 0.0, h], [0.0, d / 2.0, h], [0.0, -d / 2.0, h]],
             pairs: [(0, 1), (2, 3)],
             array,
             calibration_rad: Vec::new(),
             peak: PeakOptions::default(),
-            range: RangeConfig {
-                min_m: 0.0,
-                max_m: 150.0,
-                ..RangeConfig::default()
-            },
+            range: RangeConfig { min_m: 0.0, max_m: 150.0, ..RangeConfig::default() },
             range_coherence: RangeCoherence::PerTag,
-            range_window: RangeWindow::AroundTiming {
-                half_width_m: fringe,
-            },
+            range_window: RangeWindow::AroundTiming { half_width_m: fringe },
             magnitude_weights: true,
             music,
             angle_combine: AngleCombine::HarmonicMean,
-            heading: HeadingConfig {
-                min_omega_rad_s: 0.05,
-                chirp_rate_hz_per_s: Some(chirp.chirp_rate_hz_per_s()),
-            },
+            heading: HeadingConfig { min_omega_rad_s: 0.05, chirp_rate_hz_per_s: Some(chirp.chirp_rate_hz_per_s()) },
             ignore_doppler: false,
             min_peak_snr_db: -20.0,
         }
@@ -214,26 +194,17 @@ impl EpochConfig {
 
     pub fn validate(&self) -> Result<()> {
         let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
-        if !(finite(&self.channels_hz)
-            && finite(&self.chirp_starts_s)
-            && finite(&self.tag_shifts_hz))
-        {
+        if !(finite(&self.channels_hz) && finite(&self.chirp_starts_s) && finite(&self.tag_shifts_hz)) {
             return Err(Error::NonFinite("epoch configuration".into()));
         }
-        if self.channels_hz.iter().any(|&f| f <= 0.0) || self.channels_hz[0] == self.channels_hz[1]
-        {
-            return Err(Error::BadConfig(
-                "two distinct positive channel frequencies are needed".into(),
-            ));
+        if self.channels_hz.iter().any(|&f| f <= 0.0) || self.channels_hz[0] == self.channels_hz[1] {
+            return Err(Error::BadConfig("two distinct positive channel frequencies are needed".into()));
         }
         let mut seen = [false; TAGS];
         for &(a, b) in &self.pairs {
             for t in [a, b] {
                 if t >= TAGS || seen[t] {
-                    return Err(Error::BadConfig(format!(
-                        "pairs {:?} must partition the 4 tags",
-                        self.pairs
-                    )));
+                    return Err(Error::BadConfig(format!("pairs {:?} must partition the 4 tags", self.pairs)));
                 }
                 seen[t] = true;
             }
@@ -243,16 +214,11 @@ impl EpochConfig {
             return Err(Error::BadConfig("at least 2 receive antennas".into()));
         }
         if !(self.calibration_rad.is_empty() || self.calibration_rad.len() == m * CHANNELS * TAGS) {
-            return Err(Error::Shape(format!(
-                "calibration: {} values for {m} x 8",
-                self.calibration_rad.len()
-            )));
+            return Err(Error::Shape(format!("calibration: {} values for {m} x 8", self.calibration_rad.len())));
         }
         if let RangeWindow::AroundTiming { half_width_m } = self.range_window {
             if !(half_width_m > 0.0 && half_width_m.is_finite()) {
-                return Err(Error::BadConfig(format!(
-                    "range window half-width {half_width_m} m"
-                )));
+                return Err(Error::BadConfig(format!("range window half-width {half_width_m} m")));
             }
         }
         Ok(())
@@ -379,51 +345,29 @@ impl EpochProcessor {
     ///
     /// Errors: [`Error::Shape`] for a wrong length, [`Error::NonFinite`] for
     /// bad samples or corrections, and the steps' own errors.
-    pub fn process<S: Sample>(
-        &mut self,
-        samples: &[S],
-        corrections: &Corrections,
-    ) -> Result<EpochFeatures> {
+    pub fn process<S: Sample>(&mut self, samples: &[S], corrections: &Corrections) -> Result<EpochFeatures> {
         check_input(&self.config, samples.len(), corrections)?;
         // 1. Peaks, and which clear the decoding threshold.
         let peaks = self.find_peaks(samples)?;
         let c = &self.config;
         let clear = clear_peaks(&peaks, c.min_peak_snr_db);
-        let grid = PeakGrid {
-            peaks: &peaks,
-            clear: &clear,
-            antennas: c.antennas(),
-        };
+        let grid = PeakGrid { peaks: &peaks, clear: &clear, antennas: c.antennas() };
 
         // 2. Angle per tag, combined; the line of sight the Doppler uses.
         let (tag_angles, tag_used) = tag_angles(c, &grid)?;
-        let angles: Vec<(f64, f64)> = tag_angles
-            .iter()
-            .zip(&tag_used)
-            .filter(|(_, &u)| u)
-            .map(|(e, _)| (e.azimuth, e.elevation))
-            .collect();
+        let angles: Vec<(f64, f64)> =
+            tag_angles.iter().zip(&tag_used).filter(|(_, &u)| u).map(|(e, _)| (e.azimuth, e.elevation)).collect();
         let (azimuth, elevation) = combine_angles(&angles, c.angle_combine)?;
         let direction = super::geometry::direction(azimuth, elevation);
         let u = line_of_sight(corrections, direction)?;
 
         // 3. CFO, translational and rotational Doppler; the chirp-timing range.
-        let cfo: Vec<f64> = c
-            .tag_shifts_hz
-            .iter()
-            .map(|&s| cfo_hz(corrections.clock_error, s))
-            .collect();
+        let cfo: Vec<f64> = c.tag_shifts_hz.iter().map(|&s| cfo_hz(corrections.clock_error, s)).collect();
         let v_gear = gear_velocity(c, corrections)?;
         let carriers = carriers_hz(c);
         let translational: Vec<f64> = carriers
             .iter()
-            .map(|&f| {
-                if c.ignore_doppler {
-                    0.0
-                } else {
-                    translational_doppler_hz(f, &u, &v_gear)
-                }
-            })
+            .map(|&f| if c.ignore_doppler { 0.0 } else { translational_doppler_hz(f, &u, &v_gear) })
             .collect();
         let pairs = pair_shifts(c, &grid, &cfo, &translational);
         let timing = chirp_timing(c, &pairs.timing_terms);
@@ -537,10 +481,7 @@ fn clear_peaks(peaks: &[Peak], min_peak_snr_db: f64) -> Vec<bool> {
 
 /// Received carriers `f_j + s_k/2`, index `j * 4 + k`, Hz.
 fn carriers_hz(c: &EpochConfig) -> Vec<f64> {
-    (0..CHANNELS)
-        .flat_map(|j| (0..TAGS).map(move |k| (j, k)))
-        .map(|(j, k)| c.carrier_hz(j, k))
-        .collect()
+    (0..CHANNELS).flat_map(|j| (0..TAGS).map(move |k| (j, k))).map(|(j, k)| c.carrier_hz(j, k)).collect()
 }
 
 /// Step 2: MUSIC per tag on the calibrated centre phases of its channels
@@ -550,21 +491,13 @@ fn carriers_hz(c: &EpochConfig) -> Vec<f64> {
 /// no tag in use: all are.
 fn tag_angles(c: &EpochConfig, grid: &PeakGrid) -> Result<(Vec<MusicEstimate>, [bool; TAGS])> {
     let m_ant = grid.antennas;
-    let centre_phase = |j: usize, k: usize, m: usize| {
-        grid.peak(j, k, m).amplitude_centre.arg() - c.calibration(m, j, k)
-    };
+    let centre_phase = |j: usize, k: usize, m: usize| grid.peak(j, k, m).amplitude_centre.arg() - c.calibration(m, j, k);
     let mut tag_angles = Vec::with_capacity(TAGS);
     let mut tag_used = [false; TAGS];
     for (k, used) in tag_used.iter_mut().enumerate() {
-        let clear_channels: Vec<usize> = (0..CHANNELS)
-            .filter(|&j| (0..m_ant).all(|m| grid.clear(j, k, m)))
-            .collect();
+        let clear_channels: Vec<usize> = (0..CHANNELS).filter(|&j| (0..m_ant).all(|m| grid.clear(j, k, m))).collect();
         *used = !clear_channels.is_empty();
-        let channels: Vec<usize> = if *used {
-            clear_channels
-        } else {
-            (0..CHANNELS).collect()
-        };
+        let channels: Vec<usize> = if *used { clear_channels } else { (0..CHANNELS).collect() };
         let phases: Vec<f64> = (0..m_ant)
             .flat_map(|m| channels.iter().map(move |&j| (j, m)))
             .map(|(j, m)| centre_phase(j, k, m))
@@ -591,15 +524,8 @@ fn line_of_sight(corrections: &Corrections, direction: Vec3) -> Result<Vec3> {
 /// lever arm `R (omega x r_c)` when the attitude and rate are known; 0
 /// without a velocity.
 fn gear_velocity(c: &EpochConfig, corrections: &Corrections) -> Result<Vec3> {
-    let centroid = c
-        .tag_positions
-        .iter()
-        .fold([0.0; 3], |s, r| add(&s, &r.map(|x| x / TAGS as f64)));
-    let v_gear = match (
-        corrections.velocity,
-        corrections.attitude,
-        corrections.omega_body,
-    ) {
+    let centroid = c.tag_positions.iter().fold([0.0; 3], |s, r| add(&s, &r.map(|x| x / TAGS as f64)));
+    let v_gear = match (corrections.velocity, corrections.attitude, corrections.omega_body) {
         (Some(v), Some(r), Some(w)) => add(&v, &mat_vec(&r, &cross(&w, &centroid))),
         (Some(v), _, _) => v,
         (None, _, _) => [0.0; 3],
@@ -630,22 +556,16 @@ fn pair_shifts(c: &EpochConfig, grid: &PeakGrid, cfo: &[f64], translational: &[f
                 let (pa, pb) = (grid.peak(j, a, m), grid.peak(j, b, m));
                 let i = (j * m_ant + m) * 2 + p;
                 pair_mean_hz[i] = pair_mean(pa.frequency_hz, pb.frequency_hz);
-                rotational_hz[i] = pair_half_difference(pa.frequency_hz, pb.frequency_hz)
-                    - 0.5 * (cfo[a] - cfo[b]);
+                rotational_hz[i] = pair_half_difference(pa.frequency_hz, pb.frequency_hz) - 0.5 * (cfo[a] - cfo[b]);
                 let t = pair_mean_hz[i]
                     - 0.5 * (cfo[a] + cfo[b])
                     - 0.5 * (translational[j * TAGS + a] + translational[j * TAGS + b]);
-                let variance =
-                    0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
+                let variance = 0.25 * (pa.frequency_sigma_hz.powi(2) + pb.frequency_sigma_hz.powi(2));
                 timing_terms.push((t, variance, grid.pair_clear(j, (a, b), m)));
             }
         }
     }
-    PairShifts {
-        pair_mean_hz,
-        rotational_hz,
-        timing_terms,
-    }
+    PairShifts { pair_mean_hz, rotational_hz, timing_terms }
 }
 
 /// The chirp-timing term `-(BW/T) tau` (Hz) and the range `c0 tau / 2` of
@@ -674,12 +594,7 @@ fn chirp_timing(c: &EpochConfig, terms: &[(f64, f64, bool)]) -> Timing {
 /// peak's half difference is up to 125 kHz, and its ramp scrambles the
 /// pair's phases on every antenna. No clear antenna: no rotational shift is
 /// removed. All 0 for the Doppler-blind baseline.
-fn ramp_doppler(
-    c: &EpochConfig,
-    grid: &PeakGrid,
-    translational: &[f64],
-    rotational_hz: &[f64],
-) -> [f64; CHANNELS * TAGS] {
+fn ramp_doppler(c: &EpochConfig, grid: &PeakGrid, translational: &[f64], rotational_hz: &[f64]) -> [f64; CHANNELS * TAGS] {
     let m_ant = grid.antennas;
     let mut doppler = [0.0; CHANNELS * TAGS];
     if c.ignore_doppler {
@@ -687,16 +602,11 @@ fn ramp_doppler(
     }
     for j in 0..CHANNELS {
         for (p, &(a, b)) in c.pairs.iter().enumerate() {
-            let clear_antennas: Vec<usize> = (0..m_ant)
-                .filter(|&m| grid.pair_clear(j, (a, b), m))
-                .collect();
+            let clear_antennas: Vec<usize> = (0..m_ant).filter(|&m| grid.pair_clear(j, (a, b), m)).collect();
             let rot = if clear_antennas.is_empty() {
                 0.0
             } else {
-                clear_antennas
-                    .iter()
-                    .map(|&m| rotational_hz[(j * m_ant + m) * 2 + p])
-                    .sum::<f64>()
+                clear_antennas.iter().map(|&m| rotational_hz[(j * m_ant + m) * 2 + p]).sum::<f64>()
                     / clear_antennas.len() as f64
             };
             doppler[j * TAGS + a] = translational[j * TAGS + a] + rot;
@@ -708,31 +618,16 @@ fn ramp_doppler(
 
 /// Step 4: every chirp's channel phase at the epoch's reference time (eq. 3),
 /// its CFO and Doppler ramps and calibration removed (rad, wrapped).
-fn channel_phases(
-    c: &EpochConfig,
-    grid: &PeakGrid,
-    cfo: &[f64],
-    doppler: &[f64],
-    epoch_time_s: Option<f64>,
-) -> Vec<f64> {
+fn channel_phases(c: &EpochConfig, grid: &PeakGrid, cfo: &[f64], doppler: &[f64], epoch_time_s: Option<f64>) -> Vec<f64> {
     let t_ref = c.reference_time_s();
     let mut phases_rad = vec![0.0; grid.peaks.len()];
     for j in 0..CHANNELS {
         for k in 0..TAGS {
-            let correction = PhaseCorrection {
-                cfo_hz: cfo[k],
-                doppler_hz: doppler[j * TAGS + k],
-                epoch_time_s,
-            };
+            let correction = PhaseCorrection { cfo_hz: cfo[k], doppler_hz: doppler[j * TAGS + k], epoch_time_s };
             for m in 0..grid.antennas {
                 let raw = grid.peak(j, k, m).amplitude_centre.arg();
-                phases_rad[grid.index(j, k, m)] = channel_phase(
-                    raw,
-                    c.chirp_centre_s(j),
-                    t_ref,
-                    c.calibration(m, j, k),
-                    &correction,
-                );
+                phases_rad[grid.index(j, k, m)] =
+                    channel_phase(raw, c.chirp_centre_s(j), t_ref, c.calibration(m, j, k), &correction);
             }
         }
     }
@@ -744,20 +639,8 @@ fn channel_phases(
 /// (one frequency carries no range).
 type AntennaGroups = Vec<(PhaseGroup, Option<usize>)>;
 
-fn phase_groups(
-    c: &EpochConfig,
-    grid: &PeakGrid,
-    phases_rad: &[f64],
-    m: usize,
-    mask: &[bool],
-) -> Result<AntennaGroups> {
-    let weight = |p: &Peak| {
-        if c.magnitude_weights {
-            p.amplitude_centre.norm()
-        } else {
-            1.0
-        }
-    };
+fn phase_groups(c: &EpochConfig, grid: &PeakGrid, phases_rad: &[f64], m: usize, mask: &[bool]) -> Result<AntennaGroups> {
+    let weight = |p: &Peak| if c.magnitude_weights { p.amplitude_centre.norm() } else { 1.0 };
     let allowed = |j: usize, k: usize| mask[grid.index(j, k, m)];
     let phase = |j: usize, k: usize| phases_rad[grid.index(j, k, m)];
     let mut groups = Vec::new();
@@ -767,12 +650,8 @@ fn phase_groups(
                 PhaseGroup::new(
                     sel.iter().map(|&(j, k)| c.carrier_hz(j, k)).collect(),
                     sel.iter().map(|&(j, k)| phase(j, k)).collect(),
-                    sel.iter()
-                        .map(|&(j, k)| weight(grid.peak(j, k, m)))
-                        .collect(),
-                    sel.iter()
-                        .map(|&(j, k)| grid.peak(j, k, m).phase_sigma_rad)
-                        .collect(),
+                    sel.iter().map(|&(j, k)| weight(grid.peak(j, k, m))).collect(),
+                    sel.iter().map(|&(j, k)| grid.peak(j, k, m).phase_sigma_rad).collect(),
                 )?,
                 tag,
             ));
@@ -782,22 +661,13 @@ fn phase_groups(
     match c.range_coherence {
         RangeCoherence::AcrossTags => {
             push(
-                (0..CHANNELS)
-                    .flat_map(|j| (0..TAGS).map(move |k| (j, k)))
-                    .filter(|&(j, k)| allowed(j, k))
-                    .collect(),
+                (0..CHANNELS).flat_map(|j| (0..TAGS).map(move |k| (j, k))).filter(|&(j, k)| allowed(j, k)).collect(),
                 None,
             )?;
         }
         RangeCoherence::PerTag => {
             for k in 0..TAGS {
-                push(
-                    (0..CHANNELS)
-                        .map(|j| (j, k))
-                        .filter(|&(j, k)| allowed(j, k))
-                        .collect(),
-                    Some(k),
-                )?;
+                push((0..CHANNELS).map(|j| (j, k)).filter(|&(j, k)| allowed(j, k)).collect(), Some(k))?;
             }
         }
         RangeCoherence::PairSums => {
@@ -808,23 +678,11 @@ fn phase_groups(
             if sel.len() >= 2 {
                 groups.push((
                     PhaseGroup::new(
+                        sel.iter().map(|&(j, (a, b))| c.carrier_hz(j, a) + c.carrier_hz(j, b)).collect(),
+                        sel.iter().map(|&(j, (a, b))| super::wrap_angle(phase(j, a) + phase(j, b))).collect(),
+                        sel.iter().map(|&(j, (a, b))| weight(grid.peak(j, a, m)) * weight(grid.peak(j, b, m))).collect(),
                         sel.iter()
-                            .map(|&(j, (a, b))| c.carrier_hz(j, a) + c.carrier_hz(j, b))
-                            .collect(),
-                        sel.iter()
-                            .map(|&(j, (a, b))| super::wrap_angle(phase(j, a) + phase(j, b)))
-                            .collect(),
-                        sel.iter()
-                            .map(|&(j, (a, b))| {
-                                weight(grid.peak(j, a, m)) * weight(grid.peak(j, b, m))
-                            })
-                            .collect(),
-                        sel.iter()
-                            .map(|&(j, (a, b))| {
-                                grid.peak(j, a, m)
-                                    .phase_sigma_rad
-                                    .hypot(grid.peak(j, b, m).phase_sigma_rad)
-                            })
+                            .map(|&(j, (a, b))| grid.peak(j, a, m).phase_sigma_rad.hypot(grid.peak(j, b, m).phase_sigma_rad))
                             .collect(),
                     )?,
                     None,
@@ -861,22 +719,14 @@ struct PhaseRange {
     group_of: Vec<(usize, Option<usize>)>,
 }
 
-fn phase_range(
-    c: &EpochConfig,
-    grid: &PeakGrid,
-    phases_rad: &[f64],
-    timing_range_m: f64,
-) -> Result<PhaseRange> {
+fn phase_range(c: &EpochConfig, grid: &PeakGrid, phases_rad: &[f64], timing_range_m: f64) -> Result<PhaseRange> {
     let m_ant = grid.antennas;
     // The clear peaks' groups; where no group is left, every peak's.
-    let mut per_antenna: Vec<AntennaGroups> = (0..m_ant)
-        .map(|m| phase_groups(c, grid, phases_rad, m, grid.clear))
-        .collect::<Result<_>>()?;
+    let mut per_antenna: Vec<AntennaGroups> =
+        (0..m_ant).map(|m| phase_groups(c, grid, phases_rad, m, grid.clear)).collect::<Result<_>>()?;
     if per_antenna.iter().all(|g| g.is_empty()) {
         let all = vec![true; grid.peaks.len()];
-        per_antenna = (0..m_ant)
-            .map(|m| phase_groups(c, grid, phases_rad, m, &all))
-            .collect::<Result<_>>()?;
+        per_antenna = (0..m_ant).map(|m| phase_groups(c, grid, phases_rad, m, &all)).collect::<Result<_>>()?;
     }
     let range_config = range_search(c, timing_range_m);
     let mut groups = Vec::new();
@@ -884,18 +734,12 @@ fn phase_range(
     let mut antenna_ranges_m = Vec::with_capacity(m_ant);
     for (m, antenna) in per_antenna.into_iter().enumerate() {
         let (antenna, tags): (Vec<PhaseGroup>, Vec<Option<usize>>) = antenna.into_iter().unzip();
-        antenna_ranges_m
-            .push(estimate_range(&antenna, &range_config).map_or(f64::NAN, |e| e.range_m));
+        antenna_ranges_m.push(estimate_range(&antenna, &range_config).map_or(f64::NAN, |e| e.range_m));
         groups.extend(antenna);
         group_of.extend(tags.into_iter().map(|k| (m, k)));
     }
     let range = estimate_range(&groups, &range_config)?;
-    Ok(PhaseRange {
-        range,
-        antenna_ranges_m,
-        groups,
-        group_of,
-    })
+    Ok(PhaseRange { range, antenna_ranges_m, groups, group_of })
 }
 
 /// The combined angle's consistency (see [`EpochFeatures::angle_spread_rad`]).
@@ -906,20 +750,14 @@ fn phase_range(
 /// lever arm reads as scatter. An opposing pair's lever arms are opposite,
 /// so the pair's mean direction is the centroid's to first order whatever
 /// the attitude: the spread is taken over pair means.
-fn angle_spread(
-    c: &EpochConfig,
-    tag_angles: &[MusicEstimate],
-    tag_used: &[bool; TAGS],
-    direction: Vec3,
-) -> Option<f64> {
+fn angle_spread(c: &EpochConfig, tag_angles: &[MusicEstimate], tag_used: &[bool; TAGS], direction: Vec3) -> Option<f64> {
     let pair_directions: Vec<Vec3> = c
         .pairs
         .iter()
         .filter(|&&(a, b)| tag_used[a] && tag_used[b])
         .filter_map(|&(a, b)| normalize(&add(&tag_angles[a].direction, &tag_angles[b].direction)))
         .collect();
-    let pair_mean =
-        normalize(&pair_directions.iter().fold([0.0; 3], |s, d| add(&s, d))).unwrap_or(direction);
+    let pair_mean = normalize(&pair_directions.iter().fold([0.0; 3], |s, d| add(&s, d))).unwrap_or(direction);
     direction_spread(&pair_directions, &pair_mean)
 }
 
@@ -932,12 +770,7 @@ fn range_spread(c: &EpochConfig, phase: &PhaseRange, direction: Vec3) -> Option<
     let group_deviation = group_deviations_m(&phase.groups, phase.range.range_m);
     let antenna_offset = |m: usize| -0.5 * dot(&c.array.elements()[m], &direction);
     let of_tag = |m: usize, k: usize| {
-        phase
-            .group_of
-            .iter()
-            .zip(&group_deviation)
-            .find(|(&(gm, gk), _)| gm == m && gk == Some(k))
-            .and_then(|(_, &d)| d)
+        phase.group_of.iter().zip(&group_deviation).find(|(&(gm, gk), _)| gm == m && gk == Some(k)).and_then(|(_, &d)| d)
     };
     let mut deviations: Vec<f64> = phase
         .group_of
@@ -1002,10 +835,7 @@ fn heading(
 
 /// Mean and minimum per-sample SNR of the peaks, dB.
 fn snr_summary(peaks: &[Peak]) -> (f64, f64) {
-    let snrs: Vec<f64> = peaks
-        .iter()
-        .map(|p| 10.0 * p.snr.max(1e-30).log10())
-        .collect();
+    let snrs: Vec<f64> = peaks.iter().map(|p| 10.0 * p.snr.max(1e-30).log10()).collect();
     let snr_db = snrs.iter().sum::<f64>() / snrs.len() as f64;
     let min_snr_db = snrs.iter().copied().fold(f64::INFINITY, f64::min);
     (snr_db, min_snr_db)
@@ -1017,15 +847,7 @@ fn snr_summary(peaks: &[Peak]) -> (f64, f64) {
 fn direction_spread(directions: &[Vec3], mean: &Vec3) -> Option<f64> {
     let n = directions.len();
     (n >= 2).then(|| {
-        let sum: f64 = directions
-            .iter()
-            .map(|d| {
-                super::geometry::dot(d, mean)
-                    .clamp(-1.0, 1.0)
-                    .acos()
-                    .powi(2)
-            })
-            .sum();
+        let sum: f64 = directions.iter().map(|d| super::geometry::dot(d, mean).clamp(-1.0, 1.0).acos().powi(2)).sum();
         (sum / (2.0 * (n - 1) as f64)).sqrt()
     })
 }
@@ -1049,11 +871,7 @@ fn rms_spread(deviations: &[f64]) -> Option<f64> {
 /// or more off).
 fn timing_mean(terms: &[(f64, f64, bool)]) -> (f64, f64) {
     let clear: Vec<&(f64, f64, bool)> = terms.iter().filter(|t| t.2).collect();
-    let used: Vec<&(f64, f64, bool)> = if clear.is_empty() {
-        terms.iter().collect()
-    } else {
-        clear
-    };
+    let used: Vec<&(f64, f64, bool)> = if clear.is_empty() { terms.iter().collect() } else { clear };
     let count = used.len() as f64;
     let sum: f64 = used.iter().map(|t| t.0).sum();
     let variance: f64 = used.iter().map(|t| t.1).sum();
@@ -1140,9 +958,7 @@ pub(crate) mod sim {
 
         /// The tags' centroid at `t`.
         pub fn centroid_at(&self, config: &EpochConfig, t: f64) -> Vec3 {
-            (0..TAGS).fold([0.0; 3], |s, k| {
-                add(&s, &self.tag_at(config, k, t).map(|x| x / TAGS as f64))
-            })
+            (0..TAGS).fold([0.0; 3], |s, k| add(&s, &self.tag_at(config, k, t).map(|x| x / TAGS as f64)))
         }
 
         /// World body rate `R omega_B` is not needed: omega is body-fixed.
@@ -1177,9 +993,8 @@ pub(crate) mod sim {
                             let carrier_cycles = (carrier * tau).rem_euclid(1.0);
                             let clock_cycles = (cfo * (scene.epoch_time_s + t)).rem_euclid(1.0);
                             let chirp_cycles = config.chirp.phase_cycles(t_chirp - tau);
-                            let psi = std::f64::consts::TAU
-                                * (-carrier_cycles + clock_cycles + chirp_cycles)
-                                + scene.phi_tag;
+                            let psi =
+                                std::f64::consts::TAU * (-carrier_cycles + clock_cycles + chirp_cycles) + scene.phi_tag;
                             y += g * Complex64::from_polar(1.0, psi);
                         }
                         if scene.snr_db.is_finite() {
@@ -1213,9 +1028,7 @@ mod tests {
     }
 
     fn angle_error(f: &EpochFeatures, az: f64, el: f64) -> f64 {
-        dot(&f.direction, &super::super::geometry::direction(az, el))
-            .clamp(-1.0, 1.0)
-            .acos()
+        dot(&f.direction, &super::super::geometry::direction(az, el)).clamp(-1.0, 1.0).acos()
     }
 
     #[test]
@@ -1249,11 +1062,7 @@ mod tests {
     #[test]
     fn clear_peaks_masks_the_faded_and_keeps_all_when_none_clears() {
         // -20 dB threshold: 0.01 in linear per-sample SNR.
-        let peaks = [
-            peak_with_snr(0.5),
-            peak_with_snr(0.005),
-            peak_with_snr(0.01),
-        ];
+        let peaks = [peak_with_snr(0.5), peak_with_snr(0.005), peak_with_snr(0.01)];
         assert_eq!(clear_peaks(&peaks, -20.0), vec![true, false, true]);
         // None clears 30 dB: every peak is used.
         assert_eq!(clear_peaks(&peaks, 30.0), vec![true; 3]);
@@ -1262,9 +1071,7 @@ mod tests {
     #[test]
     fn range_search_is_around_the_timing_range_within_the_interval() {
         let c = EpochConfig::marvel();
-        let RangeWindow::AroundTiming { half_width_m } = c.range_window else {
-            panic!("default window")
-        };
+        let RangeWindow::AroundTiming { half_width_m } = c.range_window else { panic!("default window") };
         let around = range_search(&c, 20.0);
         assert!((around.min_m - (20.0 - half_width_m)).abs() < 1e-12);
         assert!((around.max_m - (20.0 + half_width_m)).abs() < 1e-12);
@@ -1273,13 +1080,7 @@ mod tests {
         let beyond = range_search(&c, -3.0);
         assert_eq!(beyond.min_m, c.range.min_m);
         assert!((beyond.max_m - (c.range.min_m + half_width_m)).abs() < 1e-12);
-        let full = range_search(
-            &EpochConfig {
-                range_window: RangeWindow::Full,
-                ..c.clone()
-            },
-            20.0,
-        );
+        let full = range_search(&EpochConfig { range_window: RangeWindow::Full, ..c.clone() }, 20.0);
         assert_eq!((full.min_m, full.max_m), (c.range.min_m, c.range.max_m));
     }
 
@@ -1316,28 +1117,16 @@ mod tests {
         let normal = rand_distr::Normal::new(0.0, sigma).unwrap();
         for v in &mut y[start..start + n] {
             use rand_distr::Distribution;
-            *v = num_complex::Complex32::new(
-                normal.sample(&mut rng) as f32,
-                normal.sample(&mut rng) as f32,
-            );
+            *v = num_complex::Complex32::new(normal.sample(&mut rng) as f32, normal.sample(&mut rng) as f32);
         }
-        let corrections = Corrections {
-            clock_error: scene.clock_error,
-            attitude: Some(scene.attitude),
-            ..Default::default()
-        };
+        let corrections =
+            Corrections { clock_error: scene.clock_error, attitude: Some(scene.attitude), ..Default::default() };
         let (r, az, el) = truth(&config, &scene);
-        let masked = EpochProcessor::new(config.clone())
+        let masked = EpochProcessor::new(config.clone()).unwrap().process(&y, &corrections).unwrap();
+        let unmasked = EpochProcessor::new(EpochConfig { min_peak_snr_db: f64::NEG_INFINITY, ..config.clone() })
             .unwrap()
             .process(&y, &corrections)
             .unwrap();
-        let unmasked = EpochProcessor::new(EpochConfig {
-            min_peak_snr_db: f64::NEG_INFINITY,
-            ..config.clone()
-        })
-        .unwrap()
-        .process(&y, &corrections)
-        .unwrap();
         let faded = &masked.peaks[faded_index];
         println!(
             "faded peak {:.1} dB; angle error masked {:.3} deg (spread {:.3} deg, tags {:?}), unmasked {:.3} deg \
@@ -1357,13 +1146,7 @@ mod tests {
         // The pair means need no attitude: the same spreads without it.
         let blind = EpochProcessor::new(config.clone())
             .unwrap()
-            .process(
-                &y,
-                &Corrections {
-                    attitude: None,
-                    ..corrections
-                },
-            )
+            .process(&y, &Corrections { attitude: None, ..corrections })
             .unwrap();
         assert_eq!(blind.angle_spread_rad, masked.angle_spread_rad);
         assert_eq!(blind.range_spread_m, masked.range_spread_m);
@@ -1403,10 +1186,7 @@ mod tests {
         // seconds of epochs at rest).
         assert!((clock.clock_error - 1.5e-6).abs() < 4.0 * clock.sigma.unwrap());
 
-        let corrections = Corrections {
-            clock_error: clock.clock_error,
-            ..Default::default()
-        };
+        let corrections = Corrections { clock_error: clock.clock_error, ..Default::default() };
         let f = processor.process(&y, &corrections).unwrap();
         let (r, az, el) = truth(&config, &scene);
         println!(
@@ -1434,24 +1214,12 @@ mod tests {
         scene.velocity = u.map(|x| x * 3.0); // 3 m/s away from the controller
         scene.clock_error = -0.8e-6;
         let y = simulate(&config, &scene, &mut rng);
-        let corrections = Corrections {
-            clock_error: scene.clock_error,
-            velocity: Some(scene.velocity),
-            ..Default::default()
-        };
+        let corrections =
+            Corrections { clock_error: scene.clock_error, velocity: Some(scene.velocity), ..Default::default() };
         let (r, _, _) = truth(&config, &scene);
-        let marvel = EpochProcessor::new(config.clone())
-            .unwrap()
-            .process(&y, &corrections)
-            .unwrap();
-        let blind_config = EpochConfig {
-            ignore_doppler: true,
-            ..config.clone()
-        };
-        let blind = EpochProcessor::new(blind_config)
-            .unwrap()
-            .process(&y, &corrections)
-            .unwrap();
+        let marvel = EpochProcessor::new(config.clone()).unwrap().process(&y, &corrections).unwrap();
+        let blind_config = EpochConfig { ignore_doppler: true, ..config.clone() };
+        let blind = EpochProcessor::new(blind_config).unwrap().process(&y, &corrections).unwrap();
         println!(
             "3 m/s radial, 10 dB: Marvel range error {:+.3} m (timing {:+.2} m); Doppler-blind {:+.3} m (timing {:+.2} m)",
             marvel.range.range_m - r,
@@ -1479,24 +1247,17 @@ mod tests {
             scene.omega_body = mat_vec(&transpose(&scene.attitude), &[0.0, 0.0, 1.2]);
             let y = simulate(&config, &scene, &mut rng);
             // The tracker's attitude: roll/pitch right, yaw unknown (0).
-            let corrections = Corrections {
-                attitude: Some(rp),
-                omega_body: Some(scene.omega_body),
-                ..Default::default()
-            };
+            let corrections =
+                Corrections { attitude: Some(rp), omega_body: Some(scene.omega_body), ..Default::default() };
             let f = processor.process(&y, &corrections).unwrap();
             let h = f.heading.expect("rotating");
             // Truth: the yaw at the reference time.
-            let yaw_ref =
-                super::super::geometry::yaw_of(&scene.attitude_at(config.reference_time_s()));
+            let yaw_ref = super::super::geometry::yaw_of(&scene.attitude_at(config.reference_time_s()));
             errors.push(super::super::wrap_angle(h.yaw - yaw_ref));
             assert!(errors.last().unwrap().abs() < 0.1, "yaw {yaw}: {h:?}");
         }
         let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
-        println!(
-            "heading at 1.2 rad/s, 10 dB: yaw rms {:.2} deg over a full turn",
-            rms.to_degrees()
-        );
+        println!("heading at 1.2 rad/s, 10 dB: yaw rms {:.2} deg over a full turn", rms.to_degrees());
     }
 
     /// Accuracy at -10 and 0 dB per-sample SNR (26 / 36 dB after
@@ -1515,8 +1276,7 @@ mod tests {
             for i in 0..epochs {
                 let yaw = -3.0 + 0.25 * i as f64;
                 let x = i as f64 / epochs as f64;
-                let mut scene =
-                    Scene::hover([8.0 - 16.0 * x, 15.0 + 20.0 * x, 2.0 + 4.0 * x], snr_db);
+                let mut scene = Scene::hover([8.0 - 16.0 * x, 15.0 + 20.0 * x, 2.0 + 4.0 * x], snr_db);
                 scene.velocity = [1.0, -1.5, 0.3];
                 scene.attitude = rotation_z(yaw);
                 scene.omega_body = [0.0, 0.0, 1.0];
@@ -1540,9 +1300,7 @@ mod tests {
                 et.push(f.timing_range_m - r);
                 ea.push(angle_error(&f, az, el));
                 if let Some(h) = f.heading {
-                    let yaw_ref = super::super::geometry::yaw_of(
-                        &scene.attitude_at(config.reference_time_s()),
-                    );
+                    let yaw_ref = super::super::geometry::yaw_of(&scene.attitude_at(config.reference_time_s()));
                     ey.push(super::super::wrap_angle(h.yaw - yaw_ref));
                 }
             }
@@ -1571,20 +1329,8 @@ mod tests {
         let base = EpochConfig::marvel();
         let modes = [
             ("per-tag, near timing (default)", base.clone()),
-            (
-                "pair sums, near timing",
-                EpochConfig {
-                    range_coherence: RangeCoherence::PairSums,
-                    ..base.clone()
-                },
-            ),
-            (
-                "across tags, near timing",
-                EpochConfig {
-                    range_coherence: RangeCoherence::AcrossTags,
-                    ..base.clone()
-                },
-            ),
+            ("pair sums, near timing", EpochConfig { range_coherence: RangeCoherence::PairSums, ..base.clone() }),
+            ("across tags, near timing", EpochConfig { range_coherence: RangeCoherence::AcrossTags, ..base.clone() }),
             (
                 "across tags, first path 0-150 m (paper)",
                 EpochConfig {
@@ -1593,31 +1339,19 @@ mod tests {
                     ..base.clone()
                 },
             ),
-            (
-                "per-tag, first path 0-150 m",
-                EpochConfig {
-                    range_window: RangeWindow::Full,
-                    ..base.clone()
-                },
-            ),
+            ("per-tag, first path 0-150 m", EpochConfig { range_window: RangeWindow::Full, ..base.clone() }),
         ];
         let mut rng = StdRng::seed_from_u64(25);
         let scenes: Vec<Scene> = (0..12)
             .map(|i| {
-                let mut s = Scene::hover(
-                    [3.0 - i as f64, 12.0 + 1.5 * i as f64, 2.0 + 0.3 * i as f64],
-                    10.0,
-                );
+                let mut s = Scene::hover([3.0 - i as f64, 12.0 + 1.5 * i as f64, 2.0 + 0.3 * i as f64], 10.0);
                 s.attitude = rotation_z(0.5 * i as f64);
                 s.clock_error = 0.7e-6;
                 s.epoch_time_s = 5.0 + 3.0 * i as f64;
                 s
             })
             .collect();
-        let data: Vec<_> = scenes
-            .iter()
-            .map(|s| simulate(&base, s, &mut rng))
-            .collect();
+        let data: Vec<_> = scenes.iter().map(|s| simulate(&base, s, &mut rng)).collect();
         for (name, config) in modes {
             let mut p = EpochProcessor::new(config.clone()).unwrap();
             let errors: Vec<f64> = scenes
@@ -1653,24 +1387,9 @@ mod tests {
         let config = EpochConfig::marvel();
         let mut p = EpochProcessor::new(config.clone()).unwrap();
         let y = vec![num_complex::Complex32::new(0.0, 0.0); 10];
-        assert_eq!(
-            p.process(&y, &Corrections::default()).unwrap_err().kind(),
-            "shape"
-        );
-        assert!(EpochProcessor::new(EpochConfig {
-            pairs: [(0, 1), (1, 2)],
-            ..config.clone()
-        })
-        .is_err());
-        assert!(EpochProcessor::new(EpochConfig {
-            calibration_rad: vec![0.0; 5],
-            ..config.clone()
-        })
-        .is_err());
-        assert!(EpochProcessor::new(EpochConfig {
-            channels_hz: [915e6, 915e6],
-            ..config
-        })
-        .is_err());
+        assert_eq!(p.process(&y, &Corrections::default()).unwrap_err().kind(), "shape");
+        assert!(EpochProcessor::new(EpochConfig { pairs: [(0, 1), (1, 2)], ..config.clone() }).is_err());
+        assert!(EpochProcessor::new(EpochConfig { calibration_rad: vec![0.0; 5], ..config.clone() }).is_err());
+        assert!(EpochProcessor::new(EpochConfig { channels_hz: [915e6, 915e6], ..config }).is_err());
     }
 }

@@ -67,10 +67,7 @@ pub struct HeadingConfig {
 
 impl Default for HeadingConfig {
     fn default() -> Self {
-        Self {
-            min_omega_rad_s: 0.05,
-            chirp_rate_hz_per_s: Some(500e3 / 8.192e-3),
-        }
+        Self { min_omega_rad_s: 0.05, chirp_rate_hz_per_s: Some(500e3 / 8.192e-3) }
     }
 }
 
@@ -116,27 +113,17 @@ impl YawGeometry {
         let kappa = chirp_rate.unwrap_or(0.0);
         let k = -2.0 / SPEED_OF_LIGHT;
         let f = observation.carrier_hz;
-        let doppler_timing = [
-            k * (f * rot[0] + kappa * dr[0]),
-            k * (f * rot[1] + kappa * dr[1]),
-            k * (f * rot[2] + kappa * dr[2]),
-        ];
+        let doppler_timing =
+            [k * (f * rot[0] + kappa * dr[0]), k * (f * rot[1] + kappa * dr[1]), k * (f * rot[2] + kappa * dr[2])];
         let u = self.direction;
         let parallax = match (self.velocity, self.range_m) {
             (Some(v), Some(r)) if r > 0.0 => {
                 let along = dot(&u, &v);
-                [
-                    (v[0] - along * u[0]) / r,
-                    (v[1] - along * u[1]) / r,
-                    (v[2] - along * u[2]) / r,
-                ]
+                [(v[0] - along * u[0]) / r, (v[1] - along * u[1]) / r, (v[2] - along * u[2]) / r]
             }
             _ => [0.0; 3],
         };
-        [
-            (u, doppler_timing),
-            (parallax, [k * f * dr[0], k * f * dr[1], k * f * dr[2]]),
-        ]
+        [(u, doppler_timing), (parallax, [k * f * dr[0], k * f * dr[1], k * f * dr[2]])]
     }
 }
 
@@ -148,17 +135,10 @@ pub fn pair_coefficients(
     geometry: &YawGeometry,
     chirp_rate_hz_per_s: Option<f64>,
 ) -> (f64, f64, f64) {
-    geometry
-        .terms(observation, chirp_rate_hz_per_s)
-        .iter()
-        .fold((0.0, 0.0, 0.0), |(sa, sb, sc), (a, b)| {
-            let q = mat_vec(&geometry.roll_pitch, b);
-            (
-                sa + a[0] * q[0] + a[1] * q[1],
-                sb + a[1] * q[0] - a[0] * q[1],
-                sc + a[2] * q[2],
-            )
-        })
+    geometry.terms(observation, chirp_rate_hz_per_s).iter().fold((0.0, 0.0, 0.0), |(sa, sb, sc), (a, b)| {
+        let q = mat_vec(&geometry.roll_pitch, b);
+        (sa + a[0] * q[0] + a[1] * q[1], sb + a[1] * q[0] - a[0] * q[1], sc + a[2] * q[2])
+    })
 }
 
 /// The modelled pair difference at `yaw` (Hz), computed directly as
@@ -223,16 +203,10 @@ pub fn solve_yaw(
     if l_max.is_nan() || l_max <= 0.0 {
         return None;
     }
-    let condition = if l_min > 0.0 {
-        (l_max / l_min).sqrt()
-    } else {
-        f64::INFINITY
-    };
+    let condition = if l_min > 0.0 { (l_max / l_min).sqrt() } else { f64::INFINITY };
     let cost = |yaw: f64| -> f64 {
         let (s, c) = yaw.sin_cos();
-        rows.iter()
-            .map(|&(a, b, cc, d, w)| w * (a * c + b * s + cc - d).powi(2))
-            .sum()
+        rows.iter().map(|&(a, b, cc, d, w)| w * (a * c + b * s + cc - d).powi(2)).sum()
     };
     // Starts: the unconstrained solution and a coarse scan (the constrained
     // cost on the circle can have two minima when the design is
@@ -311,12 +285,7 @@ mod tests {
     const D: f64 = 0.66;
     const H: f64 = -0.30;
     fn tags() -> [Vec3; 4] {
-        [
-            [D / 2.0, 0.0, H],
-            [-D / 2.0, 0.0, H],
-            [0.0, D / 2.0, H],
-            [0.0, -D / 2.0, H],
-        ]
+        [[D / 2.0, 0.0, H], [-D / 2.0, 0.0, H], [0.0, D / 2.0, H], [0.0, -D / 2.0, H]]
     }
 
     #[test]
@@ -330,13 +299,7 @@ mod tests {
             range_m: Some(12.0),
         };
         let t = tags();
-        let o = PairObservation {
-            tag_a: t[0],
-            tag_b: t[1],
-            carrier_hz: 903e6,
-            difference_hz: 0.0,
-            sigma_hz: 1.0,
-        };
+        let o = PairObservation { tag_a: t[0], tag_b: t[1], carrier_hz: 903e6, difference_hz: 0.0, sigma_hz: 1.0 };
         let kappa = Some(500e3 / 8.192e-3);
         let (a, b, c) = pair_coefficients(&o, &g, kappa);
         for i in 0..16 {
@@ -404,15 +367,9 @@ mod tests {
         let mut worst_clean: f64 = 0.0;
         let mut noisy = Vec::new();
         for &(roll, pitch) in &[(0.0, 0.0), (0.15, -0.1), (-0.25, 0.2)] {
-            for &omega in &[
-                [0.0, 0.0, 0.3],
-                [0.0, 0.0, -1.0],
-                [0.2, -0.1, 1.5],
-                [0.0, 0.0, 3.0],
-            ] {
+            for &omega in &[[0.0, 0.0, 0.3], [0.0, 0.0, -1.0], [0.2, -0.1, 1.5], [0.0, 0.0, 3.0]] {
                 for i in 0..36 {
-                    let yaw =
-                        -std::f64::consts::PI + std::f64::consts::TAU * (i as f64 + 0.5) / 36.0;
+                    let yaw = -std::f64::consts::PI + std::f64::consts::TAU * (i as f64 + 0.5) / 36.0;
                     let rp = roll_pitch_matrix(roll, pitch);
                     let r = mat_mul(&rotation_z(yaw), &rp);
                     let p = [4.0, 3.0, 6.0];
@@ -429,29 +386,18 @@ mod tests {
                     let e = solve_yaw(&clean, &g, &config).unwrap();
                     let err = super::super::wrap_angle(e.yaw - yaw).abs();
                     worst_clean = worst_clean.max(err);
-                    assert!(
-                        err < 0.01,
-                        "roll {roll} pitch {pitch} omega {omega:?} yaw {yaw}: {e:?}"
-                    );
+                    assert!(err < 0.01, "roll {roll} pitch {pitch} omega {omega:?} yaw {yaw}: {e:?}");
                     // 0.3 Hz noise per pair difference.
                     let obs = exact_differences(&rho, &p, &v, &r, &omega, 903e6, 0.3, &mut rng);
                     if let Some(e) = solve_yaw(&obs, &g, &config) {
-                        noisy.push((
-                            norm(&omega),
-                            super::super::wrap_angle(e.yaw - yaw),
-                            e.sigma_rad,
-                        ));
+                        noisy.push((norm(&omega), super::super::wrap_angle(e.yaw - yaw), e.sigma_rad));
                     }
                 }
             }
         }
-        println!(
-            "heading: worst noise-free error {:.5} rad (first-order model at 31 m, 1.1 m/s)",
-            worst_clean
-        );
+        println!("heading: worst noise-free error {:.5} rad (first-order model at 31 m, 1.1 m/s)", worst_clean);
         for &w in &[0.3, 1.0, 1.52, 3.0] {
-            let errs: Vec<&(f64, f64, f64)> =
-                noisy.iter().filter(|x| (x.0 - w).abs() < 0.05).collect();
+            let errs: Vec<&(f64, f64, f64)> = noisy.iter().filter(|x| (x.0 - w).abs() < 0.05).collect();
             let rms = (errs.iter().map(|x| x.1 * x.1).sum::<f64>() / errs.len() as f64).sqrt();
             let sig = errs.iter().map(|x| x.2).sum::<f64>() / errs.len() as f64;
             println!(
@@ -465,16 +411,7 @@ mod tests {
         }
         // No yaw at rest.
         let rp = roll_pitch_matrix(0.0, 0.0);
-        let obs = exact_differences(
-            &rho,
-            &[0.0, 0.0, 5.0],
-            &[0.0; 3],
-            &rp,
-            &[0.0, 0.0, 0.01],
-            903e6,
-            0.0,
-            &mut rng,
-        );
+        let obs = exact_differences(&rho, &[0.0, 0.0, 5.0], &[0.0; 3], &rp, &[0.0, 0.0, 0.01], 903e6, 0.0, &mut rng);
         let g = YawGeometry {
             roll_pitch: rp,
             omega_body: [0.0, 0.0, 0.01],

@@ -46,23 +46,15 @@ pub mod range;
 
 pub use chirp::{downchirp, upchirp, ChirpConfig};
 pub use doppler::{
-    cfo_hz, delay_frequency_hz, delay_from_frequency_s, estimate_clock_error, pair_half_difference,
-    pair_mean, rotational_doppler_hz, tag_doppler_hz, translational_doppler_hz, ClockEstimate,
+    cfo_hz, delay_frequency_hz, delay_from_frequency_s, estimate_clock_error, pair_half_difference, pair_mean,
+    rotational_doppler_hz, tag_doppler_hz, translational_doppler_hz, ClockEstimate,
 };
-pub use epoch::{
-    Corrections, EpochConfig, EpochFeatures, EpochProcessor, RangeCoherence, RangeWindow,
-};
+pub use epoch::{Corrections, EpochConfig, EpochFeatures, EpochProcessor, RangeCoherence, RangeWindow};
 pub use geometry::{Mat3, Vec3};
 pub use heading::{
-    pair_coefficients, predicted_difference_hz, solve_yaw, HeadingConfig, HeadingEstimate,
-    PairObservation, YawGeometry,
+    pair_coefficients, predicted_difference_hz, solve_yaw, HeadingConfig, HeadingEstimate, PairObservation, YawGeometry,
 };
-pub use music::{
-    combine_angles, music, AngleCombine, ArrayGeometry, ArrayKind, MusicConfig, MusicEstimate,
-};
+pub use music::{combine_angles, music, AngleCombine, ArrayGeometry, ArrayKind, MusicConfig, MusicEstimate};
 pub use peak::{tone_crlb, Peak, PeakFinder, PeakOptions, Sample};
 pub use phase::{channel_phase, refer_phase, wrap_angle, PhaseCorrection};
-pub use range::{
-    delay_profile, estimate_range, group_deviations_m, PhaseGroup, RangeConfig, RangeEstimate,
-    RangeSelect,
-};
+pub use range::{delay_profile, estimate_range, group_deviations_m, PhaseGroup, RangeConfig, RangeEstimate, RangeSelect};

@@ -72,11 +72,7 @@ impl ArrayGeometry {
     /// At least two finite, distinct elements.
     pub fn new(elements: Vec<Vec3>) -> Result<Self> {
         if elements.len() < 2 {
-            return Err(Error::TooShort {
-                what: "array elements",
-                needed: 2,
-                got: elements.len(),
-            });
+            return Err(Error::TooShort { what: "array elements", needed: 2, got: elements.len() });
         }
         if elements.iter().flatten().any(|x| !x.is_finite()) {
             return Err(Error::NonFinite("array element offsets".into()));
@@ -106,11 +102,7 @@ impl ArrayGeometry {
     /// section 4 option `linear`: 3 at 16 cm, the paper's pole).
     pub fn linear(spacing_m: f64, count: usize) -> Self {
         let c = (count as f64 - 1.0) / 2.0;
-        Self {
-            elements: (0..count)
-                .map(|i| [(i as f64 - c) * spacing_m, 0.0, 0.0])
-                .collect(),
-        }
+        Self { elements: (0..count).map(|i| [(i as f64 - c) * spacing_m, 0.0, 0.0]).collect() }
     }
 
     pub fn elements(&self) -> &[Vec3] {
@@ -127,33 +119,18 @@ impl ArrayGeometry {
 
     fn extent(&self) -> f64 {
         let e0 = self.elements[0];
-        self.elements
-            .iter()
-            .map(|e| norm(&[e[0] - e0[0], e[1] - e0[1], e[2] - e0[2]]))
-            .fold(0.0, f64::max)
+        self.elements.iter().map(|e| norm(&[e[0] - e0[0], e[1] - e0[1], e[2] - e0[2]])).fold(0.0, f64::max)
     }
 
     /// Linear, planar or volumetric (relative tolerance 1e-9 of the extent).
     pub fn kind(&self) -> ArrayKind {
         let e0 = self.elements[0];
-        let rel: Vec<Vec3> = self
-            .elements
-            .iter()
-            .map(|e| [e[0] - e0[0], e[1] - e0[1], e[2] - e0[2]])
-            .collect();
+        let rel: Vec<Vec3> = self.elements.iter().map(|e| [e[0] - e0[0], e[1] - e0[1], e[2] - e0[2]]).collect();
         let scale = self.extent();
-        let far = rel
-            .iter()
-            .copied()
-            .fold([0.0; 3], |b, r| if norm(&r) > norm(&b) { r } else { b });
+        let far = rel.iter().copied().fold([0.0; 3], |b, r| if norm(&r) > norm(&b) { r } else { b });
         let axis = normalize(&far).unwrap_or([1.0, 0.0, 0.0]);
-        let best_normal = rel.iter().map(|r| cross(&axis, r)).fold([0.0; 3], |b, c| {
-            if norm(&c) > norm(&b) {
-                c
-            } else {
-                b
-            }
-        });
+        let best_normal =
+            rel.iter().map(|r| cross(&axis, r)).fold([0.0; 3], |b, c| if norm(&c) > norm(&b) { c } else { b });
         if norm(&best_normal) <= 1e-9 * scale {
             return ArrayKind::Linear { axis };
         }
@@ -170,10 +147,7 @@ impl ArrayGeometry {
     pub fn steering_vector(&self, u: &Vec3, frequency_hz: f64) -> Vec<Complex64> {
         let k = TAU * frequency_hz / SPEED_OF_LIGHT;
         let a = 1.0 / (self.len() as f64).sqrt();
-        self.elements
-            .iter()
-            .map(|e| Complex64::from_polar(a, k * dot(e, u)))
-            .collect()
+        self.elements.iter().map(|e| Complex64::from_polar(a, k * dot(e, u))).collect()
     }
 }
 
@@ -215,24 +189,11 @@ impl MusicConfig {
             tolerance_rad: 1e-7,
         };
         match geometry.kind() {
-            ArrayKind::Linear { .. } => Self {
-                azimuth_range: (0.0, PI),
-                elevation_range: (0.0, 0.0),
-                ..base
-            },
+            ArrayKind::Linear { .. } => Self { azimuth_range: (0.0, PI), elevation_range: (0.0, 0.0), ..base },
             ArrayKind::Planar { normal } => {
-                let i = (0..3)
-                    .max_by(|&a, &b| normal[a].abs().total_cmp(&normal[b].abs()))
-                    .unwrap_or(1);
-                let front = if normal[i] < 0.0 {
-                    [-normal[0], -normal[1], -normal[2]]
-                } else {
-                    normal
-                };
-                Self {
-                    front: Some(front),
-                    ..base
-                }
+                let i = (0..3).max_by(|&a, &b| normal[a].abs().total_cmp(&normal[b].abs())).unwrap_or(1);
+                let front = if normal[i] < 0.0 { [-normal[0], -normal[1], -normal[2]] } else { normal };
+                Self { front: Some(front), ..base }
             }
             ArrayKind::Volume => base,
         }
@@ -269,18 +230,13 @@ pub struct MusicEstimate {
 /// sqrt(theta^2 + 1))`, `theta = (a_qq - a_pp) / (2 |a_pq|)`).
 pub fn hermitian_eigen(a: &[Complex64], n: usize) -> Result<(Vec<f64>, Vec<Complex64>)> {
     if a.len() != n * n || n == 0 {
-        return Err(Error::Shape(format!(
-            "hermitian_eigen: {} values for {n} x {n}",
-            a.len()
-        )));
+        return Err(Error::Shape(format!("hermitian_eigen: {} values for {n} x {n}", a.len())));
     }
     if a.iter().any(|x| !(x.re.is_finite() && x.im.is_finite())) {
         return Err(Error::NonFinite("matrix".into()));
     }
     // Symmetrise: (A + A^H) / 2.
-    let mut m: Vec<Complex64> = (0..n * n)
-        .map(|i| (a[i] + a[(i % n) * n + i / n].conj()) * 0.5)
-        .collect();
+    let mut m: Vec<Complex64> = (0..n * n).map(|i| (a[i] + a[(i % n) * n + i / n].conj()) * 0.5).collect();
     let mut v = vec![Complex64::new(0.0, 0.0); n * n];
     for i in 0..n {
         v[i * n + i] = Complex64::new(1.0, 0.0);
@@ -303,19 +259,10 @@ pub fn hermitian_eigen(a: &[Complex64], n: usize) -> Result<(Vec<f64>, Vec<Compl
                 }
                 let phase = Complex64::from_polar(1.0, -apq.arg()); // e^{-i phi}
                 let theta = (m[q * n + q].re - m[p * n + p].re) / (2.0 * b);
-                let t = if theta == 0.0 {
-                    1.0
-                } else {
-                    theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt())
-                };
+                let t = if theta == 0.0 { 1.0 } else { theta.signum() / (theta.abs() + (theta * theta + 1.0).sqrt()) };
                 let c = 1.0 / (t * t + 1.0).sqrt();
                 let s = t * c;
-                let (vpp, vpq, vqp, vqq) = (
-                    Complex64::new(c, 0.0),
-                    Complex64::new(s, 0.0),
-                    phase * -s,
-                    phase * c,
-                );
+                let (vpp, vpq, vqp, vqq) = (Complex64::new(c, 0.0), Complex64::new(s, 0.0), phase * -s, phase * c);
                 // M <- M V (columns p, q), then M <- V^H M (rows p, q).
                 for k in 0..n {
                     let (x, y) = (m[k * n + p], m[k * n + q]);
@@ -350,10 +297,7 @@ pub fn hermitian_eigen(a: &[Complex64], n: usize) -> Result<(Vec<f64>, Vec<Compl
 /// The virtual measurement matrix of eq. 6: `exp(i theta)` for each phase
 /// (row-major, antennas x snapshots).
 pub fn virtual_measurement_matrix(phases_rad: &[f64]) -> Vec<Complex64> {
-    phases_rad
-        .iter()
-        .map(|&t| Complex64::from_polar(1.0, t))
-        .collect()
+    phases_rad.iter().map(|&t| Complex64::from_polar(1.0, t)).collect()
 }
 
 /// Sample covariance `R = X X^H / N` of a row-major `m x n` matrix.
@@ -361,10 +305,7 @@ pub fn sample_covariance(x: &[Complex64], m: usize, n: usize) -> Vec<Complex64> 
     let mut r = vec![Complex64::new(0.0, 0.0); m * m];
     for i in 0..m {
         for j in 0..m {
-            r[i * m + j] = (0..n)
-                .map(|s| x[i * n + s] * x[j * n + s].conj())
-                .sum::<Complex64>()
-                / n as f64;
+            r[i * m + j] = (0..n).map(|s| x[i * n + s] * x[j * n + s].conj()).sum::<Complex64>() / n as f64;
         }
     }
     r
@@ -373,33 +314,15 @@ pub fn sample_covariance(x: &[Complex64], m: usize, n: usize) -> Vec<Complex64> 
 /// MUSIC null `||E_n^H a(u)||^2` (0 at a source, 1 when `a` lies in the
 /// noise subspace); `noise` holds the noise eigenvectors as row-major
 /// columns of an `m x k` matrix.
-pub fn music_null(
-    geometry: &ArrayGeometry,
-    noise: &[Complex64],
-    k: usize,
-    u: &Vec3,
-    frequency_hz: f64,
-) -> f64 {
+pub fn music_null(geometry: &ArrayGeometry, noise: &[Complex64], k: usize, u: &Vec3, frequency_hz: f64) -> f64 {
     let a = geometry.steering_vector(u, frequency_hz);
     let m = a.len();
-    (0..k)
-        .map(|c| {
-            (0..m)
-                .map(|r| noise[r * k + c].conj() * a[r])
-                .sum::<Complex64>()
-                .norm_sqr()
-        })
-        .sum()
+    (0..k).map(|c| (0..m).map(|r| noise[r * k + c].conj() * a[r]).sum::<Complex64>().norm_sqr()).sum()
 }
 
 /// One subspace estimate: the noise eigenvectors (`m x (m - K)`) and the
 /// eigenvalues.
-fn noise_subspace(
-    x: &[Complex64],
-    m: usize,
-    n: usize,
-    sources: usize,
-) -> Result<(Vec<Complex64>, Vec<f64>)> {
+fn noise_subspace(x: &[Complex64], m: usize, n: usize, sources: usize) -> Result<(Vec<Complex64>, Vec<f64>)> {
     let r = sample_covariance(x, m, n);
     let (values, vectors) = hermitian_eigen(&r, m)?;
     let k = m - sources;
@@ -430,29 +353,17 @@ pub fn music(
     let m = geometry.len();
     let n = frequencies_hz.len();
     if n == 0 || phases_rad.len() != m * n {
-        return Err(Error::Shape(format!(
-            "music: {} phases for {m} antennas x {n} snapshots",
-            phases_rad.len()
-        )));
+        return Err(Error::Shape(format!("music: {} phases for {m} antennas x {n} snapshots", phases_rad.len())));
     }
     if !(1..m).contains(&config.sources) {
-        return Err(Error::BadConfig(format!(
-            "music: {} sources for {m} antennas",
-            config.sources
-        )));
+        return Err(Error::BadConfig(format!("music: {} sources for {m} antennas", config.sources)));
     }
     let (a0, a1) = config.azimuth_range;
     let (e0, e1) = config.elevation_range;
     if !(a1 > a0 && e1 >= e0 && config.grid_step_rad > 0.0 && config.tolerance_rad > 0.0) {
-        return Err(Error::BadConfig(
-            "music: empty search domain or bad step".into(),
-        ));
+        return Err(Error::BadConfig("music: empty search domain or bad step".into()));
     }
-    if phases_rad
-        .iter()
-        .chain(frequencies_hz)
-        .any(|x| !x.is_finite())
-    {
+    if phases_rad.iter().chain(frequencies_hz).any(|x| !x.is_finite()) {
         return Err(Error::NonFinite("music phases or frequencies".into()));
     }
     let f_ref = frequencies_hz.iter().sum::<f64>() / n as f64;
@@ -476,11 +387,7 @@ pub fn music(
     for i in 0..=na {
         let az = a0 + (a1 - a0) * i as f64 / na as f64;
         for j in 0..=ne {
-            let el = if ne == 0 {
-                e0
-            } else {
-                e0 + (e1 - e0) * j as f64 / ne as f64
-            };
+            let el = if ne == 0 { e0 } else { e0 + (e1 - e0) * j as f64 / ne as f64 };
             let d = null_at(&noise, az, el);
             if d < best.0 {
                 best = (d, az, el);
@@ -488,19 +395,12 @@ pub fn music(
         }
     }
     if best.0 > 1.5 {
-        return Err(Error::BadConfig(
-            "music: no direction of the grid lies in the front half-space".into(),
-        ));
+        return Err(Error::BadConfig("music: no direction of the grid lies in the front half-space".into()));
     }
     let two_d = e1 > e0;
     let refine = |noise: &[Complex64], start: (f64, f64), size: f64| -> (f64, f64, f64) {
         if two_d {
-            nelder_mead_2d(
-                |p| null_at(noise, p.0, p.1),
-                start,
-                size,
-                config.tolerance_rad,
-            )
+            nelder_mead_2d(|p| null_at(noise, p.0, p.1), start, size, config.tolerance_rad)
         } else {
             let (az, d) = golden_min(
                 |az| null_at(noise, az, e0),
@@ -513,9 +413,7 @@ pub fn music(
     };
     let (mut az, mut el, mut d) = refine(&noise, (best.1, best.2), config.grid_step_rad);
 
-    let spread = frequencies_hz
-        .iter()
-        .any(|f| (f - f_ref).abs() > 1e-9 * f_ref);
+    let spread = frequencies_hz.iter().any(|f| (f - f_ref).abs() > 1e-9 * f_ref);
     if config.focus && spread {
         // Coherent focusing at u0: remove each snapshot's frequency offset
         // from the steering phase, then refine from u0.
@@ -523,8 +421,7 @@ pub fn music(
         for (row, e) in geometry.elements().iter().enumerate() {
             let p = dot(e, &u0);
             for (col, f) in frequencies_hz.iter().enumerate() {
-                x[row * n + col] *=
-                    Complex64::from_polar(1.0, -TAU * (f - f_ref) / SPEED_OF_LIGHT * p);
+                x[row * n + col] *= Complex64::from_polar(1.0, -TAU * (f - f_ref) / SPEED_OF_LIGHT * p);
             }
         }
         let (focused, values) = noise_subspace(&x, m, n, config.sources)?;
@@ -573,17 +470,8 @@ fn golden_min(f: impl Fn(f64) -> f64, mut a: f64, mut b: f64, tolerance: f64) ->
 
 /// Nelder-Mead minimum of `f(az, el)` from `start` with an initial simplex of
 /// `size` rad: `(az, el, f)`.
-fn nelder_mead_2d(
-    f: impl Fn((f64, f64)) -> f64,
-    start: (f64, f64),
-    size: f64,
-    tolerance: f64,
-) -> (f64, f64, f64) {
-    let mut s = [
-        (start.0, start.1),
-        (start.0 + size, start.1),
-        (start.0, start.1 + size),
-    ];
+fn nelder_mead_2d(f: impl Fn((f64, f64)) -> f64, start: (f64, f64), size: f64, tolerance: f64) -> (f64, f64, f64) {
+    let mut s = [(start.0, start.1), (start.0 + size, start.1), (start.0, start.1 + size)];
     let mut v = [f(s[0]), f(s[1]), f(s[2])];
     for _ in 0..400 {
         // Order best..worst.
@@ -591,8 +479,8 @@ fn nelder_mead_2d(
         idx.sort_by(|&i, &j| v[i].total_cmp(&v[j]));
         s = [s[idx[0]], s[idx[1]], s[idx[2]]];
         v = [v[idx[0]], v[idx[1]], v[idx[2]]];
-        let extent = ((s[1].0 - s[0].0).abs() + (s[1].1 - s[0].1).abs())
-            .max((s[2].0 - s[0].0).abs() + (s[2].1 - s[0].1).abs());
+        let extent =
+            ((s[1].0 - s[0].0).abs() + (s[1].1 - s[0].1).abs()).max((s[2].0 - s[0].0).abs() + (s[2].1 - s[0].1).abs());
         if extent < tolerance {
             break;
         }
@@ -665,11 +553,7 @@ pub enum AngleCombine {
 /// Errors: [`Error::TooShort`] for no angles, [`Error::NonFinite`].
 pub fn combine_angles(angles: &[(f64, f64)], method: AngleCombine) -> Result<(f64, f64)> {
     if angles.is_empty() {
-        return Err(Error::TooShort {
-            what: "angles to combine",
-            needed: 1,
-            got: 0,
-        });
+        return Err(Error::TooShort { what: "angles to combine", needed: 1, got: 0 });
     }
     if angles.iter().any(|a| !(a.0.is_finite() && a.1.is_finite())) {
         return Err(Error::NonFinite("angles".into()));
@@ -693,8 +577,7 @@ pub fn combine_angles(angles: &[(f64, f64)], method: AngleCombine) -> Result<(f6
                 let u = direction(a.0, a.1);
                 [s[0] + u[0], s[1] + u[1], s[2] + u[2]]
             });
-            let u = normalize(&sum)
-                .ok_or_else(|| Error::BadConfig("angles cancel: no mean direction".into()))?;
+            let u = normalize(&sum).ok_or_else(|| Error::BadConfig("angles cancel: no mean direction".into()))?;
             Ok(azimuth_elevation(&u))
         }
     }
@@ -713,27 +596,18 @@ mod tests {
         for n in [1usize, 2, 3, 5] {
             for _ in 0..20 {
                 let b: Vec<Complex64> = (0..n * n)
-                    .map(|_| {
-                        Complex64::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0))
-                    })
+                    .map(|_| Complex64::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)))
                     .collect();
-                let a: Vec<Complex64> = (0..n * n)
-                    .map(|i| b[i] + b[(i % n) * n + i / n].conj())
-                    .collect();
+                let a: Vec<Complex64> = (0..n * n).map(|i| b[i] + b[(i % n) * n + i / n].conj()).collect();
                 let (values, vectors) = hermitian_eigen(&a, n).unwrap();
                 assert!(values.windows(2).all(|w| w[0] <= w[1]));
                 for k in 0..n {
                     for i in 0..n {
                         let av: Complex64 = (0..n).map(|j| a[i * n + j] * vectors[j * n + k]).sum();
-                        assert!(
-                            (av - vectors[i * n + k] * values[k]).norm() < 1e-10,
-                            "n {n}"
-                        );
+                        assert!((av - vectors[i * n + k] * values[k]).norm() < 1e-10, "n {n}");
                     }
                     for l in 0..n {
-                        let ip: Complex64 = (0..n)
-                            .map(|i| vectors[i * n + k].conj() * vectors[i * n + l])
-                            .sum();
+                        let ip: Complex64 = (0..n).map(|i| vectors[i * n + k].conj() * vectors[i * n + l]).sum();
                         let expected = if k == l { 1.0 } else { 0.0 };
                         assert!((ip - expected).norm() < 1e-10);
                     }
@@ -745,36 +619,21 @@ mod tests {
 
     #[test]
     fn array_kinds_and_domains() {
-        assert!(matches!(
-            ArrayGeometry::linear(0.16, 3).kind(),
-            ArrayKind::Linear { .. }
-        ));
+        assert!(matches!(ArrayGeometry::linear(0.16, 3).kind(), ArrayKind::Linear { .. }));
         match ArrayGeometry::triangle(0.16).kind() {
             ArrayKind::Planar { normal } => assert!(normal[1].abs() > 0.999999),
             k => panic!("{k:?}"),
         }
         let c = MusicConfig::for_array(&ArrayGeometry::triangle(0.16));
         assert!(c.front.unwrap()[1] > 0.999);
-        let volume = ArrayGeometry::new(vec![
-            [0.0; 3],
-            [0.1, 0.0, 0.0],
-            [0.0, 0.1, 0.0],
-            [0.0, 0.0, 0.1],
-        ])
-        .unwrap();
+        let volume = ArrayGeometry::new(vec![[0.0; 3], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0], [0.0, 0.0, 0.1]]).unwrap();
         assert_eq!(volume.kind(), ArrayKind::Volume);
         assert!(ArrayGeometry::new(vec![[0.0; 3], [0.0; 3]]).is_err());
     }
 
     /// Exact phases at the array from the geometry (spherical wave,
     /// docs/marvel.md section 6, rx leg only varies), plus noise.
-    fn array_phases(
-        geometry: &ArrayGeometry,
-        source: &Vec3,
-        freqs: &[f64],
-        sigma: f64,
-        rng: &mut StdRng,
-    ) -> Vec<f64> {
+    fn array_phases(geometry: &ArrayGeometry, source: &Vec3, freqs: &[f64], sigma: f64, rng: &mut StdRng) -> Vec<f64> {
         let normal = Normal::new(0.0, sigma.max(1e-300)).unwrap();
         let mut out = vec![0.0; geometry.len() * freqs.len()];
         let mut offsets = Vec::new();
@@ -798,19 +657,12 @@ mod tests {
         let freqs = [902.6e6, 928.5e6];
         let mut rng = StdRng::seed_from_u64(8);
         let mut worst: f64 = 0.0;
-        for &(az, el, r) in &[
-            (1.2, 0.2, 30.0),
-            (0.6, -0.3, 12.0),
-            (2.3, 0.5, 50.0),
-            (1.6, 0.0, 20.0),
-            (0.3, 0.1, 25.0),
-        ] {
+        for &(az, el, r) in &[(1.2, 0.2, 30.0), (0.6, -0.3, 12.0), (2.3, 0.5, 50.0), (1.6, 0.0, 20.0), (0.3, 0.1, 25.0)]
+        {
             let source = direction(az, el).map(|x| x * r);
             let ph = array_phases(&geometry, &source, &freqs, 0.0, &mut rng);
             let e = music(&geometry, &config, &ph, &freqs).unwrap();
-            let err = dot(&e.direction, &direction(az, el))
-                .clamp(-1.0, 1.0)
-                .acos();
+            let err = dot(&e.direction, &direction(az, el)).clamp(-1.0, 1.0).acos();
             worst = worst.max(err);
             // The spherical wave at 12 m bends the far-field fit by ~2e-3 rad.
             assert!(err < 4e-3, "az {az} el {el}: {e:?}");
@@ -819,10 +671,7 @@ mod tests {
             // must land there, not at the truth.
             let mirrored: Vec<f64> = ph.iter().map(|p| -p).collect();
             let m = music(&geometry, &config, &mirrored, &freqs).unwrap();
-            assert!(
-                dot(&m.direction, &direction(PI - az, -el)) > 0.9999,
-                "{m:?}"
-            );
+            assert!(dot(&m.direction, &direction(PI - az, -el)) > 0.9999, "{m:?}");
         }
         println!("music triangle noise-free worst error {:.2e} rad", worst);
     }
@@ -858,20 +707,11 @@ mod tests {
         let mut errors = Vec::new();
         for _ in 0..100 {
             let az = rng.random_range(0.4..2.7);
-            let ph = array_phases(
-                &linear,
-                &direction(az, 0.0).map(|x| x * 30.0),
-                &freqs,
-                0.1,
-                &mut rng,
-            );
+            let ph = array_phases(&linear, &direction(az, 0.0).map(|x| x * 30.0), &freqs, 0.1, &mut rng);
             let e = music(&linear, &config, &ph, &freqs).unwrap();
             errors.push(e.azimuth - az);
         }
-        println!(
-            "music linear @0.1 rad: az rms {:.2} deg",
-            rms(&errors).to_degrees()
-        );
+        println!("music linear @0.1 rad: az rms {:.2} deg", rms(&errors).to_degrees());
         assert!(rms(&errors) < 5f64.to_radians());
     }
 
@@ -883,21 +723,9 @@ mod tests {
         let source = direction(0.5, 0.4).map(|x| x * 1e4);
         let ph = array_phases(&geometry, &source, &freqs, 0.0, &mut rng);
         let plain = music(&geometry, &MusicConfig::for_array(&geometry), &ph, &freqs).unwrap();
-        let focused = music(
-            &geometry,
-            &MusicConfig {
-                focus: true,
-                ..MusicConfig::for_array(&geometry)
-            },
-            &ph,
-            &freqs,
-        )
-        .unwrap();
-        let err = |e: &MusicEstimate| {
-            dot(&e.direction, &direction(0.5, 0.4))
-                .clamp(-1.0, 1.0)
-                .acos()
-        };
+        let focused =
+            music(&geometry, &MusicConfig { focus: true, ..MusicConfig::for_array(&geometry) }, &ph, &freqs).unwrap();
+        let err = |e: &MusicEstimate| dot(&e.direction, &direction(0.5, 0.4)).clamp(-1.0, 1.0).acos();
         println!(
             "music carrier mismatch: error {:.2e} rad without focusing, {:.2e} rad with",
             err(&plain),
@@ -916,14 +744,9 @@ mod tests {
         let spread = [(0.9, 0.1), (1.1, 0.3), (1.0, 0.2), (1.0, 0.2)];
         let (ah, eh) = combine_angles(&spread, AngleCombine::HarmonicMean).unwrap();
         assert!(ah < 1.0 && ah > 0.98, "{ah}"); // pulled towards the smaller
-        let polar_h = 4.0
-            / [1.4707963, 1.2707963, 1.3707963, 1.3707963]
-                .iter()
-                .map(|x: &f64| 1.0 / x)
-                .sum::<f64>();
+        let polar_h = 4.0 / [1.4707963, 1.2707963, 1.3707963, 1.3707963].iter().map(|x: &f64| 1.0 / x).sum::<f64>();
         assert!((eh - (FRAC_PI_2 - polar_h)).abs() < 1e-6);
-        let (ac, _) =
-            combine_angles(&[(3.1, 0.0), (-3.1, 0.0)], AngleCombine::MeanDirection).unwrap();
+        let (ac, _) = combine_angles(&[(3.1, 0.0), (-3.1, 0.0)], AngleCombine::MeanDirection).unwrap();
         assert!((super::super::wrap_angle(ac - PI)).abs() < 1e-9);
         assert!(combine_angles(&[], AngleCombine::HarmonicMean).is_err());
     }

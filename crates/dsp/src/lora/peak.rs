@@ -54,11 +54,7 @@ pub struct PeakOptions {
 
 impl Default for PeakOptions {
     fn default() -> Self {
-        Self {
-            search_hz: None,
-            max_iterations: 8,
-            tolerance_hz: 1e-6,
-        }
+        Self { search_hz: None, max_iterations: 8, tolerance_hz: 1e-6 }
     }
 }
 
@@ -138,9 +134,7 @@ impl PeakFinder {
     pub fn new(chirp: ChirpConfig, options: PeakOptions) -> Result<Self> {
         if let Some(s) = options.search_hz {
             if !(s > 0.0 && s.is_finite()) {
-                return Err(Error::BadConfig(format!(
-                    "peak search window must be > 0 Hz, got {s}"
-                )));
+                return Err(Error::BadConfig(format!("peak search window must be > 0 Hz, got {s}")));
             }
         }
         if options.tolerance_hz.is_nan() || options.tolerance_hz <= 0.0 {
@@ -178,10 +172,7 @@ impl PeakFinder {
     pub fn process<S: Sample>(&mut self, samples: &[S]) -> Result<Peak> {
         let n = self.chirp.samples();
         if samples.len() != n {
-            return Err(Error::Shape(format!(
-                "a chirp is {n} samples, got {}",
-                samples.len()
-            )));
+            return Err(Error::Shape(format!("a chirp is {n} samples, got {}", samples.len())));
         }
         for ((z, s), d) in self.dechirped.iter_mut().zip(samples).zip(&self.down) {
             let s = s.to_c64();
@@ -191,8 +182,7 @@ impl PeakFinder {
             *z = s * d;
         }
         self.spectrum.copy_from_slice(&self.dechirped);
-        self.fft
-            .process_with_scratch(&mut self.spectrum, &mut self.scratch);
+        self.fft.process_with_scratch(&mut self.spectrum, &mut self.scratch);
         for (p, x) in self.power.iter_mut().zip(&self.spectrum) {
             *p = x.norm_sqr();
         }
@@ -200,19 +190,10 @@ impl PeakFinder {
         // Coarse peak within the search window (bins in FFT order).
         let fs = self.chirp.sample_rate_hz();
         let bin_hz = fs / n as f64;
-        let signed = |k: usize| {
-            if k >= n / 2 {
-                k as f64 - n as f64
-            } else {
-                k as f64
-            }
-        };
+        let signed = |k: usize| if k >= n / 2 { k as f64 - n as f64 } else { k as f64 };
         let mut best = (0usize, -1.0f64);
         for (k, &p) in self.power.iter().enumerate() {
-            let inside = self
-                .options
-                .search_hz
-                .is_none_or(|w| (signed(k) * bin_hz).abs() <= w);
+            let inside = self.options.search_hz.is_none_or(|w| (signed(k) * bin_hz).abs() <= w);
             if inside && p > best.1 {
                 best = (k, p);
             }
@@ -220,17 +201,9 @@ impl PeakFinder {
         let k = best.0;
         // Jacobsen's interpolator with Candan's correction: nearly unbiased
         // for a rectangular window, so Newton starts well inside the lobe.
-        let (xm, x0, xp) = (
-            self.spectrum[(k + n - 1) % n],
-            self.spectrum[k],
-            self.spectrum[(k + 1) % n],
-        );
+        let (xm, x0, xp) = (self.spectrum[(k + n - 1) % n], self.spectrum[k], self.spectrum[(k + 1) % n]);
         let denominator = x0 * 2.0 - xm - xp;
-        let mut delta = if denominator.norm() > 0.0 {
-            ((xm - xp) / denominator).re
-        } else {
-            0.0
-        };
+        let mut delta = if denominator.norm() > 0.0 { ((xm - xp) / denominator).re } else { 0.0 };
         let pi_n = std::f64::consts::PI / n as f64;
         delta *= pi_n.tan() / pi_n;
         let delta = delta.clamp(-0.5, 0.5);
@@ -251,11 +224,7 @@ impl PeakFinder {
             // g' = 2 Im(conj(S0) S1), g'' = 2 (|S1|^2 - Re(conj(S0) S2)).
             let d1 = 2.0 * (s0.conj() * s1).im;
             let d2 = 2.0 * (s1.norm_sqr() - (s0.conj() * s2).re);
-            let mut step = if d2 < 0.0 {
-                -d1 / d2
-            } else {
-                max_step * d1.signum()
-            };
+            let mut step = if d2 < 0.0 { -d1 / d2 } else { max_step * d1.signum() };
             step = step.clamp(-max_step, max_step);
             let mut accepted = false;
             for _ in 0..20 {
@@ -283,9 +252,7 @@ impl PeakFinder {
         // ln 2 times its mean N sigma^2 (unnormalised FFT); the peak bins
         // barely move a median of 4096.
         let mid = n / 2;
-        let (_, median, _) = self
-            .power
-            .select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
+        let (_, median, _) = self.power.select_nth_unstable_by(mid, |a, b| a.total_cmp(b));
         let noise_power = (*median / std::f64::consts::LN_2 / n as f64).max(f64::MIN_POSITIVE);
         // E|A_hat|^2 = |A|^2 + sigma^2 / N.
         let signal = (a_c.norm_sqr() - noise_power / n as f64).max(f64::MIN_POSITIVE);
@@ -310,19 +277,10 @@ impl PeakFinder {
 /// DTFT and its scaled derivatives: `Z' = -i S1`, `Z'' = -S2`), by a phasor
 /// recurrence (one complex multiply per sample instead of a sin/cos; the
 /// rounding error after 4096 steps is ~1e-12).
-fn dtft_sums(
-    z: &[Complex64],
-    omega: f64,
-    centre: f64,
-    derivatives: bool,
-) -> (Complex64, Complex64, Complex64) {
+fn dtft_sums(z: &[Complex64], omega: f64, centre: f64, derivatives: bool) -> (Complex64, Complex64, Complex64) {
     let step = Complex64::from_polar(1.0, -omega);
     let mut phasor = Complex64::from_polar(1.0, omega * centre);
-    let (mut s0, mut s1, mut s2) = (
-        Complex64::new(0.0, 0.0),
-        Complex64::new(0.0, 0.0),
-        Complex64::new(0.0, 0.0),
-    );
+    let (mut s0, mut s1, mut s2) = (Complex64::new(0.0, 0.0), Complex64::new(0.0, 0.0), Complex64::new(0.0, 0.0));
     if derivatives {
         for (i, &x) in z.iter().enumerate() {
             let m = i as f64 - centre;
@@ -369,14 +327,8 @@ pub(crate) mod tests {
                 // the dechirped tone is then exact. (Whatever precedes the
                 // chirp in a recording touches only the first tau*fs < 1
                 // samples, an O(1/N) effect.)
-                let c = Complex64::from_polar(
-                    1.0,
-                    std::f64::consts::TAU * chirp.phase_cycles(t - tau_s),
-                );
-                let y = c * Complex64::from_polar(
-                    amplitude,
-                    phase + std::f64::consts::TAU * offset_hz * t,
-                );
+                let c = Complex64::from_polar(1.0, std::f64::consts::TAU * chirp.phase_cycles(t - tau_s));
+                let y = c * Complex64::from_polar(amplitude, phase + std::f64::consts::TAU * offset_hz * t);
                 let w = if noise_power > 0.0 {
                     Complex64::new(normal.sample(rng), normal.sample(rng))
                 } else {
@@ -402,17 +354,11 @@ pub(crate) mod tests {
             let p = finder.process(&y).unwrap();
             assert!((p.frequency_hz - f).abs() < 1e-4, "{f}: {}", p.frequency_hz);
             assert!((p.amplitude.norm() - 0.7).abs() < 1e-5);
-            assert!(
-                wrap(p.amplitude.arg() - 0.4).abs() < 1e-5,
-                "{f}: {}",
-                p.amplitude.arg()
-            );
+            assert!(wrap(p.amplitude.arg() - 0.4).abs() < 1e-5, "{f}: {}", p.amplitude.arg());
             let centre_phase = 0.4 + std::f64::consts::TAU * f * chirp.duration_s() / 2.0;
             assert!(wrap(p.amplitude_centre.arg() - centre_phase).abs() < 1e-5);
         }
-        assert!(finder
-            .process(&vec![Complex32::new(0.0, 0.0); 100])
-            .is_err());
+        assert!(finder.process(&vec![Complex32::new(0.0, 0.0); 100]).is_err());
         let mut bad = vec![Complex32::new(0.0, 0.0); 4096];
         bad[3] = Complex32::new(f32::NAN, 0.0);
         assert_eq!(finder.process(&bad).unwrap_err().kind(), "non-finite");
@@ -431,17 +377,9 @@ pub(crate) mod tests {
             let y = received_chirp(&chirp, 1.0, -1.1, 0.0, tau, 0.0, &mut rng);
             let p = finder.process(&y).unwrap();
             let expected = -chirp.chirp_rate_hz_per_s() * tau;
-            assert!(
-                (p.frequency_hz - expected).abs() < 1e-3,
-                "{tau}: {} vs {expected}",
-                p.frequency_hz
-            );
+            assert!((p.frequency_hz - expected).abs() < 1e-3, "{tau}: {} vs {expected}", p.frequency_hz);
             let tiny = std::f64::consts::PI * chirp.chirp_rate_hz_per_s() * tau * tau; // 2 pi BW tau^2/(2T)
-            assert!(
-                wrap(p.amplitude_centre.arg() - (-1.1 + tiny)).abs() < 1e-4,
-                "{tau}: {}",
-                p.amplitude_centre.arg()
-            );
+            assert!(wrap(p.amplitude_centre.arg() - (-1.1 + tiny)).abs() < 1e-4, "{tau}: {}", p.amplitude_centre.arg());
         }
     }
 
@@ -455,18 +393,14 @@ pub(crate) mod tests {
         let mut rng = StdRng::seed_from_u64(3);
         let snr = 0.1; // -10 dB per sample: 26 dB after the 36 dB dechirp gain
         let trials = 300;
-        let (mut ef, mut ec, mut es, mut snr_est) =
-            (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+        let (mut ef, mut ec, mut es, mut snr_est) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
         for _ in 0..trials {
             let f: f64 = rng.random_range(-6.0..6.0);
             let phase: f64 = rng.random_range(-3.0..3.0);
             let y = received_chirp(&chirp, 1.0, phase, f, 0.0, 1.0 / snr, &mut rng);
             let p = finder.process(&y).unwrap();
             ef.push(p.frequency_hz - f);
-            ec.push(wrap(
-                p.amplitude_centre.arg()
-                    - (phase + std::f64::consts::TAU * f * chirp.duration_s() / 2.0),
-            ));
+            ec.push(wrap(p.amplitude_centre.arg() - (phase + std::f64::consts::TAU * f * chirp.duration_s() / 2.0)));
             es.push(wrap(p.amplitude.arg() - phase));
             snr_est.push(p.snr);
         }
@@ -505,14 +439,7 @@ pub(crate) mod tests {
         }
         let mut all = PeakFinder::new(chirp, PeakOptions::default()).unwrap();
         assert!((all.process(&y).unwrap().frequency_hz - 50_030.0).abs() < 1.0);
-        let mut near = PeakFinder::new(
-            chirp,
-            PeakOptions {
-                search_hz: Some(1000.0),
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let mut near = PeakFinder::new(chirp, PeakOptions { search_hz: Some(1000.0), ..Default::default() }).unwrap();
         assert!((near.process(&y).unwrap().frequency_hz - 30.0).abs() < 1.0);
     }
 }

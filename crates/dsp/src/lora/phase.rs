@@ -86,27 +86,17 @@ mod tests {
         let (cfo, fd, psi0) = (3.2, -17.5, 0.8);
         let t_ref = 8.192e-3;
         let psi = |t: f64| wrap_angle(psi0 + TAU * (cfo + fd) * t);
-        let c = PhaseCorrection {
-            cfo_hz: cfo,
-            doppler_hz: fd,
-            epoch_time_s: None,
-        };
+        let c = PhaseCorrection { cfo_hz: cfo, doppler_hz: fd, epoch_time_s: None };
         for &tc in &[4.096e-3, 12.288e-3] {
             let theta = channel_phase(psi(tc), tc, t_ref, 0.0, &c);
             assert!(wrap_angle(theta - psi(t_ref)).abs() < 1e-9);
-            assert!(
-                wrap_angle(refer_phase(psi(tc), tc, t_ref, cfo + fd) - psi(t_ref)).abs() < 1e-9
-            );
+            assert!(wrap_angle(refer_phase(psi(tc), tc, t_ref, cfo + fd) - psi(t_ref)).abs() < 1e-9);
         }
         // Absolute CFO removal at a late epoch leaves psi0 + the Doppler
         // ramp to t_ref only.
         let t0 = 1234.5;
-        let psi_abs =
-            |t: f64| wrap_angle(psi0 + TAU * (cfo * (t0 + t)).rem_euclid(1.0) + TAU * fd * t);
-        let c = PhaseCorrection {
-            epoch_time_s: Some(t0),
-            ..c
-        };
+        let psi_abs = |t: f64| wrap_angle(psi0 + TAU * (cfo * (t0 + t)).rem_euclid(1.0) + TAU * fd * t);
+        let c = PhaseCorrection { epoch_time_s: Some(t0), ..c };
         let theta = channel_phase(psi_abs(12.288e-3), 12.288e-3, t_ref, 0.5, &c);
         assert!(wrap_angle(theta - (psi0 + TAU * fd * t_ref - 0.5)).abs() < 1e-6);
     }

@@ -51,10 +51,7 @@ impl PhaseGroup {
         sigmas_rad: Vec<f64>,
     ) -> Result<Self> {
         let n = frequencies_hz.len();
-        if phases_rad.len() != n
-            || weights.len() != n
-            || !(sigmas_rad.is_empty() || sigmas_rad.len() == n)
-        {
+        if phases_rad.len() != n || weights.len() != n || !(sigmas_rad.is_empty() || sigmas_rad.len() == n) {
             return Err(Error::Shape(format!(
                 "phase group: {n} frequencies, {} phases, {} weights, {} sigmas",
                 phases_rad.len(),
@@ -62,24 +59,13 @@ impl PhaseGroup {
                 sigmas_rad.len()
             )));
         }
-        if frequencies_hz
-            .iter()
-            .chain(&phases_rad)
-            .chain(&weights)
-            .chain(&sigmas_rad)
-            .any(|x| !x.is_finite())
-        {
+        if frequencies_hz.iter().chain(&phases_rad).chain(&weights).chain(&sigmas_rad).any(|x| !x.is_finite()) {
             return Err(Error::NonFinite("phase group".into()));
         }
         if weights.iter().any(|&w| w < 0.0) {
             return Err(Error::BadConfig("phase group weights must be >= 0".into()));
         }
-        Ok(Self {
-            frequencies_hz,
-            phases_rad,
-            weights,
-            sigmas_rad,
-        })
+        Ok(Self { frequencies_hz, phases_rad, weights, sigmas_rad })
     }
 
     /// Unit weights, no sigmas.
@@ -89,16 +75,8 @@ impl PhaseGroup {
     }
 
     fn span_hz(&self) -> f64 {
-        let lo = self
-            .frequencies_hz
-            .iter()
-            .copied()
-            .fold(f64::INFINITY, f64::min);
-        let hi = self
-            .frequencies_hz
-            .iter()
-            .copied()
-            .fold(f64::NEG_INFINITY, f64::max);
+        let lo = self.frequencies_hz.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = self.frequencies_hz.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         if hi > lo {
             hi - lo
         } else {
@@ -212,126 +190,62 @@ pub fn delay_profile(groups: &[PhaseGroup], ranges_m: &[f64]) -> Vec<f64> {
 pub fn estimate_range(groups: &[PhaseGroup], config: &RangeConfig) -> Result<RangeEstimate> {
     let span = groups.iter().map(PhaseGroup::span_hz).fold(0.0, f64::max);
     if span.is_nan() || span <= 0.0 {
-        return Err(Error::TooShort {
-            what: "range: distinct frequencies in a group",
-            needed: 2,
-            got: 1,
-        });
+        return Err(Error::TooShort { what: "range: distinct frequencies in a group", needed: 2, got: 1 });
     }
     if !(config.min_m.is_finite() && config.max_m.is_finite() && config.max_m > config.min_m) {
-        return Err(Error::BadConfig(format!(
-            "range interval [{}, {}] m",
-            config.min_m, config.max_m
-        )));
+        return Err(Error::BadConfig(format!("range interval [{}, {}] m", config.min_m, config.max_m)));
     }
     if !(config.threshold > 0.0 && config.threshold <= 1.0) {
-        return Err(Error::BadConfig(format!(
-            "first-path threshold must be in (0, 1], got {}",
-            config.threshold
-        )));
+        return Err(Error::BadConfig(format!("first-path threshold must be in (0, 1], got {}", config.threshold)));
     }
     let resolution_m = SPEED_OF_LIGHT / (2.0 * span);
     let step = config.step_m.unwrap_or(resolution_m / 8.0);
     let points = ((config.max_m - config.min_m) / step).ceil() as usize + 1;
     if step.is_nan() || step <= 0.0 || points > 1_000_000 {
-        return Err(Error::BadConfig(format!(
-            "range grid step {step} m gives {points} points"
-        )));
+        return Err(Error::BadConfig(format!("range grid step {step} m gives {points} points")));
     }
     let points = points.max(3);
     let step = (config.max_m - config.min_m) / (points - 1) as f64;
-    let grid: Vec<f64> = (0..points)
-        .map(|i| config.min_m + step * i as f64)
-        .collect();
+    let grid: Vec<f64> = (0..points).map(|i| config.min_m + step * i as f64).collect();
     let power = delay_profile(groups, &grid);
 
     // Interior local maxima, each refined inside its two neighbours' span.
     let mut peaks: Vec<(f64, f64)> = Vec::new();
     for i in 1..points - 1 {
         if power[i] >= power[i - 1] && power[i] > power[i + 1] {
-            peaks.push(golden_max(
-                groups,
-                grid[i - 1],
-                grid[i + 1],
-                config.tolerance_m,
-            ));
+            peaks.push(golden_max(groups, grid[i - 1], grid[i + 1], config.tolerance_m));
         }
     }
     if peaks.is_empty() {
         // Monotone over the window: the edge sample is all there is.
-        let i = if power[0] >= power[points - 1] {
-            0
-        } else {
-            points - 1
-        };
+        let i = if power[0] >= power[points - 1] { 0 } else { points - 1 };
         peaks.push((grid[i], power[i]));
     }
-    let (peak_range_m, peak_power) =
-        peaks
-            .iter()
-            .copied()
-            .fold((0.0, -1.0), |b, p| if p.1 > b.1 { p } else { b });
-    let passing = peaks
-        .iter()
-        .copied()
-        .filter(|p| p.1 >= config.threshold * peak_power);
+    let (peak_range_m, peak_power) = peaks.iter().copied().fold((0.0, -1.0), |b, p| if p.1 > b.1 { p } else { b });
+    let passing = peaks.iter().copied().filter(|p| p.1 >= config.threshold * peak_power);
     let chosen = match config.select {
         RangeSelect::FirstPath => passing.min_by(|a, b| a.0.total_cmp(&b.0)),
-        RangeSelect::NearestTo(prior) => {
-            passing.min_by(|a, b| (a.0 - prior).abs().total_cmp(&(b.0 - prior).abs()))
-        }
+        RangeSelect::NearestTo(prior) => passing.min_by(|a, b| (a.0 - prior).abs().total_cmp(&(b.0 - prior).abs())),
     };
     let (range_m, first_power) = chosen.unwrap_or((peak_range_m, peak_power));
-    let second = peaks
-        .iter()
-        .filter(|p| p.0 != peak_range_m)
-        .map(|p| p.1)
-        .fold(0.0, f64::max);
-    let ambiguity = if peak_power > 0.0 {
-        second / peak_power
-    } else {
-        1.0
-    };
+    let second = peaks.iter().filter(|p| p.0 != peak_range_m).map(|p| p.1).fold(0.0, f64::max);
+    let ambiguity = if peak_power > 0.0 { second / peak_power } else { 1.0 };
 
     // Uncertainty: LS slope of phase vs frequency, one intercept per group.
     let mut information = 0.0;
     let mut any_sigma = false;
     for g in groups.iter().filter(|g| !g.sigmas_rad.is_empty()) {
         any_sigma = true;
-        let w: Vec<f64> = g
-            .sigmas_rad
-            .iter()
-            .map(|s| if *s > 0.0 { 1.0 / (s * s) } else { 0.0 })
-            .collect();
+        let w: Vec<f64> = g.sigmas_rad.iter().map(|s| if *s > 0.0 { 1.0 / (s * s) } else { 0.0 }).collect();
         let wsum: f64 = w.iter().sum();
         if wsum <= 0.0 {
             continue;
         }
-        let fbar = g
-            .frequencies_hz
-            .iter()
-            .zip(&w)
-            .map(|(f, w)| f * w)
-            .sum::<f64>()
-            / wsum;
-        information += g
-            .frequencies_hz
-            .iter()
-            .zip(&w)
-            .map(|(f, w)| w * (f - fbar).powi(2))
-            .sum::<f64>();
+        let fbar = g.frequencies_hz.iter().zip(&w).map(|(f, w)| f * w).sum::<f64>() / wsum;
+        information += g.frequencies_hz.iter().zip(&w).map(|(f, w)| w * (f - fbar).powi(2)).sum::<f64>();
     }
-    let sigma_m =
-        (any_sigma && information > 0.0).then(|| SPEED_OF_LIGHT / (4.0 * PI) / information.sqrt());
-    Ok(RangeEstimate {
-        range_m,
-        peak_range_m,
-        power: first_power,
-        peak_power,
-        ambiguity,
-        sigma_m,
-        resolution_m,
-    })
+    let sigma_m = (any_sigma && information > 0.0).then(|| SPEED_OF_LIGHT / (4.0 * PI) / information.sqrt());
+    Ok(RangeEstimate { range_m, peak_range_m, power: first_power, peak_power, ambiguity, sigma_m, resolution_m })
 }
 
 /// Each group's own range minus `range_m` (m): the peak of the group's
@@ -355,9 +269,7 @@ pub fn group_deviations_m(groups: &[PhaseGroup], range_m: f64) -> Vec<Option<f64
                 select: RangeSelect::NearestTo(range_m),
                 ..RangeConfig::default()
             };
-            estimate_range(std::slice::from_ref(g), &config)
-                .ok()
-                .map(|e| e.range_m - range_m)
+            estimate_range(std::slice::from_ref(g), &config).ok().map(|e| e.range_m - range_m)
         })
         .collect()
 }
@@ -404,12 +316,8 @@ mod tests {
         freqs
             .iter()
             .map(|f| {
-                let h: Complex64 = paths
-                    .iter()
-                    .map(|(r, g)| {
-                        g * Complex64::from_polar(1.0, -4.0 * PI * f * r / SPEED_OF_LIGHT)
-                    })
-                    .sum();
+                let h: Complex64 =
+                    paths.iter().map(|(r, g)| g * Complex64::from_polar(1.0, -4.0 * PI * f * r / SPEED_OF_LIGHT)).sum();
                 (h.arg() + offset, h.norm())
             })
             .unzip()
@@ -429,9 +337,7 @@ mod tests {
     /// 13 LoRa channels (sec. III-C), uniform: unambiguous over
     /// c0 / (2 x 2.16 MHz) = 69 m, resolution c0 / (2 x 25.9 MHz) = 5.8 m.
     fn all_channels() -> Vec<f64> {
-        (0..13)
-            .map(|i| 902.1e6 + 2.16e6 * i as f64 + 0.5e6)
-            .collect()
+        (0..13).map(|i| 902.1e6 + 2.16e6 * i as f64 + 0.5e6).collect()
     }
 
     #[test]
@@ -441,10 +347,7 @@ mod tests {
         let freqs = vec![902.6e6, 928.52e6];
         let fringe = SPEED_OF_LIGHT / (2.0 * (freqs[1] - freqs[0]));
         let group = |r: f64| {
-            let th: Vec<f64> = freqs
-                .iter()
-                .map(|f| (-4.0 * PI * f * r / SPEED_OF_LIGHT) % (2.0 * PI) + 0.7)
-                .collect();
+            let th: Vec<f64> = freqs.iter().map(|f| (-4.0 * PI * f * r / SPEED_OF_LIGHT) % (2.0 * PI) + 0.7).collect();
             PhaseGroup::uniform(freqs.clone(), th).unwrap()
         };
         let groups = [group(10.0), group(10.4), group(10.0 + 2.0 * fringe - 0.2)];
@@ -463,10 +366,7 @@ mod tests {
         let freqs = all_channels();
         let mut rng = StdRng::seed_from_u64(5);
         let noise = Normal::new(0.0, 0.1).unwrap();
-        let config = RangeConfig {
-            max_m: 60.0,
-            ..Default::default()
-        };
+        let config = RangeConfig { max_m: 60.0, ..Default::default() };
         for &r in &[3.0, 17.35, 41.2] {
             let groups: Vec<PhaseGroup> = (0..3)
                 .map(|a| {
@@ -485,82 +385,38 @@ mod tests {
     #[test]
     fn picks_the_first_path_before_a_stronger_later_one() {
         let freqs = all_channels();
-        let config = RangeConfig {
-            max_m: 60.0,
-            threshold: 0.3,
-            ..Default::default()
-        };
+        let config = RangeConfig { max_m: 60.0, threshold: 0.3, ..Default::default() };
         // Direct path at 12 m (weaker), reflection at 30 m (stronger).
-        let paths = [
-            (12.0, Complex64::new(0.6, 0.0)),
-            (30.0, Complex64::from_polar(1.0, 1.0)),
-        ];
+        let paths = [(12.0, Complex64::new(0.6, 0.0)), (30.0, Complex64::from_polar(1.0, 1.0))];
         let g = weighted(&freqs, &paths);
         let e = estimate_range(&[g], &config).unwrap();
         assert!((e.range_m - 12.0).abs() < 0.3, "{e:?}");
         assert!((e.peak_range_m - 30.0).abs() < 0.3, "{e:?}");
         // A weaker later path leaves the direct one as both first and peak.
-        let paths = [
-            (12.0, Complex64::new(1.0, 0.0)),
-            (30.0, Complex64::from_polar(0.4, 2.0)),
-        ];
+        let paths = [(12.0, Complex64::new(1.0, 0.0)), (30.0, Complex64::from_polar(0.4, 2.0))];
         let g = weighted(&freqs, &paths);
         let e = estimate_range(&[g], &config).unwrap();
-        assert!(
-            (e.range_m - 12.0).abs() < 0.3 && (e.peak_range_m - 12.0).abs() < 0.3,
-            "{e:?}"
-        );
+        assert!((e.range_m - 12.0).abs() < 0.3 && (e.peak_range_m - 12.0).abs() < 0.3, "{e:?}");
     }
 
     #[test]
     fn two_channel_fringe_is_reported_ambiguous_and_bad_input_errors() {
         let freqs = vec![902.6e6, 928.5e6];
-        let g = PhaseGroup::uniform(
-            freqs.clone(),
-            phases(&freqs, &[(20.0, Complex64::new(1.0, 0.0))], 0.0),
-        )
-        .unwrap();
-        let e = estimate_range(
-            std::slice::from_ref(&g),
-            &RangeConfig {
-                min_m: 17.5,
-                max_m: 22.5,
-                ..Default::default()
-            },
-        )
-        .unwrap();
+        let g = PhaseGroup::uniform(freqs.clone(), phases(&freqs, &[(20.0, Complex64::new(1.0, 0.0))], 0.0)).unwrap();
+        let e =
+            estimate_range(std::slice::from_ref(&g), &RangeConfig { min_m: 17.5, max_m: 22.5, ..Default::default() })
+                .unwrap();
         assert!((e.range_m - 20.0).abs() < 1e-3, "{e:?}");
         let wide = estimate_range(std::slice::from_ref(&g), &RangeConfig::default()).unwrap();
         assert!(wide.ambiguity > 0.99, "{wide:?}");
         // The fringe nearest to a coarse prior (2 m off) is the right one.
-        let near = RangeConfig {
-            min_m: 10.0,
-            max_m: 30.0,
-            select: RangeSelect::NearestTo(22.0),
-            ..Default::default()
-        };
-        assert!(
-            (estimate_range(std::slice::from_ref(&g), &near)
-                .unwrap()
-                .range_m
-                - 20.0)
-                .abs()
-                < 1e-3
-        );
+        let near = RangeConfig { min_m: 10.0, max_m: 30.0, select: RangeSelect::NearestTo(22.0), ..Default::default() };
+        assert!((estimate_range(std::slice::from_ref(&g), &near).unwrap().range_m - 20.0).abs() < 1e-3);
         let single = PhaseGroup::uniform(vec![915e6], vec![0.0]).unwrap();
-        assert_eq!(
-            estimate_range(&[single], &RangeConfig::default())
-                .unwrap_err()
-                .kind(),
-            "too-short"
-        );
+        assert_eq!(estimate_range(&[single], &RangeConfig::default()).unwrap_err().kind(), "too-short");
         assert!(estimate_range(
             std::slice::from_ref(&g),
-            &RangeConfig {
-                min_m: 5.0,
-                max_m: 5.0,
-                ..Default::default()
-            }
+            &RangeConfig { min_m: 5.0, max_m: 5.0, ..Default::default() }
         )
         .is_err());
         assert!(PhaseGroup::new(vec![1.0], vec![0.0, 1.0], vec![1.0], vec![]).is_err());

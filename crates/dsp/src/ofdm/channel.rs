@@ -66,8 +66,7 @@ impl ChannelMatrix {
     pub fn resize(&mut self, symbols: usize, subcarriers: usize) {
         self.symbols = symbols;
         self.subcarriers = subcarriers;
-        self.data
-            .resize(symbols * subcarriers, Complex32::new(0.0, 0.0));
+        self.data.resize(symbols * subcarriers, Complex32::new(0.0, 0.0));
         self.valid.resize(symbols, true);
     }
 

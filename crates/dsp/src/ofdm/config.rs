@@ -27,12 +27,7 @@ impl OfdmConfig {
     /// `centre_hz > B / 2` so every subcarrier is a positive RF frequency,
     /// `BLF > 0`) or when the design rule `N < B / (2 BLF)` is broken.
     pub fn new(bandwidth_hz: f64, subcarriers: usize, centre_hz: f64, blf_hz: f64) -> Result<Self> {
-        let config = Self {
-            bandwidth_hz,
-            subcarriers,
-            centre_hz,
-            blf_hz,
-        };
+        let config = Self { bandwidth_hz, subcarriers, centre_hz, blf_hz };
         config.validate()?;
         Ok(config)
     }
@@ -41,22 +36,13 @@ impl OfdmConfig {
     pub fn validate(&self) -> Result<()> {
         let bad = |m: String| Err(Error::BadConfig(m));
         if !(self.bandwidth_hz.is_finite() && self.bandwidth_hz > 0.0) {
-            return bad(format!(
-                "bandwidth_hz must be a positive number, got {}",
-                self.bandwidth_hz
-            ));
+            return bad(format!("bandwidth_hz must be a positive number, got {}", self.bandwidth_hz));
         }
         if !(self.blf_hz.is_finite() && self.blf_hz > 0.0) {
-            return bad(format!(
-                "blf_hz must be a positive number, got {}",
-                self.blf_hz
-            ));
+            return bad(format!("blf_hz must be a positive number, got {}", self.blf_hz));
         }
         if self.subcarriers < 2 {
-            return bad(format!(
-                "subcarriers must be at least 2 (one is the dropped DC), got {}",
-                self.subcarriers
-            ));
+            return bad(format!("subcarriers must be at least 2 (one is the dropped DC), got {}", self.subcarriers));
         }
         if !(self.centre_hz.is_finite() && self.centre_hz > self.bandwidth_hz / 2.0) {
             return bad(format!(
@@ -128,27 +114,18 @@ impl OfdmConfig {
     /// frequency.
     pub fn active_bins(&self) -> Vec<usize> {
         let n = self.subcarriers as i64;
-        self.signed_bins()
-            .into_iter()
-            .map(|k| k.rem_euclid(n) as usize)
-            .collect()
+        self.signed_bins().into_iter().map(|k| k.rem_euclid(n) as usize).collect()
     }
 
     /// What demodulation divides by: the active bins (ascending frequency)
     /// and `1 / (√N X[k])` for each — the unitary FFT's scaling and the
     /// known symbol in one factor. Errors when `symbol` does not have `N`
     /// bins or the configuration is invalid.
-    pub fn demodulation_factors(
-        &self,
-        symbol: &super::KnownSymbol,
-    ) -> Result<(Vec<usize>, Vec<Complex64>)> {
+    pub fn demodulation_factors(&self, symbol: &super::KnownSymbol) -> Result<(Vec<usize>, Vec<Complex64>)> {
         self.validate()?;
         let n = self.subcarriers;
         if symbol.len() != n {
-            return Err(Error::Shape(format!(
-                "symbol has {} bins, configuration has N = {n}",
-                symbol.len()
-            )));
+            return Err(Error::Shape(format!("symbol has {} bins, configuration has N = {n}", symbol.len())));
         }
         let bins = self.active_bins();
         let scale = 1.0 / (n as f64).sqrt();
@@ -160,10 +137,7 @@ impl OfdmConfig {
     /// ascending.
     pub fn subcarrier_frequencies(&self) -> Vec<f64> {
         let spacing = self.bandwidth_hz / self.subcarriers as f64;
-        self.signed_bins()
-            .into_iter()
-            .map(|k| self.centre_hz + k as f64 * spacing)
-            .collect()
+        self.signed_bins().into_iter().map(|k| self.centre_hz + k as f64 * spacing).collect()
     }
 }
 
@@ -186,10 +160,7 @@ mod tests {
         let e = OfdmConfig::new(100e6, 100, 915e6, 500e3).unwrap_err();
         let text = e.to_string();
         assert!(matches!(e, Error::BadConfig(_)));
-        assert!(
-            text.contains("N < B/(2 BLF)") && text.contains("largest N allowed: 99"),
-            "{text}"
-        );
+        assert!(text.contains("N < B/(2 BLF)") && text.contains("largest N allowed: 99"), "{text}");
         assert_eq!(OfdmConfig::max_subcarriers(100e6, 500e3), 99);
         assert_eq!(OfdmConfig::max_subcarriers(100e6, 40e3), 1249);
     }
@@ -204,10 +175,7 @@ mod tests {
             (100e6, 20, 915e6, 0.0),
             (100e6, 20, f64::INFINITY, 40e3),
         ] {
-            assert!(
-                matches!(OfdmConfig::new(b, n, fc, blf), Err(Error::BadConfig(_))),
-                "{b} {n} {fc} {blf}"
-            );
+            assert!(matches!(OfdmConfig::new(b, n, fc, blf), Err(Error::BadConfig(_))), "{b} {n} {fc} {blf}");
         }
     }
 

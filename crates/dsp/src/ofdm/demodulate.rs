@@ -36,18 +36,8 @@ impl Demodulator {
         let n = config.subcarriers;
         let fft = FftPlanner::<f32>::new().plan_fft_forward(n);
         let scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
-        let inverse = inverse
-            .iter()
-            .map(|v| Complex32::new(v.re as f32, v.im as f32))
-            .collect();
-        Ok(Self {
-            n,
-            fft,
-            buffer: Vec::new(),
-            scratch,
-            bins,
-            inverse,
-        })
+        let inverse = inverse.iter().map(|v| Complex32::new(v.re as f32, v.im as f32)).collect();
+        Ok(Self { n, fft, buffer: Vec::new(), scratch, bins, inverse })
     }
 
     /// Samples per symbol `N`.
@@ -60,12 +50,7 @@ impl Demodulator {
     /// subcarriers). A symbol with a non-finite sample is marked invalid
     /// (NaN row). Errors: [`Error::TooShort`] without one whole symbol,
     /// [`Error::NonFinite`] when no symbol is valid.
-    pub fn demodulate(
-        &mut self,
-        samples: &[Complex32],
-        first_sample: usize,
-        out: &mut ChannelMatrix,
-    ) -> Result<()> {
+    pub fn demodulate(&mut self, samples: &[Complex32], first_sample: usize, out: &mut ChannelMatrix) -> Result<()> {
         let n = self.n;
         let available = samples.len().saturating_sub(first_sample);
         let symbols = available / n;
@@ -79,8 +64,7 @@ impl Demodulator {
         let f_count = self.bins.len();
         out.resize(symbols, f_count);
         self.buffer.clear();
-        self.buffer
-            .extend_from_slice(&samples[first_sample..first_sample + symbols * n]);
+        self.buffer.extend_from_slice(&samples[first_sample..first_sample + symbols * n]);
         for (j, chunk) in self.buffer.chunks_exact_mut(n).enumerate() {
             // x·0 is 0 for finite x and NaN for NaN or ±∞: one vectorisable sum.
             let finite = chunk.iter().map(|v| v.re * 0.0 + v.im * 0.0).sum::<f32>() == 0.0;
@@ -90,15 +74,9 @@ impl Demodulator {
                 chunk.iter_mut().for_each(|v| *v = Complex32::new(0.0, 0.0));
             }
         }
-        self.fft
-            .process_with_scratch(&mut self.buffer, &mut self.scratch);
+        self.fft.process_with_scratch(&mut self.buffer, &mut self.scratch);
         let nan = Complex32::new(f32::NAN, f32::NAN);
-        for ((spectrum, row), &valid) in self
-            .buffer
-            .chunks_exact(n)
-            .zip(out.data.chunks_exact_mut(f_count))
-            .zip(&out.valid)
-        {
+        for ((spectrum, row), &valid) in self.buffer.chunks_exact(n).zip(out.data.chunks_exact_mut(f_count)).zip(&out.valid) {
             if valid {
                 for ((h, &k), &inv) in row.iter_mut().zip(&self.bins).zip(&self.inverse) {
                     *h = spectrum[k] * inv;
@@ -108,9 +86,7 @@ impl Demodulator {
             }
         }
         if !out.valid.iter().any(|&v| v) {
-            return Err(Error::NonFinite(format!(
-                "all {symbols} symbols of the window have non-finite samples"
-            )));
+            return Err(Error::NonFinite(format!("all {symbols} symbols of the window have non-finite samples")));
         }
         Ok(())
     }
@@ -121,28 +97,13 @@ mod tests {
     use super::*;
     use num_complex::Complex64;
 
-    fn periodic(
-        symbol: &KnownSymbol,
-        channel: &[Complex64],
-        len: usize,
-        shift: usize,
-    ) -> Vec<Complex32> {
+    fn periodic(symbol: &KnownSymbol, channel: &[Complex64], len: usize, shift: usize) -> Vec<Complex32> {
         // y = IFFT(X · H) repeated: the steady state of back-to-back symbols.
         let n = symbol.len();
-        let mut spectrum: Vec<Complex64> = symbol
-            .frequency
-            .iter()
-            .zip(channel)
-            .map(|(x, h)| x * h)
-            .collect();
-        FftPlanner::<f64>::new()
-            .plan_fft_inverse(n)
-            .process(&mut spectrum);
+        let mut spectrum: Vec<Complex64> = symbol.frequency.iter().zip(channel).map(|(x, h)| x * h).collect();
+        FftPlanner::<f64>::new().plan_fft_inverse(n).process(&mut spectrum);
         let scale = 1.0 / (n as f64).sqrt();
-        (0..len)
-            .map(|i| spectrum[(i + shift) % n] * scale)
-            .map(|v| Complex32::new(v.re as f32, v.im as f32))
-            .collect()
+        (0..len).map(|i| spectrum[(i + shift) % n] * scale).map(|v| Complex32::new(v.re as f32, v.im as f32)).collect()
     }
 
     #[test]
@@ -150,9 +111,8 @@ mod tests {
         let config = OfdmConfig::new(100e6, 20, 915e6, 40e3).unwrap();
         let symbol = KnownSymbol::generate(20, 3).unwrap();
         // A channel with a known value on every bin (FFT order).
-        let channel: Vec<Complex64> = (0..20)
-            .map(|k| Complex64::from_polar(0.5 + 0.02 * k as f64, 0.3 * k as f64))
-            .collect();
+        let channel: Vec<Complex64> =
+            (0..20).map(|k| Complex64::from_polar(0.5 + 0.02 * k as f64, 0.3 * k as f64)).collect();
         let samples = periodic(&symbol, &channel, 20 * 7 + 5, 0);
         let mut demodulator = Demodulator::new(&config, &symbol).unwrap();
         let mut h = ChannelMatrix::default();
@@ -160,10 +120,7 @@ mod tests {
         assert_eq!((h.symbols, h.subcarriers), (7, 19));
         for j in 0..7 {
             for (f, &k) in config.active_bins().iter().enumerate() {
-                assert!(
-                    (h.at(j, f) - channel[k]).norm() < 1e-5,
-                    "symbol {j} bin {k}"
-                );
+                assert!((h.at(j, f) - channel[k]).norm() < 1e-5, "symbol {j} bin {k}");
             }
         }
     }
@@ -181,27 +138,15 @@ mod tests {
         assert!(h.row(1).iter().all(|v| v.re.is_nan()));
         assert!((h.at(2, 0) - Complex64::new(1.0, 0.0)).norm() < 1e-5);
         let all_nan = vec![Complex32::new(f32::NAN, f32::NAN); 32];
-        assert!(matches!(
-            demodulator.demodulate(&all_nan, 0, &mut h),
-            Err(Error::NonFinite(_))
-        ));
-        assert!(matches!(
-            demodulator.demodulate(&samples[..7], 0, &mut h),
-            Err(Error::TooShort { .. })
-        ));
-        assert!(matches!(
-            demodulator.demodulate(&samples, 30, &mut h),
-            Err(Error::TooShort { .. })
-        ));
+        assert!(matches!(demodulator.demodulate(&all_nan, 0, &mut h), Err(Error::NonFinite(_))));
+        assert!(matches!(demodulator.demodulate(&samples[..7], 0, &mut h), Err(Error::TooShort { .. })));
+        assert!(matches!(demodulator.demodulate(&samples, 30, &mut h), Err(Error::TooShort { .. })));
     }
 
     #[test]
     fn symbol_size_must_match() {
         let config = OfdmConfig::new(100e6, 8, 915e6, 40e3).unwrap();
         let symbol = KnownSymbol::generate(10, 3).unwrap();
-        assert!(matches!(
-            Demodulator::new(&config, &symbol),
-            Err(Error::Shape(_))
-        ));
+        assert!(matches!(Demodulator::new(&config, &symbol), Err(Error::Shape(_))));
     }
 }

@@ -36,9 +36,7 @@ impl KnownSymbol {
     /// from `seed` (deterministic), DC dropped. Needs `subcarriers ≥ 2`.
     pub fn generate(subcarriers: usize, seed: u64) -> Result<Self> {
         if subcarriers < 2 {
-            return Err(Error::BadConfig(format!(
-                "a symbol needs at least 2 bins, got {subcarriers}"
-            )));
+            return Err(Error::BadConfig(format!("a symbol needs at least 2 bins, got {subcarriers}")));
         }
         let mut state = seed;
         let frequency = (0..subcarriers)
@@ -61,9 +59,7 @@ impl KnownSymbol {
     pub fn from_frequency(frequency: Vec<Complex64>) -> Result<Self> {
         let n = frequency.len();
         if n < 2 {
-            return Err(Error::BadConfig(format!(
-                "a symbol needs at least 2 bins, got {n}"
-            )));
+            return Err(Error::BadConfig(format!("a symbol needs at least 2 bins, got {n}")));
         }
         if frequency[0].norm() > 1e-9 {
             return Err(Error::BadConfig(format!(
@@ -71,18 +67,14 @@ impl KnownSymbol {
                 frequency[0]
             )));
         }
-        if let Some(k) =
-            (1..n).find(|&k| !frequency[k].is_finite() || (frequency[k].norm() - 1.0).abs() > 1e-6)
-        {
+        if let Some(k) = (1..n).find(|&k| !frequency[k].is_finite() || (frequency[k].norm() - 1.0).abs() > 1e-6) {
             return Err(Error::BadConfig(format!(
                 "symbol bin {k} must be finite with unit magnitude, got {}",
                 frequency[k]
             )));
         }
         let mut time = frequency.clone();
-        FftPlanner::<f64>::new()
-            .plan_fft_inverse(n)
-            .process(&mut time);
+        FftPlanner::<f64>::new().plan_fft_inverse(n).process(&mut time);
         let scale = 1.0 / (n as f64).sqrt();
         time.iter_mut().for_each(|v| *v *= scale);
         Ok(Self { frequency, time })
@@ -111,9 +103,7 @@ mod tests {
         assert_eq!(a, b);
         assert_ne!(a.frequency, c.frequency);
         assert_eq!(a.frequency[0], Complex64::new(0.0, 0.0));
-        assert!(a.frequency[1..]
-            .iter()
-            .all(|x| (x.norm() - 1.0).abs() < 1e-12));
+        assert!(a.frequency[1..].iter().all(|x| (x.norm() - 1.0).abs() < 1e-12));
         // Parseval with the unitary transform: Σ|x|² = Σ|X|² = N − 1.
         let energy: f64 = a.time.iter().map(|v| v.norm_sqr()).sum();
         assert!((energy - 19.0).abs() < 1e-9);
@@ -126,16 +116,10 @@ mod tests {
     fn invalid_bins_are_rejected() {
         let mut x = KnownSymbol::generate(8, 1).unwrap().frequency;
         x[0] = Complex64::new(1.0, 0.0);
-        assert!(matches!(
-            KnownSymbol::from_frequency(x.clone()),
-            Err(Error::BadConfig(_))
-        ));
+        assert!(matches!(KnownSymbol::from_frequency(x.clone()), Err(Error::BadConfig(_))));
         x[0] = Complex64::new(0.0, 0.0);
         x[3] = Complex64::new(0.5, 0.0);
-        assert!(matches!(
-            KnownSymbol::from_frequency(x.clone()),
-            Err(Error::BadConfig(_))
-        ));
+        assert!(matches!(KnownSymbol::from_frequency(x.clone()), Err(Error::BadConfig(_))));
         x[3] = Complex64::new(f64::NAN, 0.0);
         assert!(KnownSymbol::from_frequency(x).is_err());
         assert!(KnownSymbol::generate(1, 0).is_err());

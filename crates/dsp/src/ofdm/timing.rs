@@ -38,11 +38,7 @@ pub struct SymbolTiming {
 pub fn symbol_timing(samples: &[Complex32], symbol: &KnownSymbol) -> Result<SymbolTiming> {
     let n = symbol.len();
     if samples.len() < n {
-        return Err(Error::TooShort {
-            what: "symbol timing (samples)",
-            needed: n,
-            got: samples.len(),
-        });
+        return Err(Error::TooShort { what: "symbol timing (samples)", needed: n, got: samples.len() });
     }
     let mut folded = vec![Complex64::new(0.0, 0.0); n];
     let mut blocks = 0;
@@ -55,40 +51,19 @@ pub fn symbol_timing(samples: &[Complex32], symbol: &KnownSymbol) -> Result<Symb
         }
     }
     if blocks == 0 {
-        return Err(Error::NonFinite(
-            "every symbol period of the window has a non-finite sample".into(),
-        ));
+        return Err(Error::NonFinite("every symbol period of the window has a non-finite sample".into()));
     }
-    let magnitude: Vec<f64> = (0..n)
-        .map(|m| {
-            (0..n)
-                .map(|i| folded[(i + m) % n] * symbol.time[i].conj())
-                .sum::<Complex64>()
-                .norm()
-        })
-        .collect();
+    let magnitude: Vec<f64> =
+        (0..n).map(|m| (0..n).map(|i| folded[(i + m) % n] * symbol.time[i].conj()).sum::<Complex64>().norm()).collect();
     let (peak_lag, &peak) =
         magnitude
             .iter()
             .enumerate()
-            .fold((0, &f64::NEG_INFINITY), |best, (i, v)| {
-                if *v > *best.1 {
-                    (i, v)
-                } else {
-                    best
-                }
-            });
+            .fold((0, &f64::NEG_INFINITY), |best, (i, v)| if *v > *best.1 { (i, v) } else { best });
     let mean = magnitude.iter().sum::<f64>() / n as f64;
-    let (before, after) = (
-        magnitude[(peak_lag + n - 1) % n],
-        magnitude[(peak_lag + 1) % n],
-    );
+    let (before, after) = (magnitude[(peak_lag + n - 1) % n], magnitude[(peak_lag + 1) % n]);
     let curvature = before - 2.0 * peak + after;
-    let offset = if curvature < 0.0 {
-        0.5 * (before - after) / curvature
-    } else {
-        0.0
-    };
+    let offset = if curvature < 0.0 { 0.5 * (before - after) / curvature } else { 0.0 };
     Ok(SymbolTiming {
         first_sample: peak_lag,
         delay_samples: peak_lag as f64 + offset.clamp(-0.5, 0.5),
@@ -122,14 +97,8 @@ mod tests {
     fn bad_windows_are_errors() {
         let symbol = KnownSymbol::generate(8, 1).unwrap();
         let short = vec![Complex32::new(1.0, 0.0); 5];
-        assert!(matches!(
-            symbol_timing(&short, &symbol),
-            Err(Error::TooShort { .. })
-        ));
+        assert!(matches!(symbol_timing(&short, &symbol), Err(Error::TooShort { .. })));
         let nan = vec![Complex32::new(f32::NAN, 0.0); 40];
-        assert!(matches!(
-            symbol_timing(&nan, &symbol),
-            Err(Error::NonFinite(_))
-        ));
+        assert!(matches!(symbol_timing(&nan, &symbol), Err(Error::NonFinite(_))));
     }
 }

@@ -42,22 +42,11 @@ impl ChannelTransform {
             .flat_map(|t| {
                 bins.iter().zip(&inverse).map(move |(&k, inv)| {
                     // (k t) mod N keeps the angle exact for any symbol length.
-                    inv * Complex64::from_polar(
-                        1.0,
-                        -std::f64::consts::TAU * ((k * t) % n) as f64 / n as f64,
-                    )
+                    inv * Complex64::from_polar(1.0, -std::f64::consts::TAU * ((k * t) % n) as f64 / n as f64)
                 })
             })
             .collect();
-        Ok(Self {
-            n,
-            fft,
-            scratch,
-            buffer: vec![Complex64::new(0.0, 0.0); n],
-            bins,
-            inverse,
-            kernel,
-        })
+        Ok(Self { n, fft, scratch, buffer: vec![Complex64::new(0.0, 0.0); n], bins, inverse, kernel })
     }
 
     /// Samples per symbol `N`.
@@ -74,8 +63,7 @@ impl ChannelTransform {
     /// (`N − 1` values, ascending frequency).
     pub fn apply(&mut self, y: &[Complex64], out: &mut [Complex64]) {
         self.buffer.copy_from_slice(y);
-        self.fft
-            .process_with_scratch(&mut self.buffer, &mut self.scratch);
+        self.fft.process_with_scratch(&mut self.buffer, &mut self.scratch);
         for ((h, &k), inv) in out.iter_mut().zip(&self.bins).zip(&self.inverse) {
             *h = self.buffer[k] * inv;
         }
@@ -104,45 +92,24 @@ mod tests {
     fn agrees_with_the_demodulator_and_the_filter_with_the_projection() {
         let config = OfdmConfig::new(100e6, 20, 915e6, 40e3).unwrap();
         let symbol = KnownSymbol::generate(20, 5).unwrap();
-        let samples: Vec<Complex32> = (0..60)
-            .map(|i| {
-                Complex32::new(
-                    (0.3 * i as f32).sin() * 40.0,
-                    (0.17 * i as f32).cos() * 25.0,
-                )
-            })
-            .collect();
+        let samples: Vec<Complex32> =
+            (0..60).map(|i| Complex32::new((0.3 * i as f32).sin() * 40.0, (0.17 * i as f32).cos() * 25.0)).collect();
         let mut demodulator = Demodulator::new(&config, &symbol).unwrap();
         let mut h = ChannelMatrix::default();
         demodulator.demodulate(&samples, 0, &mut h).unwrap();
         let mut transform = ChannelTransform::new(&config, &symbol).unwrap();
         let mut out = vec![Complex64::new(0.0, 0.0); 19];
-        let v: Vec<Complex64> = (0..19)
-            .map(|f| Complex64::from_polar(1.0 / 19f64.sqrt(), 0.4 * f as f64))
-            .collect();
+        let v: Vec<Complex64> = (0..19).map(|f| Complex64::from_polar(1.0 / 19f64.sqrt(), 0.4 * f as f64)).collect();
         let w = transform.projection_filter(&v);
         for s in 0..3 {
-            let y: Vec<Complex64> = samples[s * 20..(s + 1) * 20]
-                .iter()
-                .map(|v| Complex64::new(v.re as f64, v.im as f64))
-                .collect();
+            let y: Vec<Complex64> = samples[s * 20..(s + 1) * 20].iter().map(|v| Complex64::new(v.re as f64, v.im as f64)).collect();
             transform.apply(&y, &mut out);
             for f in 0..19 {
-                assert!(
-                    (out[f] - h.at(s, f)).norm() < 1e-4 * (1.0 + out[f].norm()),
-                    "{s} {f}"
-                );
+                assert!((out[f] - h.at(s, f)).norm() < 1e-4 * (1.0 + out[f].norm()), "{s} {f}");
             }
             let direct: Complex64 = v.iter().zip(&out).map(|(v, h)| v.conj() * h).sum();
-            let filtered: Complex64 = w
-                .iter()
-                .zip(&y)
-                .map(|(w, y)| Complex64::new(w.re as f64, w.im as f64) * y)
-                .sum();
-            assert!(
-                (direct - filtered).norm() < 1e-4 * (1.0 + direct.norm()),
-                "{direct} {filtered}"
-            );
+            let filtered: Complex64 = w.iter().zip(&y).map(|(w, y)| Complex64::new(w.re as f64, w.im as f64) * y).sum();
+            assert!((direct - filtered).norm() < 1e-4 * (1.0 + direct.norm()), "{direct} {filtered}");
         }
     }
 }

@@ -75,12 +75,7 @@ impl Reply {
             trext: false,
             bits: vec![1, 0, 1, 1, 0, 0, 1, 0, 1, 1, 1, 0, 0, 1, 0, 1],
             tx: [0.0, 0.0, 0.0],
-            rx: vec![
-                [0.4, 0.0, 0.0],
-                [0.8, 0.0, 0.0],
-                [1.2, 0.0, 0.0],
-                [1.6, 0.0, 0.0],
-            ],
+            rx: vec![[0.4, 0.0, 0.0], [0.8, 0.0, 0.0], [1.2, 0.0, 0.0], [1.6, 0.0, 0.0]],
             tag: [0.7, 1.4, 0.3],
             gamma: Complex64::from_polar(0.3, 1.1),
             leakage_gain: 30.0,
@@ -105,21 +100,13 @@ impl Reply {
     /// RF frequency of FFT bin `k`.
     fn bin_frequency(&self, k: usize) -> f64 {
         let n = self.config.subcarriers as i64;
-        let signed = if (k as i64) < n - n / 2 {
-            k as i64
-        } else {
-            k as i64 - n
-        };
+        let signed = if (k as i64) < n - n / 2 { k as i64 } else { k as i64 - n };
         self.config.centre_hz + signed as f64 * self.config.bandwidth_hz / n as f64
     }
 
     fn signed_bin(&self, k: usize) -> f64 {
         let n = self.config.subcarriers as i64;
-        (if (k as i64) < n - n / 2 {
-            k as i64
-        } else {
-            k as i64 - n
-        }) as f64
+        (if (k as i64) < n - n / 2 { k as i64 } else { k as i64 - n }) as f64
     }
 
     /// Hardware response `G_a` at FFT bin `k`.
@@ -128,8 +115,7 @@ impl Reply {
         let x = self.signed_bin(k) / n;
         let gain = (1.0 + 0.25 * a as f64) * (1.0 + self.ripple * (7.0 * x + a as f64).cos());
         let phase = 0.4 * (5.0 * x + 0.3 * a as f64).sin() + a as f64;
-        let delay =
-            -std::f64::consts::TAU * self.signed_bin(k) * self.hardware_delay_samples[a] / n;
+        let delay = -std::f64::consts::TAU * self.signed_bin(k) * self.hardware_delay_samples[a] / n;
         Complex64::from_polar(gain, phase + delay)
     }
 
@@ -145,9 +131,7 @@ impl Reply {
     /// docs/formats.md §5 tag channel, `rx × active subcarriers`, ascending.
     pub fn true_tag_channel(&self, tag: &[f64; 3]) -> Vec<Complex64> {
         let bins = self.config.active_bins();
-        (0..self.rx.len())
-            .flat_map(|a| bins.iter().map(move |&k| self.tag_channel_bin(a, k, tag)))
-            .collect()
+        (0..self.rx.len()).flat_map(|a| bins.iter().map(move |&k| self.tag_channel_bin(a, k, tag))).collect()
     }
 
     /// What the DSP measures before calibration (`G Γ T`, FFT timing at the
@@ -156,9 +140,7 @@ impl Reply {
         let bins = self.config.active_bins();
         (0..self.rx.len())
             .flat_map(|a| {
-                bins.iter().map(move |&k| {
-                    self.hardware(a, k) * self.gamma * self.tag_channel_bin(a, k, &self.tag)
-                })
+                bins.iter().map(move |&k| self.hardware(a, k) * self.gamma * self.tag_channel_bin(a, k, &self.tag))
             })
             .collect()
     }
@@ -166,11 +148,7 @@ impl Reply {
     /// Signed bins of the active subcarriers (ascending), for the timing's
     /// linear phase.
     pub fn signed_active_bins(&self) -> Vec<f64> {
-        self.config
-            .signed_bins()
-            .into_iter()
-            .map(|k| k as f64)
-            .collect()
+        self.config.signed_bins().into_iter().map(|k| k as f64).collect()
     }
 
     /// Per-sample complex noise standard deviation for the configured SNR.
@@ -182,10 +160,7 @@ impl Reply {
         let power: f64 = (0..self.rx.len())
             .map(|a| {
                 (1..n)
-                    .map(|k| {
-                        (self.hardware(a, k) * self.gamma * self.tag_channel_bin(a, k, &self.tag))
-                            .norm_sqr()
-                    })
+                    .map(|k| (self.hardware(a, k) * self.gamma * self.tag_channel_bin(a, k, &self.tag)).norm_sqr())
                     .sum::<f64>()
                     / n as f64
             })
@@ -214,10 +189,7 @@ impl Reply {
         }
         // Linear ramp: average of the hard waveform over [t − ramp/2, t + ramp/2].
         let steps = 8;
-        (0..steps)
-            .map(|i| at(t - ramp / 2.0 + ramp * (i as f64 + 0.5) / steps as f64))
-            .sum::<f64>()
-            / steps as f64
+        (0..steps).map(|i| at(t - ramp / 2.0 + ramp * (i as f64 + 0.5) / steps as f64)).sum::<f64>() / steps as f64
     }
 
     /// One window per rx antenna.
@@ -227,9 +199,8 @@ impl Reply {
         let sigma = self.noise_sigma();
         let mut rng = StdRng::seed_from_u64(self.seed);
         let normal = Normal::new(0.0, (sigma * sigma / 2.0).sqrt().max(1e-300)).unwrap();
-        let levels: Vec<f64> = (0..self.window_samples)
-            .map(|i| self.level(&chips, i as f64 / self.config.bandwidth_hz))
-            .collect();
+        let levels: Vec<f64> =
+            (0..self.window_samples).map(|i| self.level(&chips, i as f64 / self.config.bandwidth_hz)).collect();
         (0..self.rx.len())
             .map(|a| {
                 let d = distance(&self.tx, &self.rx[a]);
@@ -240,10 +211,7 @@ impl Reply {
                                 .map(|k| {
                                     self.symbol.frequency[k]
                                         * spectrum(k)
-                                        * Complex64::from_polar(
-                                            1.0,
-                                            std::f64::consts::TAU * (k * t) as f64 / n as f64,
-                                        )
+                                        * Complex64::from_polar(1.0, std::f64::consts::TAU * (k * t) as f64 / n as f64)
                                 })
                                 .sum::<Complex64>()
                                 / (n as f64).sqrt()
@@ -257,9 +225,7 @@ impl Reply {
                             -std::f64::consts::TAU * self.bin_frequency(k) * d / SPEED_OF_LIGHT,
                         )
                 });
-                let tag = idft(&|k| {
-                    self.hardware(a, k) * self.gamma * self.tag_channel_bin(a, k, &self.tag)
-                });
+                let tag = idft(&|k| self.hardware(a, k) * self.gamma * self.tag_channel_bin(a, k, &self.tag));
                 (0..self.window_samples)
                     .map(|i| {
                         let p = (i + self.tx_phase) % n;
