@@ -427,7 +427,7 @@ mod tests {
     #[test]
     fn collinear_subsets_are_left_out() {
         use crate::model::wideband::Candidates;
-        let candidates = Candidates { distances_m: vec![2.0], weights: vec![1.0], spacing_m: 0.33, sigma_m: 0.003, best: 0 };
+        let candidates = Candidates { distances_m: vec![2.0], weights: vec![1.0], spacing_m: 0.33, sigma_m: 0.003, best: 0, residual_coherence: 0.0 };
         let geometry = HelperGeometry { tx: 0, tx_position: Vector3::new(0.6, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 };
         let at = |x: f64, y: f64| Receiver { antenna: 1, position: Vector3::new(x, y, 0.0), candidates: candidates.clone() };
         // The outside example's layout: three receivers in a row with tx, one off the line.
@@ -460,6 +460,7 @@ mod tests {
                     spacing_m: 0.33,
                     sigma_m: 0.003 + 0.001 * j as f64,
                     best: 1,
+                    residual_coherence: 0.0,
                 },
             })
             .collect();

@@ -203,7 +203,7 @@ mod tests {
     fn frame_covariance_inverts_the_information() {
         use crate::model::wideband::Candidates;
         let geometry = HelperGeometry { tx: 0, tx_position: Vector3::new(0.0, 0.0, 0.0), bounds: vec![], dimensions: 3, plane_z: 0.0 };
-        let candidates = Candidates { distances_m: vec![2.0], weights: vec![1.0], spacing_m: 0.33, sigma_m: 0.003, best: 0 };
+        let candidates = Candidates { distances_m: vec![2.0], weights: vec![1.0], spacing_m: 0.33, sigma_m: 0.003, best: 0, residual_coherence: 0.0 };
         let at = |x: f64, y: f64, z: f64| Receiver { antenna: 1, position: Vector3::new(x, y, z), candidates: candidates.clone() };
         let receivers = vec![at(1.0, 0.0, 0.0), at(0.0, 1.0, 0.0), at(-1.0, 0.0, 0.0), at(0.0, 0.0, 1.0)];
         let p = Vector3::new(0.3, 0.8, 0.5);

@@ -878,7 +878,9 @@ impl TurboTrack {
             return;
         }
         mean /= static_weight;
-        let receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &self.params.candidates, self.params.distance_sigma_m, &mean);
+        // The fit does not read the residual's coherence (the lobe search does).
+        let fit_candidates = CandidateParams { measure_coherence: false, ..self.params.candidates.clone() };
+        let receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &fit_candidates, self.params.distance_sigma_m, &mean);
         if receivers.len() < self.geometry.needed() {
             return;
         }
@@ -923,7 +925,9 @@ impl TurboTrack {
         let mut candidates = self.params.candidates.clone();
         candidates.min_relative_weight = candidates.min_relative_weight.min(RESTING_LOBE_RELATIVE_WEIGHT);
         let mut receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &candidates, self.params.distance_sigma_m, fit);
-        if receivers.len() < self.geometry.needed() {
+        if receivers.len() < self.geometry.needed() || super::lobes::multipath_frame(&receivers) {
+            // A reflection biases the averaged envelope as it does each
+            // frame's (`lobes::MULTIPATH_COHERENCE`): no lobe decision.
             return;
         }
         // The calibration residual (a bias per receiver, departure 14) does
@@ -1046,7 +1050,7 @@ impl TurboTrack {
                 }
                 (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
             }
-        } else if let Some(receivers) = receivers.filter(|_| self.lobe_test()) {
+        } else if let Some(receivers) = receivers.filter(|r| self.lobe_test() && !super::lobes::multipath_frame(r)) {
             // Another lobe won: the whole cloud moves there.
             if let Some(d) = self.test_lobes(receivers, &mean) {
                 self.move_cloud(&d);
