@@ -74,6 +74,7 @@ import bench_modules  # noqa: E402
 import turbotrack_lobes as lobes  # noqa: E402
 
 _run = bench_modules.load("run")  # for its table formatting and JSON helpers
+_robustness = bench_modules.load("glac_robustness")  # its per-tag beyond_three_sigma
 simulate_run, table, text_table, markdown_table, json_ready = (
     _run.simulate_run,
     _run.table,
@@ -112,31 +113,6 @@ def scenario_speed_cm_s(name: str) -> float:
 # one run, and runs pooled over seeds
 
 
-def beyond_3sigma(truth, track, skip_first_s: float = 0.0) -> tuple[int, int]:
-    """Rows after ``skip_first_s`` whose error exceeds 3 reported sigmas on some
-    axis, and the rows counted (each tag against its own truth; rows without a
-    sigma count as within)."""
-    if track.sigma is None or len(track) == 0:
-        return 0, 0
-    start = float(np.min(truth.time_s)) + skip_first_s
-    beyond = counted = 0
-    for epc in np.unique(np.asarray(track.epc)):
-        rows = np.asarray(track.epc) == epc
-        mine = np.asarray(truth.epc) == epc
-        if not mine.any():
-            continue
-        order = np.argsort(truth.time_s[mine], kind="stable")
-        t, p = truth.time_s[mine][order], truth.position[mine][order]
-        time = np.asarray(track.time_s)[rows]
-        keep = (time >= start) & (time <= t[-1])
-        ref = np.stack([np.interp(time[keep], t, p[:, j]) for j in range(3)], axis=1)
-        error = np.abs(np.asarray(track.position)[rows][keep] - ref)
-        sigma = np.asarray(track.sigma)[rows][keep]
-        beyond += int(np.sum(np.any(error > 3.0 * np.where(np.isfinite(sigma), sigma, np.inf), axis=1)))
-        counted += int(keep.sum())
-    return beyond, counted
-
-
 def track_and_score(method: str, sim, seed: int, **params) -> dict:
     """``scattertrack.track.run`` on the simulation's frames (timed, wall
     clock), scored after ``SKIP_FIRST_S``; ``seed`` seeds the tracker."""
@@ -146,7 +122,7 @@ def track_and_score(method: str, sim, seed: int, **params) -> dict:
     o = compare(sim.truth, track, skip_first_s=SKIP_FIRST_S).overall
     steps, mean_ns, max_ns = track.latency
     quantiles = getattr(track, "latency_quantiles_ns", None) or {}
-    beyond, counted = beyond_3sigma(sim.truth, track, SKIP_FIRST_S)
+    counted, beyond = _robustness.beyond_three_sigma(sim.truth, track, from_s=SKIP_FIRST_S)
     return {
         "seed": seed,
         "beyond_rows": beyond,

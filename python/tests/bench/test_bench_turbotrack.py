@@ -234,23 +234,3 @@ def test_runtime_block_streams_iq_and_reports_latency(smoke):
     assert r["stages"] == ["dispatch", "antenna", "hand-off", "fusion", "tracker"]
     assert isinstance(r["target_met"], bool)
 
-
-def test_beyond_3sigma_counts_each_tag_against_its_own_truth():
-    from scattertrack.io.types import Track, Truth
-
-    truth = Truth(
-        time_s=np.array([0.0, 1.0, 0.0, 1.0]),
-        epc=np.array(["A", "A", "B", "B"]),
-        position=np.array([[0.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0], [5.0, 0, 0]]),
-        velocity=np.full((4, 3), np.nan),
-    )
-    track = Track(
-        time_s=np.array([0.5, 0.5, 0.75]),
-        epc=np.array(["A", "B", "B"]),
-        position=np.array([[0.5, 0.0, 0.0], [5.0, 0.0, 0.1], [5.0, 0.0, 0.0]]),
-        velocity=np.full((3, 3), np.nan),
-        sigma=np.full((3, 3), 0.01),
-    )
-    # A on its truth; B once 10 sigma off in z, once on it; the first 0.6 s skipped leaves one row.
-    assert bench.beyond_3sigma(truth, track) == (1, 3)
-    assert bench.beyond_3sigma(truth, track, skip_first_s=0.6) == (0, 1)

@@ -81,6 +81,26 @@ def test_beyond_three_sigma_counts_rows_from_2_s_on_any_axis(robustness):
     assert robustness.beyond_three_sigma(truth, track, from_s=0.0) == (8, 2)
 
 
+def test_beyond_three_sigma_counts_each_tag_against_its_own_truth(robustness):
+    # bench/turbotrack.py scores its accuracy block with it too (3-tags).
+    truth = Truth(
+        np.array([0.0, 1.0, 0.0, 1.0]),
+        np.array(["A", "A", "B", "B"]),
+        np.array([[0.0, 0, 0], [1.0, 0, 0], [5.0, 0, 0], [5.0, 0, 0]]),
+        np.full((4, 3), np.nan),
+    )
+    track = Track(
+        np.array([0.5, 0.5, 0.75]),
+        np.array(["A", "B", "B"]),
+        np.array([[0.5, 0.0, 0.0], [5.0, 0.0, 0.1], [5.0, 0.0, 0.0]]),
+        np.full((3, 3), np.nan),
+        sigma=np.full((3, 3), 0.01),
+    )
+    # A on its truth; B once 10 sigma off in z, once on it; from 0.6 s on one row is left.
+    assert robustness.beyond_three_sigma(truth, track, from_s=0.0) == (3, 1)
+    assert robustness.beyond_three_sigma(truth, track, from_s=0.6) == (1, 0)
+
+
 def test_the_largest_gap_leaves_out_read_outages(robustness):
     reads = np.r_[np.arange(0.0, 12.0, 0.03), np.arange(18.0, 20.0, 0.03)]
     # Estimates at every read, except none for the first second after the outage.

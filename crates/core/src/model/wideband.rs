@@ -162,16 +162,11 @@ fn even_spacing_hz(frequencies_hz: &[f64]) -> Option<f64> {
     (spacing != 0.0 && frequencies_hz.windows(2).all(|w| ((w[1] - w[0]) - spacing).abs() <= tolerance)).then_some(spacing)
 }
 
-/// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m), with
-/// `phasors` as scratch space (length of `frequencies_hz`).
-fn beamform_with(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64, phasors: &mut [Complex<f64>]) -> Complex<f64> {
+/// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m); the
+/// steering phasors at `d` are left in `phasors` (length of `frequencies_hz`).
+fn beamform(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64, phasors: &mut [Complex<f64>]) -> Complex<f64> {
     steering(frequencies_hz, d, phasors);
     h.iter().zip(phasors.iter()).map(|(hk, e)| hk * e).sum()
-}
-
-/// `B(d) = Σ h_k exp(+j 2π f_k d / c)` at one path length `d` (m).
-pub fn beamform(frequencies_hz: &[f64], h: &[Complex<f64>], d: f64) -> Complex<f64> {
-    beamform_with(frequencies_hz, h, d, &mut vec![Complex::new(0.0, 0.0); frequencies_hz.len()])
 }
 
 /// Distance candidates of one receive antenna from its channel `h` at
@@ -232,9 +227,9 @@ pub fn distance_candidates(
     let slope = two_pi_over_c * f_mean;
     let mut d_peak = best_d;
     for _ in 0..3 {
-        d_peak -= beamform_with(frequencies_hz, h, d_peak, &mut scratch).arg() / slope;
+        d_peak -= beamform(frequencies_hz, h, d_peak, &mut scratch).arg() / slope;
     }
-    let peak = beamform_with(frequencies_hz, h, d_peak, &mut scratch).norm();
+    let peak = beamform(frequencies_hz, h, d_peak, &mut scratch).norm();
     if !(peak > 0.0) {
         return None;
     }
@@ -285,8 +280,9 @@ pub fn distance_candidates(
     let a = peak / k as f64;
     let residual: f64 = base.iter().map(|g| (g - a).norm_sqr()).sum::<f64>() / k as f64;
     let coherence = if params.measure_coherence {
-        let leftover: Vec<Complex<f64>> = base.iter().map(|g| g - a).collect();
-        residual_coherence(frequencies_hz, &leftover, &mut scratch)
+        // The coarse search's phasors are spent: they hold the residual.
+        phasor.iter_mut().zip(&base).for_each(|(p, g)| *p = g - a);
+        residual_coherence(frequencies_hz, &mut phasor, &mut scratch)
     } else {
         0.0
     };
@@ -326,8 +322,9 @@ pub fn distance_candidates(
 /// 0.19 for 20 subcarriers, above 0.3 in 4 % and above 0.4 in 0.2 % of
 /// frames); one reflection puts it at one delay (up to 1). Lobe-level
 /// tests read the envelope and skip frames where this is high
-/// (`track::lobes::MULTIPATH_COHERENCE`). `scratch`: length of `r`.
-pub fn residual_coherence(frequencies_hz: &[f64], r: &[Complex<f64>], scratch: &mut [Complex<f64>]) -> f64 {
+/// (`track::lobes::MULTIPATH_COHERENCE`). `r` is rotated in place (it is
+/// left as scratch); `scratch`: length of `r`.
+pub fn residual_coherence(frequencies_hz: &[f64], r: &mut [Complex<f64>], scratch: &mut [Complex<f64>]) -> f64 {
     let k = r.len();
     let energy: f64 = r.iter().map(|v| v.norm_sqr()).sum();
     if k < 2 || !(energy > 0.0) {
@@ -341,11 +338,10 @@ pub fn residual_coherence(frequencies_hz: &[f64], r: &[Complex<f64>], scratch: &
     let steps = 2 * k;
     let step_m = SPEED_OF_LIGHT / spacing / steps as f64;
     steering(frequencies_hz, step_m, scratch);
-    let mut phasor: Vec<Complex<f64>> = r.to_vec();
     let mut best = 0.0f64;
     for _ in 0..steps {
-        best = best.max(phasor.iter().sum::<Complex<f64>>().norm_sqr());
-        phasor.iter_mut().zip(scratch.iter()).for_each(|(p, e)| *p *= e);
+        best = best.max(r.iter().sum::<Complex<f64>>().norm_sqr());
+        r.iter_mut().zip(scratch.iter()).for_each(|(p, e)| *p *= e);
     }
     (best / (k as f64 * energy)).min(1.0)
 }

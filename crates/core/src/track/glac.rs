@@ -1450,8 +1450,8 @@ impl Glac {
     /// that hypothesis' own P.
     fn best_estimate(&self, time_s: f64) -> Option<Estimate> {
         let h = &self.hypotheses;
-        let best = self.reported()?;
-        let (x, own) = h.state(best);
+        let reported = self.reported()?;
+        let (x, own) = h.state(reported);
         let mut p = if h.len() == 1 { own } else { mixture_covariance(h, &x, self.params.weight_temperature) };
         self.add_bias_covariance(&mut p, &x);
         self.add_twin_covariance(&mut p, &x);
@@ -1463,7 +1463,7 @@ impl Glac {
             velocity,
             covariance: Estimate::covariance_from(&p),
             hypotheses: h.len(),
-            weight: h.items[best].log_likelihood.exp(),
+            weight: h.items[reported].log_likelihood.exp(),
         })
     }
 
