@@ -22,7 +22,9 @@ tracker, causal or not, picks the wrong one in a good share of such runs.
 
 A fit from a shifted start finds a wrong trajectory at best as good as the
 best one, and GLAC proposes the candidates, so the count of indistinguishable
-runs is a lower bound.
+runs is a lower bound. A wrong trajectory that leaves the scene's region
+(by more than GLAC's ``region_margin_m``, 5 cm) is not counted: the scene
+rules it out for every tracker, as it does for GLAC.
 
     .venv/bin/python bench/glac_ambiguity.py --scenario glac-3d-arm --seeds 100
 """
@@ -121,6 +123,23 @@ def fit_trajectory(scene, reads, t0: float, t1: float, start, q: float, knot_s: 
     return Fit(spline(solution.x), float(np.sum(r[: len(t)] ** 2)), float(np.sum(r[len(t) :] ** 2)))
 
 
+REGION_MARGIN_M = 0.05
+"""GLAC's ``region_margin_m``: how far outside the scene's region a hypothesis may stray, m."""
+
+
+def inside_region(scene, fit: Fit, times) -> bool:
+    """Whether the fitted trajectory stays within the scene's region (grown by
+    :data:`REGION_MARGIN_M`) at ``times``; True without a region."""
+    region = scene.region
+    if region is None:
+        return True
+    p = fit.spline(np.asarray(times, dtype=float))
+    axes = 2 if scene.dimensions == 2 else 3
+    low = np.asarray(region.min, dtype=float)[:axes] - REGION_MARGIN_M
+    high = np.asarray(region.max, dtype=float)[:axes] + REGION_MARGIN_M
+    return bool(np.all((p[:, :axes] >= low) & (p[:, :axes] <= high)))
+
+
 def truth_at(truth, times) -> np.ndarray:
     """Truth positions at ``times`` (linear interpolation), (n, 3) m."""
     return np.column_stack([np.interp(times, truth.time_s, truth.position[:, j]) for j in range(3)])
@@ -185,6 +204,8 @@ def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,)) -> d
             # Start from the truth shifted onto the candidate, then follow it.
             shift = p - there
             fit = follow(sim.scene, sim.reads, t0, ends, lambda t, s=shift: truth_at(sim.truth, t) + s, q)
+            if not inside_region(sim.scene, fit, np.linspace(t0, deadline, 50)):
+                continue  # the scene's region rules this trajectory out
             if best is None or fit.cost < best.cost:
                 best = fit
     if best is None:
@@ -207,10 +228,11 @@ def excursion_verdicts(
     ``after_s`` (absolute, s): rows more than ``wrong_m`` from the truth once
     the track had been on it. At the excursion's first row, the reads of the
     last ``window_s`` are fitted once from the truth and once from each of
-    GLAC's wrong candidates then. A wrong branch leaves the truth only just
-    before, so its start follows the truth and ramps onto the candidate over
-    the last 0.1 or 0.2 s; a fit that slides back onto the truth does not
-    count. Δ < 3 means the reads so far favour neither:
+    GLAC's wrong candidates then. A wrong branch that leaves the truth only
+    just before starts from the truth and ramps onto the candidate over the
+    last 0.1 or 0.2 s; a candidate that has competed all along starts from
+    the truth shifted onto it over the whole window. A fit that slides back
+    onto the truth, or leaves the region, does not count. Δ < 3 means the reads so far favour neither:
     a causal tracker cannot avoid the excursion (a smoother, with later reads,
     can). ``propose(sim, t, wrong_m)`` gives the candidates (default: GLAC's,
     :func:`live_candidates`)."""
@@ -227,15 +249,21 @@ def excursion_verdicts(
         here = truth_at(sim.truth, [te])[0]
         best = None
         for p in propose(sim, te, wrong_m):
-            for ramp_s in (0.1, 0.2):
+            # None: the candidate has competed all along (the truth shifted
+            # onto it over the whole window), not just branched off.
+            for ramp_s in (0.1, 0.2, None):
 
                 def start(t, shift=p - here, ramp_s=ramp_s):
+                    if ramp_s is None:
+                        return truth_at(sim.truth, t) + shift
                     weight = np.clip((np.asarray(t) - (te - ramp_s)) / ramp_s, 0.0, 1.0)
                     return truth_at(sim.truth, t) + weight[:, None] * shift
 
                 fit = fit_trajectory(sim.scene, sim.reads, t0, te, start, q)
                 if np.linalg.norm(fit.spline(te) - here) <= wrong_m:
                     continue  # the fit slid back onto the truth: not a distinct trajectory
+                if not inside_region(sim.scene, fit, np.linspace(t0, te, 50)):
+                    continue  # the scene's region rules this trajectory out
                 best = fit.cost if best is None else min(best, fit.cost)
         verdicts.append(
             {

@@ -1,8 +1,9 @@
-"""GLAC (COTS) tracking robustness: three non-degenerate 3D layouts under one impairment at a time.
+"""GLAC (COTS) tracking robustness: five non-degenerate 3D layouts under one impairment at a time.
 
 Every cell is one antenna layout (``scenarios/glac-3d-raised``, ``-walls``,
-``-workcell``: the ``glac-3d-arm`` pick-and-place path, no four antennas in
-a plane, a region that keeps the tag above the table) and one condition:
+``-workcell``, ``-bay``, ``-overhead``: the ``glac-3d-arm`` pick-and-place
+path, no four antennas in a plane, a region that keeps the tag above the
+table) and one condition:
 the baseline (paper-like noise, 0.1 rad white, one channel) or one
 impairment added to it (``CONDITIONS``). Each is simulated over ``--seeds``
 seeds and tracked with ``glac`` at its defaults; nothing here tunes the
@@ -10,7 +11,8 @@ tracker. Per cell:
 
 - wins <= 1 s: share of runs where the correct candidate wins within 1 s
   of motion, as ``bench/run.py`` scores it (``score``: 3D error below 5 cm
-  from then on; ``aggregate``: ``candidate_wins_within_1s``);
+  from then on; ``aggregate``: ``candidate_wins_within_1s``); a target on
+  the baseline only;
 - median 3D error, pooled over every row of every run, mm;
 - beyond 3 sigma: share of rows from 2 s on with |error| > 3 sigma on x, y
   or z (the track's sigma columns);
@@ -58,7 +60,13 @@ from scattertrack.sim.trajectory import positions_velocities
 BENCH = Path(__file__).resolve().parent
 OUTSIDE_DIR = Path("/work/shared/outside")
 
-LAYOUTS = {"raised": "glac-3d-raised", "walls": "glac-3d-walls", "workcell": "glac-3d-workcell"}
+LAYOUTS = {
+    "raised": "glac-3d-raised",
+    "walls": "glac-3d-walls",
+    "workcell": "glac-3d-workcell",
+    "bay": "glac-3d-bay",
+    "overhead": "glac-3d-overhead",
+}
 """Short name -> scenario file (scenarios/NAME.toml)."""
 
 STOP_AFTER_S = 6.0  # s: the stop begins at the first pause of the path after this
@@ -243,8 +251,13 @@ def run_one(job: tuple) -> dict:
     return result
 
 
-def summarise(runs: list[dict], median_target_m: float | None) -> dict:
-    """bench/run.py's aggregate of a cell's runs, plus the pooled beyond-3-sigma share and the targets."""
+def summarise(runs: list[dict], median_target_m: float | None, wins_target: bool = True) -> dict:
+    """bench/run.py's aggregate of a cell's runs, plus the pooled beyond-3-sigma share and the targets.
+
+    ``wins_target``: whether the wins-within-1-s target applies (the issue sets
+    it for the baseline only; with an impairment it asks for the median and
+    the beyond-3-sigma share). Where it does not, ``meets["wins_within_1s"]``
+    is None."""
     summary = bench_run.aggregate(runs)
     rows = sum(r["sigma_rows"] for r in runs)
     summary.pop("per_seed")
@@ -258,7 +271,7 @@ def summarise(runs: list[dict], median_target_m: float | None) -> dict:
     if median_target_m is not None:
         summary["median_target_mm"] = median_target_m * 1e3
         summary["meets"] = {
-            "wins_within_1s": summary["candidate_wins_within_1s"] >= WINS_TARGET,
+            "wins_within_1s": summary["candidate_wins_within_1s"] >= WINS_TARGET if wins_target else None,
             "median": summary["median_3d_mm"] <= median_target_m * 1e3,
             "beyond_3_sigma": summary["beyond_3_sigma"] <= BEYOND_TARGET,
         }
@@ -293,7 +306,7 @@ def run_cells(
     cells = []
     for layout in layouts:
         for condition in conditions:
-            summary = summarise(grouped[(layout, condition)], CONDITIONS[condition][2])
+            summary = summarise(grouped[(layout, condition)], CONDITIONS[condition][2], condition == "baseline")
             cells.append({"layout": layout, "condition": condition} | summary)
     realistic_row = summarise(grouped[("realistic-3d-arm", "defaults")], None) if realistic else None
     return cells, realistic_row
@@ -351,7 +364,7 @@ def text_table(headers: list[str], cells: list[list[str]]) -> str:
 
 def cell_lines(cells: list[dict]) -> list[list[str]]:
     def mark(cell, what):
-        return "" if cell["meets"][what] else " *"
+        return " *" if cell["meets"][what] is False else ""
 
     return [
         [
@@ -385,7 +398,7 @@ def report(cells, realistic_row, outside, seeds, wall_s: float) -> str:
         headers = ["layout / condition", "runs", "wins <= 1 s", "median mm", "target", "> 3 sigma", "wide sigma", "never", "no win", "back <= 1 s"]
         out.append(text_table(headers, cell_lines(cells)))
         out.append(
-            f"Targets (the issue's, not asserted): wins <= 1 s >= {WINS_TARGET:.0%}, median <= target mm, "
+            f"Targets (the issue's, not asserted): wins <= 1 s >= {WINS_TARGET:.0%} (baseline only), median <= target mm, "
             f"> 3 sigma <= {BEYOND_TARGET:.0%}; '*' marks a miss. wins: the correct candidate wins (3D error "
             "< 5 cm from then on) within 1 s of motion (bench/run.py score); median: pooled 3D error; > 3 sigma: "
             f"rows from {SIGMA_FROM_S:g} s on with |error| > 3 sigma on x, y or z; wide sigma: of the rows from "
@@ -394,6 +407,16 @@ def report(cells, realistic_row, outside, seeds, wall_s: float) -> str:
             "(< 20 mm held to the end); no win: runs whose error never stays < 5 cm; back <= 1 s (stop and "
             "dropout only): runs whose error stays < 5 cm from at most 1 s after the motion or the reads resume."
         )
+        met = [c["layout"] for c in cells if c["condition"] == "baseline" and all(v is not False for v in c["meets"].values())]
+        baselines = sum(c["condition"] == "baseline" for c in cells)
+        if baselines:
+            out.append(
+                f"Baseline cells meeting every target: {len(met)} of {baselines} layouts"
+                + (f" ({', '.join(met)})" if met else "")
+                + ". Impairment cells meeting theirs: "
+                + f"{sum(c['condition'] != 'baseline' and all(v is not False for v in c['meets'].values()) for c in cells)}"
+                + f" of {sum(c['condition'] != 'baseline' for c in cells)}."
+            )
     if realistic_row is not None:
         r = realistic_row
         out += [

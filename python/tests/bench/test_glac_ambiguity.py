@@ -125,3 +125,17 @@ def test_an_excursion_is_judged_on_the_reads_up_to_it(ambiguity):
 def test_main_refuses_a_scenario_with_several_tags(ambiguity):
     with pytest.raises(SystemExit, match="5 tags"):
         ambiguity.main(["--scenario", "glac-3d-arm-5tags", "--seeds", "1"])
+
+
+def test_a_wrong_trajectory_outside_the_region_is_not_counted(ambiguity):
+    # glac-3d-walls keeps the tag in front of both walls (x, y >= 0.05 m):
+    # the truth's fit stays inside, the same trajectory 30 cm behind the
+    # wall x = 0 does not (beyond the 5 cm margin GLAC allows).
+    sim = _sim("glac-3d-walls", duration_s=2.0)
+    t1 = float(sim.reads.time_s.max())
+    truth = lambda t: ambiguity.truth_at(sim.truth, t)
+    fit = ambiguity.fit_trajectory(sim.scene, sim.reads, 0.0, t1, truth, q=0.05)
+    times = np.linspace(0.0, t1, 20)
+    assert ambiguity.inside_region(sim.scene, fit, times)
+    behind = ambiguity.Fit(lambda t: fit.spline(t) - np.array([0.6, 0.0, 0.0]), fit.data_cost, fit.prior_cost)
+    assert not ambiguity.inside_region(sim.scene, behind, times)

@@ -135,6 +135,10 @@ def test_the_block_runs_into_a_table_and_json(robustness, tmp_path, capsys):
     for cell in result["cells"]:
         assert 0.0 <= cell["candidate_wins_within_1s"] <= 1.0 and 0.0 <= cell["beyond_3_sigma"] <= 1.0
         assert cell["median_3d_mm"] > 0.0 and set(cell["meets"]) == {"wins_within_1s", "median", "beyond_3_sigma"}
+    # The issue sets the wins-within-1-s target on the baseline only.
+    assert result["cells"][0]["meets"]["wins_within_1s"] in (True, False)
+    assert result["cells"][1]["meets"]["wins_within_1s"] is None
+    assert "Baseline cells meeting every target: " in text
     assert result["cells"][0]["back_within_1s_of_resume"] is None  # only the stop and the dropout have one
     assert result["realistic_3d_arm"]["runs"] == 2
     simulated = next(c for c in result["outside"] if c["case"] == "cots-simulated")
