@@ -139,3 +139,20 @@ def test_a_wrong_trajectory_outside_the_region_is_not_counted(ambiguity):
     assert ambiguity.inside_region(sim.scene, fit, times)
     behind = ambiguity.Fit(lambda t: fit.spline(t) - np.array([0.6, 0.0, 0.0]), fit.data_cost, fit.prior_cost)
     assert not ambiguity.inside_region(sim.scene, behind, times)
+
+
+def test_a_robustness_cell_is_named_by_layout_and_condition(ambiguity):
+    with pytest.raises(SystemExit, match="unknown cell 'bay/earthquake'"):
+        ambiguity.main(["--cell", "bay/earthquake", "--seeds", "1"])
+
+
+def test_the_bench_loader_registers_the_module_it_runs():
+    # glac_ambiguity's dataclass resolves its module through sys.modules:
+    # loaded from another script (bench_modules.load), it must be there.
+    sys.path.insert(0, str(BENCH))
+    import bench_modules
+
+    loaded = bench_modules.load("glac_ambiguity")
+    assert sys.modules["scattertrack_bench_glac_ambiguity"] is loaded
+    assert bench_modules.load("glac_ambiguity") is loaded
+    assert loaded.Fit.__module__ == "scattertrack_bench_glac_ambiguity"
