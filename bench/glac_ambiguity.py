@@ -49,6 +49,7 @@ from scipy.optimize import least_squares
 from scattertrack import track as st_track
 from scattertrack.io.types import SPEED_OF_LIGHT
 from scattertrack.sim import load_scenario, simulate
+from scattertrack.sim.cots import round_trip_channel
 
 
 def _bench_run():
@@ -79,13 +80,16 @@ def motion_start_s(truth, speed_m_s: float = 0.01) -> float:
     return float(truth.time_s[moving[0]]) if moving.size else float(truth.time_s[0])
 
 
-def fit_trajectory(scene, reads, t0: float, t1: float, start, q: float, knot_s: float = 0.15) -> Fit:
+def fit_trajectory(scene, reads, t0: float, t1: float, start, q: float, knot_s: float = 0.15, reflectors=None) -> Fit:
     """Best smooth trajectory over the reads in [t0, t1] near ``start``.
 
     ``start(t)`` gives (n, 3) positions, m, to start from. Phases follow
     docs/formats.md §1: φ = sign·4π d/λ + θ_antenna + θ_channel (mod the reader's
     period); residuals are wrapped to ±period/2, so the fit stays on the
     candidate trajectory it starts on. 2D scenes keep z at the plane.
+    ``reflectors`` (the simulator's ``reader_model.reflectors``): the model
+    phase also carries their multipath excess, sign·excess (what a
+    likelihood that knew the walls would predict); None: a single path.
     """
     m = (reads.time_s >= t0) & (reads.time_s <= t1)
     t = reads.time_s[m]
@@ -116,8 +120,13 @@ def fit_trajectory(scene, reads, t0: float, t1: float, start, q: float, knot_s: 
 
     def residuals(c):
         p = spline(c)
-        d = np.linalg.norm(p(t) - anchors, axis=1)
-        e = phase - (sign * 4.0 * np.pi * d / wavelength + offsets)
+        positions = p(t)
+        d = np.linalg.norm(positions - anchors, axis=1)
+        model = sign * 4.0 * np.pi * d / wavelength + offsets
+        if reflectors:
+            _, excess, _ = round_trip_channel(anchors, positions, reads.frequency_hz[m], reflectors)
+            model = model + sign * excess
+        e = phase - model
         e = (e + period / 2) % period - period / 2
         acc = p.derivative(2)(grid)[:, :axes]
         return np.r_[e / sigma, (acc * prior_weight).ravel()]
@@ -151,12 +160,12 @@ def truth_at(truth, times) -> np.ndarray:
     return np.column_stack([np.interp(times, truth.time_s, truth.position[:, j]) for j in range(3)])
 
 
-def follow(scene, reads, t0: float, ends, start, q: float) -> Fit:
+def follow(scene, reads, t0: float, ends, start, q: float, reflectors=None) -> Fit:
     """fit_trajectory over growing windows [t0, end] for each end in turn,
     each started from the previous fit (held before, extrapolated at its last
     velocity after): a wrong candidate drifts relative to the truth, and a
     fit started from one shift over the whole span would lose it."""
-    fit = fit_trajectory(scene, reads, t0, ends[0], start, q)
+    fit = fit_trajectory(scene, reads, t0, ends[0], start, q, reflectors=reflectors)
     for end in ends[1:]:
         previous = fit.spline
         last = float(previous.t[-1])
@@ -167,7 +176,7 @@ def follow(scene, reads, t0: float, ends, start, q: float) -> Fit:
             inside = previous(np.minimum(t, last))
             return np.where((t > last)[:, None], previous(last) + np.outer(t - last, velocity), inside)
 
-        fit = fit_trajectory(scene, reads, t0, end, extended, q)
+        fit = fit_trajectory(scene, reads, t0, end, extended, q, reflectors=reflectors)
     return fit
 
 
@@ -191,7 +200,7 @@ def live_candidates(sim, until_s: float, wrong_m: float = 0.05, most: int = 8) -
     return [p for p, _ in ranked if np.linalg.norm(p - here) > wrong_m][:most]
 
 
-def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,)) -> dict | None:
+def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,), reflectors=None) -> dict | None:
     """The smoother's verdict on one run: of the wrong candidates GLAC holds
     at each of ``proposal_s`` after motion starts and at the deadline, the
     one that comes closest to explaining the reads up to the deadline as well
@@ -199,7 +208,7 @@ def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,)) -> d
     start = motion_start_s(sim.truth)
     deadline = start + within_s
     t0 = float(sim.reads.time_s.min())
-    truth_fit = fit_trajectory(sim.scene, sim.reads, t0, deadline, lambda t: truth_at(sim.truth, t), q)
+    truth_fit = fit_trajectory(sim.scene, sim.reads, t0, deadline, lambda t: truth_at(sim.truth, t), q, reflectors=reflectors)
     best, proposed = None, 0
     for after_s in sorted({*(s for s in proposal_s if s < within_s), within_s}):
         proposed_at = start + after_s
@@ -209,7 +218,7 @@ def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,)) -> d
             proposed += 1
             # Start from the truth shifted onto the candidate, then follow it.
             shift = p - there
-            fit = follow(sim.scene, sim.reads, t0, ends, lambda t, s=shift: truth_at(sim.truth, t) + s, q)
+            fit = follow(sim.scene, sim.reads, t0, ends, lambda t, s=shift: truth_at(sim.truth, t) + s, q, reflectors=reflectors)
             if not inside_region(sim.scene, fit, np.linspace(t0, deadline, 50)):
                 continue  # the scene's region rules this trajectory out
             if best is None or fit.cost < best.cost:
@@ -228,7 +237,7 @@ def verdict(sim, within_s: float = 1.0, q: float = 0.05, proposal_s=(0.5,)) -> d
 
 
 def excursion_verdicts(
-    sim, track, after_s: float, q: float, wrong_m: float = 0.05, window_s: float = 1.0, propose=None
+    sim, track, after_s: float, q: float, wrong_m: float = 0.05, window_s: float = 1.0, propose=None, reflectors=None
 ) -> list[dict]:
     """The smoother's verdict on each excursion of the reported track after
     ``after_s`` (absolute, s): rows more than ``wrong_m`` from the truth once
@@ -251,7 +260,7 @@ def excursion_verdicts(
         te = float(track.time_s[first])
         rows = int(np.argmin(wrong[first:])) if not wrong[first:].all() else len(wrong) - first
         t0 = te - window_s
-        truth_fit = fit_trajectory(sim.scene, sim.reads, t0, te, lambda t: truth_at(sim.truth, t), q)
+        truth_fit = fit_trajectory(sim.scene, sim.reads, t0, te, lambda t: truth_at(sim.truth, t), q, reflectors=reflectors)
         here = truth_at(sim.truth, [te])[0]
         best = None
         for p in propose(sim, te, wrong_m):
@@ -265,7 +274,7 @@ def excursion_verdicts(
                     weight = np.clip((np.asarray(t) - (te - ramp_s)) / ramp_s, 0.0, 1.0)
                     return truth_at(sim.truth, t) + weight[:, None] * shift
 
-                fit = fit_trajectory(sim.scene, sim.reads, t0, te, start, q)
+                fit = fit_trajectory(sim.scene, sim.reads, t0, te, start, q, reflectors=reflectors)
                 if np.linalg.norm(fit.spline(te) - here) <= wrong_m:
                     continue  # the fit slid back onto the truth: not a distinct trajectory
                 if not inside_region(sim.scene, fit, np.linspace(t0, te, 50)):
@@ -298,6 +307,18 @@ def parse_args(argv=None):
         default=[],
         metavar="ID,X,Y,Z",
         help="move antenna ID to (X, Y, Z) m before simulating (repeatable): try a layout before mounting it",
+    )
+    parser.add_argument(
+        "--model-reflectors",
+        action="store_true",
+        help="the fits model the scenario's reflectors (its reader_model.reflectors): would a likelihood that knew the walls tell the trajectories apart?",
+    )
+    parser.add_argument(
+        "--reflector-shift-m",
+        type=float,
+        default=0.0,
+        metavar="M",
+        help="with --model-reflectors, move each plane this far along its normal in the model (a wall known to M metres)",
     )
     parser.add_argument("--within-s", type=float, default=1.0, help="deadline after motion starts, s (default 1)")
     parser.add_argument("--q", type=float, default=0.05, help="smoothness prior, m²/s³ (default 0.05)")
@@ -334,6 +355,15 @@ def main(argv=None) -> int:
             if antenna["id"] == int(ident):
                 antenna["position"] = [float(v) for v in xyz]
     seeds = range(args.first_seed, args.first_seed + args.seeds)
+    reflectors = None
+    if args.model_reflectors:
+        reflectors = [dict(r) for r in scenario.get("reader_model", {}).get("reflectors", [])]
+        if not reflectors:
+            raise SystemExit(f"{args.scenario}: no reflectors to model")
+        for r in reflectors:
+            if r["kind"] == "plane":
+                normal = np.asarray(r["normal"], float)
+                r["point"] = list(np.asarray(r["point"], float) + args.reflector_shift_m * normal / np.linalg.norm(normal))
     for seed in seeds:
         sim = simulate(scenario, seed=seed)
         track = st_track.run("glac", sim.scene, sim.reads)
@@ -342,7 +372,7 @@ def main(argv=None) -> int:
         late += is_late
         if is_late:
             deadline = motion_start_s(sim.truth) + args.within_s
-            for e in excursion_verdicts(sim, track, deadline, args.q):
+            for e in excursion_verdicts(sim, track, deadline, args.q, reflectors=reflectors):
                 excursions += 1
                 unavoidable += e["delta"] < args.threshold
                 print(
@@ -351,7 +381,7 @@ def main(argv=None) -> int:
                     f"{'  indistinguishable' if e['delta'] < args.threshold else ''}",
                     flush=True,
                 )
-        v = verdict(sim, args.within_s, args.q)
+        v = verdict(sim, args.within_s, args.q, reflectors=reflectors)
         if v is None:
             continue
         same = v["delta"] < args.threshold
