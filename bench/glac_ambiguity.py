@@ -52,12 +52,14 @@ from scattertrack.sim import load_scenario, simulate
 from scattertrack.sim.cots import round_trip_channel
 
 
-def _bench_run():
-    """bench/run.py (its ``score``) as a module under a name that cannot clash."""
+def _bench(name: str):
+    """bench/<name>.py as a module under a name that cannot clash
+    (``bench_modules.load``): ``run`` for its ``score``, ``glac_robustness``
+    for its cells."""
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     import bench_modules
 
-    return bench_modules.load("run")
+    return bench_modules.load(name)
 
 
 @dataclass
@@ -138,8 +140,8 @@ def fit_trajectory(scene, reads, t0: float, t1: float, start, q: float, knot_s: 
     return Fit(spline(solution.x), float(np.sum(r[: len(t)] ** 2)), float(np.sum(r[len(t) :] ** 2)))
 
 
-REGION_MARGIN_M = 0.05
-"""GLAC's ``region_margin_m``: how far outside the scene's region a hypothesis may stray, m."""
+REGION_MARGIN_M = float(st_track.default_params("glac")["region_margin_m"])
+"""GLAC's ``region_margin_m`` (its default): how far outside the scene's region a hypothesis may stray, m."""
 
 
 def inside_region(scene, fit: Fit, times) -> bool:
@@ -247,9 +249,9 @@ def excursion_verdicts(
     just before starts from the truth and ramps onto the candidate over the
     last 0.1 or 0.2 s; a candidate that has competed all along starts from
     the truth shifted onto it over the whole window. A fit that slides back
-    onto the truth, or leaves the region, does not count. Δ < 3 means the reads so far favour neither:
-    a causal tracker cannot avoid the excursion (a smoother, with later reads,
-    can). ``propose(sim, t, wrong_m)`` gives the candidates (default: GLAC's,
+    onto the truth, or leaves the region, does not count. Δ < 3 means the
+    reads so far favour neither: a causal tracker cannot avoid the excursion
+    (a smoother, with later reads, can). ``propose(sim, t, wrong_m)`` gives the candidates (default: GLAC's,
     :func:`live_candidates`)."""
     propose = propose or live_candidates
     errors = np.linalg.norm(track.position - truth_at(sim.truth, track.time_s), axis=1)
@@ -330,13 +332,10 @@ def main(argv=None) -> int:
     args = parse_args(argv)
     late = late_indistinguishable = indistinguishable = 0
     excursions = unavoidable = 0
-    bench_run = _bench_run()
+    bench_run = _bench("run")
     if args.cell:
-        sys.path.insert(0, str(Path(__file__).resolve().parent))
-        import bench_modules
-
         layout, _, condition = args.cell.partition("/")
-        robustness = bench_modules.load("glac_robustness")
+        robustness = _bench("glac_robustness")
         if layout not in robustness.LAYOUTS or condition not in robustness.CONDITIONS:
             raise SystemExit(
                 f"unknown cell {args.cell!r}; layouts {', '.join(robustness.LAYOUTS)}, "

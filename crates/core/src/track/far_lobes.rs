@@ -33,7 +33,6 @@
 
 use nalgebra::{Matrix3, Vector3};
 
-
 use super::bistatic::{mixture_log_likelihood, HelperGeometry, Receiver};
 use super::lobes::{mixture_spread, path_length_step, LobeDecision, LobeFrame};
 

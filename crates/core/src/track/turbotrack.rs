@@ -64,7 +64,7 @@ use super::bistatic::{
 use super::key_hash::KeyMap;
 use super::far_lobes::{FarLobes, SLOTS as FAR_LOBE_SLOTS};
 use super::resting_average::{averaged_receivers, frame_covariance, ChannelAverage};
-use super::lobes::{mixture_spread, refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
+use super::lobes::{mixture_spread, multipath_frame, refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
 /// The registry's constructor of `turbotrack`: Algorithm 1 with the
@@ -856,7 +856,8 @@ impl TurboTrack {
     /// The resting average (`resting_average.rs`) on a frame: the frame
     /// joins the average; while the static particles carry
     /// `RESTING_STATIC_WEIGHT` of the weight and `RESTING_MIN_FRAMES` frames
-    /// are averaged, the averaged frame is fitted on the static mean's teeth. The average starts over when its
+    /// are averaged, the averaged frame is fitted on the static mean's
+    /// teeth. The average starts over when its
     /// fit leaves the particles' mode (`estimate`), not when the static
     /// weight dips: in a weakly observed direction the moving particles
     /// follow each frame's noise and win many frames of a resting tag.
@@ -925,7 +926,7 @@ impl TurboTrack {
         let mut candidates = self.params.candidates.clone();
         candidates.min_relative_weight = candidates.min_relative_weight.min(RESTING_LOBE_RELATIVE_WEIGHT);
         let mut receivers = averaged_receivers(&self.scene, &self.geometry, &self.average, &candidates, self.params.distance_sigma_m, fit);
-        if receivers.len() < self.geometry.needed() || super::lobes::multipath_frame(&receivers) {
+        if receivers.len() < self.geometry.needed() || multipath_frame(&receivers) {
             // A reflection biases the averaged envelope as it does each
             // frame's (`lobes::MULTIPATH_COHERENCE`): no lobe decision.
             return;
@@ -1050,7 +1051,7 @@ impl TurboTrack {
                 }
                 (mean, covariance, weight) = mode_mean(&self.positions, &self.log_weights, best, self.mode_radius());
             }
-        } else if let Some(receivers) = receivers.filter(|r| self.lobe_test() && !super::lobes::multipath_frame(r)) {
+        } else if let Some(receivers) = receivers.filter(|r| self.lobe_test() && !multipath_frame(r)) {
             // Another lobe won: the whole cloud moves there.
             if let Some(d) = self.test_lobes(receivers, &mean) {
                 self.move_cloud(&d);
@@ -1233,7 +1234,6 @@ const RESTING_LOBE_FRAMES: f64 = 30.0;
 /// The averaged frame's teeth kept for the resting lobe search, relative
 /// to the envelope's peak (one frame keeps those above half of it).
 const RESTING_LOBE_RELATIVE_WEIGHT: f64 = 0.05;
-
 
 /// Frames (effective, after forgetting) the resting average needs before
 /// its fit is the estimate: 10 frames lift a frame's SNR by 10 dB.
