@@ -1,13 +1,14 @@
-"""``scattertrack calibrate``: offsets, sign, period, hop table and path loss from reference tags.
+"""``scattertrack calibrate``: offsets, sign, period, hop table, path loss and walls from reference tags.
 
     scattertrack calibrate --scene S --reads R --reference EPC=x,y,z [EPC=x,y,z ...]
-                           [--truth truth.csv] --out calibrated.toml
+                           [--truth truth.csv] [--reflector-search-m 0.3] --out calibrated.toml
 
 Prints what it estimated and how well the calibrated model explains the
 references (docs/calibration.md says how to read it), writes the
 calibrated scene, and a ``warning:`` line for what the references could
 not decide (phase unusable in this room, a barely decided sign, channel
-indices a neighbouring carrier fits as well).
+indices a neighbouring carrier fits as well, a declared reflector the
+references do not pin down).
 """
 
 from __future__ import annotations
@@ -36,6 +37,14 @@ def reference(text: str) -> tuple[str, np.ndarray]:
     return epc.strip(), values
 
 
+def search_distance(text: str) -> float:
+    """A reflector search half-width: 0.01-2 m (beyond 2 m the wall is not the one declared)."""
+    value = ascii_float(text)
+    if not 0.01 <= value <= 2.0:
+        raise argparse.ArgumentTypeError(f"must be between 0.01 and 2 m, got {text}")
+    return value
+
+
 def add_parser(commands) -> None:
     calibrate = commands.add_parser(
         "calibrate",
@@ -43,12 +52,18 @@ def add_parser(commands) -> None:
         description="Calibrate a scene from reads of reference tags at known positions (--reference) or on a "
         "known trajectory (--truth): per-antenna and per-channel phase offsets (identifiable only as sums), the "
         "phase sign, a mod-pi reader, the hop table when the reads carry channel indices and the scene has none, "
-        "and per-antenna RSSI path loss. Prints residuals and the phase coherence; writes the calibrated scene.",
+        "and per-antenna RSSI path loss; refines the reflectors the scene declares ([[reflectors]]: each plane's offset "
+        "along its normal and each coefficient) or leaves out those the references cannot pin down. Prints residuals "
+        "and the phase coherence; writes the calibrated scene.",
     )
     calibrate.add_argument("--scene", required=True, help="scene.toml (positions are used; its offsets and sign are not)")
     calibrate.add_argument("--reads", required=True, help="reads.csv with the reference tags' reads")
     calibrate.add_argument("--reference", action="extend", nargs="+", type=reference, default=[], metavar="EPC=x,y,z", help="a static reference tag and its position, m (several after one flag, or the flag repeated)")
     calibrate.add_argument("--truth", help="truth.csv: reference tags moved along known trajectories")
+    calibrate.add_argument(
+        "--reflector-search-m", type=search_distance, default=None, metavar="M",
+        help="how far from where the scene declares a plane reflector its refined offset may be, m (default 0.3)",
+    )
     calibrate.add_argument("--out", required=True, help="calibrated scene.toml to write")
     calibrate.set_defaults(run=command_calibrate)
 
@@ -70,7 +85,10 @@ def command_calibrate(args) -> int:
     missing = [epc for epc in references if not np.any(np.asarray(reads.epc).astype(str) == epc)]
     if missing:
         warnings.warn(io.InputWarning(args.reads, None, "epc", f"no reads of reference {', '.join(missing)}"), stacklevel=1)
-    result = calibrate(scene, reads, references, truth)
+    from scattertrack.calibrate.reflectors import SEARCH_M
+
+    search = SEARCH_M if args.reflector_search_m is None else args.reflector_search_m
+    result = calibrate(scene, reads, references, truth, reflector_search_m=search)
     report(result)
     for message in result.warnings:
         warnings.warn(io.InputWarning(args.reads, None, None, message), stacklevel=1)
@@ -94,6 +112,10 @@ def report(result) -> None:
     if result.hop_table_hz:
         clear = sum(1 for v in result.hop_table_margin.values() if v > 0)
         say(f"  hop table: {len(result.hop_table_hz)} channel indices assigned to the US plan, {clear} clearly")
+    for fit in result.reflectors:
+        where = f"moved {100 * fit.shift_m:+.1f} cm along its normal (within {100 * fit.interval_m[0]:+.2f} to {100 * fit.interval_m[1]:+.2f} cm)" if fit.kind == "plane" else "position as declared"
+        verdict = "kept" if fit.kept else "LEFT OUT"
+        say(f"  reflector {fit.index} ({fit.kind}): {where}, coefficient {fit.coefficient:+.2f}, explains the references by {fit.gain_nats:.0f} nats: {verdict}")
     for antenna, loss in sorted(result.path_loss.items()):
         exponent = f"exponent {loss.exponent:.2f}" if loss.fitted_exponent else f"exponent {loss.exponent:.1f} (free space: the references' ranges do not spread enough to fit it)"
         say(f"  RSSI antenna {antenna}: {loss.reference_dbm:.1f} dBm at 1 m, {exponent}, spread {loss.sigma_db:.2f} dB")

@@ -243,6 +243,10 @@ def warn_about_geometry(scene, reads) -> None:
         return
     if scene.reader.kind != "cots":
         return
+    from scattertrack.check.calibration import reflector_warnings
+
+    for line in reflector_warnings(scene):
+        say(line)
     try:
         result = check.check_scene(scene, reads)
     except ValueError as error:
@@ -265,10 +269,10 @@ def command_check_scene(args) -> int:
         raise UsageError(f"check-scene checks reader scenes ([reader] kind = \"cots\", or \"sdr-helper\" without "
                          f"--reads), not {scene.reader.kind!r}" + (" with --reads" if args.reads else ""))
     reads = io.read_reads(args.reads, scene) if args.reads else None
-    from scattertrack.check.calibration import calibration_lines
+    from scattertrack.check.calibration import calibration_lines, reflector_warnings
 
     # What is not calibrated first; the geometry's verdict stays the last line.
-    for line in calibration_lines(scene, reads):
+    for line in calibration_lines(scene, reads) + reflector_warnings(scene):
         say(line)
     for line in check.check_scene(scene, reads).lines():
         say(line)

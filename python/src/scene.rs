@@ -11,13 +11,15 @@
 //! every antenna as transmit-and-receive; a localization helper's scene
 //! (`sdr-helper`) brings each antenna's `role` ("tx", "rx" or "txrx") for
 //! the bistatic trackers, and no channel offsets (its frames are
-//! calibrated per subcarrier). A scene the core rejects is a ValueError
-//! with the core's message.
+//! calibrated per subcarrier). A monostatic scene's `reflectors` (when
+//! the attribute exists: `kind` "plane" with `point`, `normal`, or "point"
+//! with `position`; and `coefficient`) become the core's known reflectors.
+//! A scene the core rejects is a ValueError with the core's message.
 
 use nalgebra::Vector3;
 use pyo3::prelude::*;
 
-use scattertrack_core::scene::{Antenna, ChannelOffset, Region, Role, Scene as CoreScene};
+use scattertrack_core::scene::{Antenna, ChannelOffset, Reflector, Region, Role, Scene as CoreScene};
 
 use crate::value_error;
 
@@ -89,8 +91,33 @@ pub fn core_scene(scene: &Bound<'_, PyAny>) -> PyResult<CoreScene> {
             });
         }
     }
+    let reflectors = if helper { Vec::new() } else { reflectors(scene)? };
     CoreScene::new(dimensions, plane_z.unwrap_or(0.0), phase_sign, phase_period, phase_noise_rad, antennas, region, channels)
+        .and_then(|s| s.with_reflectors(reflectors))
         .map_err(value_error)
+}
+
+/// The scene's `reflectors` (none when it has no such attribute).
+fn reflectors(scene: &Bound<'_, PyAny>) -> PyResult<Vec<Reflector>> {
+    let mut out = Vec::new();
+    if !scene.hasattr("reflectors")? {
+        return Ok(out);
+    }
+    for (i, r) in scene.getattr("reflectors")?.try_iter()?.enumerate() {
+        let r = r?;
+        let kind: String = r.getattr("kind")?.extract()?;
+        let coefficient: f64 = r.getattr("coefficient")?.extract()?;
+        out.push(match kind.as_str() {
+            "plane" => Reflector::Plane {
+                point: triple(&r.getattr("point")?, &format!("reflector {i} point"))?,
+                normal: triple(&r.getattr("normal")?, &format!("reflector {i} normal"))?,
+                coefficient,
+            },
+            "point" => Reflector::Point { position: triple(&r.getattr("position")?, &format!("reflector {i} position"))?, coefficient },
+            other => return Err(value_error(format!("reflector {i}: kind must be plane or point, got {other}"))),
+        });
+    }
+    Ok(out)
 }
 
 #[pymethods]
@@ -122,12 +149,13 @@ impl Scene {
 
     fn __repr__(&self) -> String {
         format!(
-            "Scene(dimensions={}, antennas={}, phase_noise_rad={}, region={}, channel_offsets={})",
+            "Scene(dimensions={}, antennas={}, phase_noise_rad={}, region={}, channel_offsets={}, reflectors={})",
             self.inner.dimensions,
             self.inner.antennas.len(),
             self.inner.phase_noise_rad,
             self.inner.region.is_some(),
-            self.inner.channel_offsets.len()
+            self.inner.channel_offsets.len(),
+            self.inner.reflectors.len()
         )
     }
 }

@@ -86,6 +86,18 @@ pub struct ChannelOffset {
     pub phase_offset_rad: f64,
 }
 
+/// A reflector the user knows of (docs/formats.md section 1,
+/// `[[reflectors]]`): it adds a path to every read
+/// ([`crate::model::apparent_range`]). Γ is the signed amplitude
+/// reflection coefficient, |Γ| ≤ 1.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Reflector {
+    /// A flat wall, floor or ceiling through `point` (m) with unit `normal`.
+    Plane { point: Vector3<f64>, normal: Vector3<f64>, coefficient: f64 },
+    /// A small scatterer at `position` (m).
+    Point { position: Vector3<f64>, coefficient: f64 },
+}
+
 /// A monostatic reader set-up as the trackers see it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Scene {
@@ -102,6 +114,9 @@ pub struct Scene {
     pub antennas: Vec<Antenna>,
     pub region: Option<Region>,
     pub channel_offsets: Vec<ChannelOffset>,
+    /// Known reflectors (empty: the single-path model); set with
+    /// [`Scene::with_reflectors`].
+    pub reflectors: Vec<Reflector>,
 }
 
 impl Scene {
@@ -169,7 +184,38 @@ impl Scene {
             antennas,
             region,
             channel_offsets,
+            reflectors: Vec::new(),
         })
+    }
+
+    /// The scene with known `reflectors` (normals made unit). Fails on a
+    /// non-finite value, a zero normal or |Γ| > 1.
+    pub fn with_reflectors(mut self, reflectors: Vec<Reflector>) -> Result<Self> {
+        let bad = |m: String| Err(Error::Scene(m));
+        let finite = |v: &Vector3<f64>| v.iter().all(|c| c.is_finite());
+        self.reflectors = Vec::with_capacity(reflectors.len());
+        for (i, r) in reflectors.into_iter().enumerate() {
+            let (coefficient, r) = match r {
+                Reflector::Plane { point, normal, coefficient } => {
+                    let length = normal.norm();
+                    if !finite(&point) || !finite(&normal) || !(length > 1e-12) {
+                        return bad(format!("reflector {i}: plane needs a finite point and a nonzero normal"));
+                    }
+                    (coefficient, Reflector::Plane { point, normal: normal / length, coefficient })
+                }
+                Reflector::Point { position, coefficient } => {
+                    if !finite(&position) {
+                        return bad(format!("reflector {i}: non-finite position"));
+                    }
+                    (coefficient, r)
+                }
+            };
+            if !(coefficient.abs() <= 1.0) {
+                return bad(format!("reflector {i}: coefficient must be in [-1, 1]"));
+            }
+            self.reflectors.push(r);
+        }
+        Ok(self)
     }
 
     /// Calibrated offset θ_ch(f) of the channel within 1 kHz of `frequency_hz`; 0 if none.
@@ -253,6 +299,22 @@ mod tests {
             .map(|(i, p)| Antenna { id: i as i64 + 1, position: Vector3::new(p[0], p[1], 0.0), phase_offset_rad: 0.3 * i as f64, role: Default::default() })
             .collect();
         Scene::new(dimensions, 0.0, -1.0, TWO_PI, 0.1, antennas, None, vec![]).unwrap()
+    }
+
+    #[test]
+    fn reflectors_are_validated_and_their_normals_made_unit() {
+        let plane = |normal: Vector3<f64>, coefficient: f64| Reflector::Plane { point: Vector3::new(1.6, 0.0, 0.0), normal, coefficient };
+        let scene = glac_scene(3).with_reflectors(vec![plane(Vector3::new(-2.0, 0.0, 0.0), 0.3)]).unwrap();
+        match scene.reflectors[0] {
+            Reflector::Plane { normal, .. } => assert!((normal - Vector3::new(-1.0, 0.0, 0.0)).norm() < 1e-15),
+            _ => unreachable!(),
+        }
+        assert!(glac_scene(3).with_reflectors(vec![plane(Vector3::zeros(), 0.3)]).is_err(), "zero normal");
+        assert!(glac_scene(3).with_reflectors(vec![plane(Vector3::new(1.0, 0.0, 0.0), 1.5)]).is_err(), "|coefficient| > 1");
+        assert!(glac_scene(3).with_reflectors(vec![plane(Vector3::new(1.0, 0.0, 0.0), f64::NAN)]).is_err(), "NaN coefficient");
+        let point = Reflector::Point { position: Vector3::new(f64::INFINITY, 0.0, 0.0), coefficient: 0.1 };
+        assert!(glac_scene(3).with_reflectors(vec![point]).is_err(), "non-finite position");
+        assert!(glac_scene(3).reflectors.is_empty(), "none unless given");
     }
 
     #[test]

@@ -13,7 +13,10 @@ for the EPC). It estimates, from those reads alone:
   stated with circular mean 0 and the antennas carry the rest;
 * the **hop table**, when the reads carry channel indices and the scene
   has none (:mod:`~scattertrack.calibrate.hop_table`);
-* the **RSSI path loss** per antenna (:mod:`~scattertrack.calibrate.path_loss`).
+* the **RSSI path loss** per antenna (:mod:`~scattertrack.calibrate.path_loss`);
+* the scene's declared **reflectors**, refined: each plane's offset along
+  its normal and each coefficient, or left out with a ``warning:`` when the
+  references cannot pin them down (:mod:`~scattertrack.calibrate.reflectors`).
 
 It reports the **phase coherence** R of the calibrated model on the
 references (1: every phase explained; the same fit on random phases
@@ -36,7 +39,10 @@ import numpy as np
 from scattertrack.calibrate.hop_table import assign_carriers
 from scattertrack.calibrate.path_loss import PathLoss, fit_path_loss
 from scattertrack.calibrate.phase import chance_coherence, fit_offsets, looks_mod_pi, round_trip_phase
+from scattertrack.calibrate.reflectors import SEARCH_M, ReflectorFit, refine_reflectors
 from scattertrack.io.hop_table import US_PLAN_HZ
+from scattertrack.io.types import Reflector
+from scattertrack.physics import round_trip_channel
 from scattertrack.io.types import ChannelOffset, Reads, Scene, Truth
 
 COHERENCE_USABLE = 0.8
@@ -73,6 +79,8 @@ class Calibration:
     references: list
     base_scene: Scene = field(repr=False)
     warnings: list = field(default_factory=list)
+    reflectors: list[ReflectorFit] = field(default_factory=list)
+    """One fit per reflector the scene declared, in its order."""
 
     @property
     def phase_usable(self) -> bool:
@@ -89,7 +97,10 @@ class Calibration:
         extra = dict(base.extra)
         extra["calibration"] = self.table()
         hop_table = {int(i): float(f) for i, f in sorted(self.hop_table_hz.items())} if self.hop_table_hz else dict(base.hop_table)
-        return dataclasses.replace(base, reader=reader, antennas=antennas, channel_offsets=channels, extra=extra, hop_table=hop_table)
+        changes = dict(reader=reader, antennas=antennas, channel_offsets=channels, extra=extra, hop_table=hop_table)
+        if self.reflectors:
+            changes["reflectors"] = [reflector_of(f.reflector) for f in self.reflectors if f.kept]
+        return dataclasses.replace(base, **changes)
 
     def table(self) -> dict:
         """The ``[calibration]`` table of the calibrated scene (plain TOML values)."""
@@ -101,15 +112,36 @@ class Calibration:
             "phase_usable": bool(self.phase_usable),
             "calibrated": ["phase_sign", "phase_period", "antenna_offsets", "channel_offsets"]
             + (["hop_table"] if self.hop_table_hz else [])
-            + (["path_loss"] if self.path_loss else []),
+            + (["path_loss"] if self.path_loss else [])
+            + (["reflectors"] if self.reflectors else []),
             "antenna_residual_rad": [{"antenna": int(a), "rms": round(float(r), 4)} for a, r in sorted(self.residual_rad.items())],
         }
+        if self.reflectors:
+            table["reflectors"] = [
+                {
+                    "reflector": f.index,
+                    "kept": f.kept,
+                    "shift_m": round(f.shift_m, 4),
+                    "interval_m": [round(v, 4) for v in f.interval_m],
+                    "coefficient": round(f.coefficient, 3),
+                    "gain_nats": round(f.gain_nats, 1),
+                }
+                for f in self.reflectors
+            ]
         if self.path_loss:
             table["path_loss"] = [
                 {"antenna": int(a), "reference_dbm": round(p.reference_dbm, 3), "exponent": round(p.exponent, 4), "sigma_db": round(p.sigma_db, 3), "fitted_exponent": p.fitted_exponent}
                 for a, p in sorted(self.path_loss.items())
             ]
         return table
+
+
+def reflector_of(values: dict) -> Reflector:
+    """The scene's :class:`~scattertrack.io.scene.Reflector` of a refined reflector's plain values."""
+    array = lambda key: None if key not in values else np.asarray(values[key], dtype=np.float64)  # noqa: E731
+    return Reflector(
+        kind=values["kind"], coefficient=float(values["coefficient"]), point=array("point"), normal=array("normal"), position=array("position")
+    )
 
 
 def reference_positions(reads: Reads, references: dict | None, truth: Truth | None) -> tuple[np.ndarray, np.ndarray]:
@@ -144,8 +176,13 @@ def _indices(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return keys, index
 
 
-def calibrate(scene: Scene, reads: Reads, references: dict | None = None, truth: Truth | None = None) -> Calibration:
+def calibrate(
+    scene: Scene, reads: Reads, references: dict | None = None, truth: Truth | None = None, reflector_search_m: float = SEARCH_M
+) -> Calibration:
     """Calibrate ``scene`` from the reads of reference tags (see the module docstring).
+
+    ``reflector_search_m``: how far (m) from where the scene declares a
+    plane reflector its refined offset may be.
 
     Raises ValueError when no read belongs to a reference, or the references
     were read by fewer than one antenna."""
@@ -195,6 +232,21 @@ def calibrate(scene: Scene, reads: Reads, references: dict | None = None, truth:
                 f"the references cannot tell {len(unclear)} of {len(margins)} channel indices from a neighbouring carrier "
                 f"(e.g. index {unclear[0]}): spread the reference tags over a few metres of range, or move one along a known path"
             )
+    declared = list(getattr(scene, "reflectors", []) or [])
+    reflector_fits = []
+    if declared:
+        reflector_fits = refine_reflectors(
+            declared, phase, frequency, anchor, positions[ref], antenna, channel, tag, counts, sign, m, reflector_search_m
+        )
+        kept = [f.reflector for f in reflector_fits if f.kept]
+        for f in reflector_fits:
+            if not f.kept:
+                warnings.append(f"reflector {f.index} ({f.kind}) left out of the calibrated scene: {f.reason}")
+        if kept:
+            _, excess, _ = round_trip_channel(anchor, positions[ref], frequency, kept)
+            geometric = round_trip_phase(frequency, distance) + excess
+            fit = fit_offsets(m * (phase - sign * geometric), antenna, channel, tag, counts)
+            other = fit_offsets(m * (phase + sign * geometric), antenna, channel, tag, counts)
     chance = chance_coherence(antenna, channel, tag, counts)
     period_rad = math.pi if period == "pi" else 2.0 * math.pi
     to_phase = lambda theta: float(np.mod(theta / m, period_rad))  # noqa: E731 - the m-circle back to reported phase
@@ -219,6 +271,7 @@ def calibrate(scene: Scene, reads: Reads, references: dict | None = None, truth:
         references=[str(t) for t in tag_keys],
         base_scene=scene,
         warnings=warnings,
+        reflectors=reflector_fits,
     )
     if counts[1] == 1:
         # One channel: its offset and the antennas' are one sum; the antennas carry it.

@@ -13,6 +13,13 @@ one antenna with ``role = "tx"`` and at least two with ``role = "rx"`` (no
 (``centre_frequency_hz``, ``bandwidth_hz`` in hertz, ``n_subcarriers``,
 ``blf_hz`` in hertz) and is kept in ``Scene.extra["helper"]``.
 
+A ``cots`` scene may declare known reflectors (``[[reflectors]]``, kept in
+``Scene.reflectors``): walls (``kind = "plane"``: a ``point`` on it and its
+``normal``, stored unit length) and point scatterers (``kind = "point"``: its
+``position``), each with an amplitude reflection ``coefficient`` in [-1, 1],
+the keys of the simulator's ``[[reader_model.reflectors]]``; trackers that
+model multipath add their phase excess (docs/formats.md section 1).
+
 Errors name the key path as the "column" (``antennas[2].position``, list
 indices 0-based as in ``Scene.antennas``) and the 1-based line where that key
 is written, found by scanning the text (tomllib does not report positions).
@@ -42,6 +49,13 @@ HELPER_ROLES = ("tx", "rx")
 HELPER_NUMBERS = ("centre_frequency_hz", "bandwidth_hz", "blf_hz")
 """Positive numbers (hertz) of a helper scene's ``[helper]`` table; ``n_subcarriers`` is a positive integer."""
 PERIODS = ("2pi", "pi")
+REFLECTOR_KEYS = {"plane": ("point", "normal", "coefficient"), "point": ("position", "coefficient")}
+"""Keys of each reflector kind besides ``kind`` (all required); the simulator's
+``[[reader_model.reflectors]]`` take the same."""
+REFLECTOR_READER_KINDS = ("cots",)
+"""Reader kinds whose scenes may declare ``[[reflectors]]`` (the monostatic multipath model)."""
+ON_PLANE_M = 1e-3
+"""An antenna within this distance of a plane reflector, metres, is warned (valid but suspicious)."""
 KNOWN_KEYS = {
     "reader": ("kind", "phase_sign", "phase_period", "phase_noise_rad"),
     "antennas": ("id", "position", "phase_offset_rad", "role"),
@@ -49,6 +63,7 @@ KNOWN_KEYS = {
     "channel_offsets": ("frequency_hz", "phase_offset_rad"),
     "helper": ("centre_frequency_hz", "bandwidth_hz", "n_subcarriers", "blf_hz"),
     "hop_table": ("channel_index", "frequency_hz"),
+    "reflectors": ("kind", "point", "normal", "position", "coefficient"),
 }
 """Keys of the known tables; another key there is accepted with a warning (it is likely a typo
 whose setting would otherwise be lost without a word)."""
@@ -65,6 +80,7 @@ KNOWN_TOP_LEVEL = (
     "region",
     "channel_offsets",
     "hop_table",
+    "reflectors",
 )
 
 
@@ -114,6 +130,29 @@ class ChannelOffset:
 
 
 @dataclass
+class Reflector:
+    """A known reflector (``[[reflectors]]``): a wall or a point scatterer, docs/formats.md section 1."""
+
+    kind: str
+    """"plane" (an infinite mirror) or "point" (a point scatterer)."""
+    coefficient: float
+    """Amplitude reflection coefficient in [-1, 1] (negative: a phase flip)."""
+    point: np.ndarray | None = None
+    """A plane's point on it, metres, shape (3,); None for a point scatterer."""
+    normal: np.ndarray | None = None
+    """A plane's unit normal, shape (3,); None for a point scatterer."""
+    position: np.ndarray | None = None
+    """A point scatterer's position, metres, shape (3,); None for a plane."""
+
+    def __post_init__(self):
+        self.coefficient = float(self.coefficient)
+        for name in ("point", "normal", "position"):
+            value = getattr(self, name)
+            if value is not None:
+                setattr(self, name, np.asarray(value, dtype=np.float64))
+
+
+@dataclass
 class Scene:
     """A hardware set-up (``scene.toml``)."""
 
@@ -131,6 +170,8 @@ class Scene:
     hop_table: dict[int, float] = field(default_factory=dict)
     """The reader's hop table (``[[hop_table]]``): its 1-based channel index -> carrier, hertz.
     Empty when the scene gives none. LLRP readers report this index, not a frequency."""
+    reflectors: list[Reflector] = field(default_factory=list)
+    """Known reflectors the user declares (``[[reflectors]]``, cots scenes only); empty when none."""
 
     def antenna_index(self, antenna_id: int) -> int:
         """Index into ``antennas`` of the antenna with this port id (KeyError if none)."""
@@ -364,6 +405,7 @@ class _SceneChecker:
             region = self.region(self.table(document, "region"), dimensions, plane_z)
         channel_offsets = self.channel_offsets(document)
         hop_table = self.hop_table(document)
+        reflectors = self.reflectors(document, reader.kind, antennas)
         extra = {k: v for k, v in document.items() if k not in KNOWN_TOP_LEVEL}
         if reader.kind == "sdr-helper":
             self.helper_roles(antennas)
@@ -379,6 +421,7 @@ class _SceneChecker:
             channel_offsets=channel_offsets,
             extra=extra,
             hop_table=hop_table,
+            reflectors=reflectors,
         )
 
     def reader(self, table: dict) -> Reader:
@@ -531,3 +574,55 @@ class _SceneChecker:
                 raise self.fail(f"{where}.frequency_hz", units.frequency_message(repr(entry["frequency_hz"]), frequency))
             table[index] = frequency
         return table
+
+    def reflectors(self, document: dict, kind: str, antennas: list[Antenna]) -> list[Reflector]:
+        """Known reflectors (``[[reflectors]]``, cots scenes only): planes and point scatterers."""
+        tables = self.array_of_tables(document, "reflectors")
+        if tables and kind not in REFLECTOR_READER_KINDS:
+            raise self.fail(
+                "reflectors",
+                f"only 'cots' scenes take [[reflectors]] for now; this one has reader.kind = {kind!r}",
+            )
+        reflectors = []
+        for i, table in enumerate(tables):
+            where = f"reflectors[{i}]"
+            self.warn_unknown_keys(table, "reflectors", where)
+            reflector_kind = self.choice(table, "kind", f"{where}.kind", tuple(REFLECTOR_KEYS))
+            for key in table:
+                if key != "kind" and key in KNOWN_KEYS["reflectors"] and key not in REFLECTOR_KEYS[reflector_kind]:
+                    self.warn(f"{where}.{key}", f"not a key of a {reflector_kind!r} reflector (ignored); its keys are "
+                                                f"kind, {', '.join(REFLECTOR_KEYS[reflector_kind])}")
+            vectors = {key: self.vector3(table, key, f"{where}.{key}")
+                       for key in REFLECTOR_KEYS[reflector_kind] if key != "coefficient"}
+            coefficient = self.number(table, "coefficient", f"{where}.coefficient")
+            if not -1.0 <= coefficient <= 1.0:
+                raise self.fail(f"{where}.coefficient", "expected an amplitude reflection coefficient in [-1, 1], "
+                                                        f"found {table['coefficient']!r}")
+            if reflector_kind == "plane":
+                normal = vectors["normal"]
+                if not normal.any():
+                    raise self.fail(f"{where}.normal", f"expected a non-zero vector, found {table['normal']!r}")
+                if not 1e-150 < np.linalg.norm(normal) < math.inf:  # huge or tiny components: scale first
+                    normal = normal / np.abs(normal).max()
+                length = float(np.linalg.norm(normal))
+                if abs(length - 1.0) > 4.0 * np.finfo(np.float64).eps:  # unit already: left as is, so nothing drifts
+                    normal = normal / length
+                vectors["normal"] = normal
+                self.plane_sides(where, vectors["point"], vectors["normal"], antennas)
+            reflectors.append(Reflector(kind=reflector_kind, coefficient=coefficient, **vectors))
+        return reflectors
+
+    def plane_sides(self, where: str, point: np.ndarray, normal: np.ndarray, antennas: list[Antenna]) -> None:
+        """Warn about a plane with an antenna (nearly) on it, or with antennas on both sides of it."""
+        sides = {int(a.id): float((a.position - point) @ normal) for a in antennas}
+        on = [i for i, side in sides.items() if abs(side) <= ON_PLANE_M]
+        if on:
+            self.warn(where, f"antenna{'s' if len(on) > 1 else ''} {', '.join(map(str, on))} within "
+                             f"{ON_PLANE_M * 1e3:g} mm of this plane reflector: a mirror reflects only between points "
+                             "on the same side of it, so its path is unreliable there (check point and normal)")
+        front = [i for i, side in sides.items() if side > ON_PLANE_M]
+        back = [i for i, side in sides.items() if side < -ON_PLANE_M]
+        if front and back:
+            self.warn(where, f"antennas on both sides of this plane reflector (in front: {', '.join(map(str, front))}; "
+                             f"behind: {', '.join(map(str, back))}): a wall between antennas is unusual "
+                             "(check point and normal)")

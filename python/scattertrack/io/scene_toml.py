@@ -107,6 +107,13 @@ def write_scene(path, scene) -> None:
     for index, frequency in sorted(scene.hop_table.items()):
         lines += ["", "[[hop_table]]", f"channel_index = {int(index)}", f"frequency_hz = {float(frequency)!r}"]
 
+    for reflector in scene.reflectors:
+        lines += ["", "[[reflectors]]", f"kind = {_toml_string(reflector.kind)}"]
+        for key in ("point", "normal", "position"):
+            if getattr(reflector, key) is not None:
+                lines.append(f"{key} = {_vector(getattr(reflector, key))}")
+        lines.append(f"coefficient = {float(reflector.coefficient)!r}")
+
     for key, table in extra_tables.items():
         lines += ["", f"[{_toml_key(key)}]"]
         lines += [f"{_toml_key(k)} = {_toml_value(v)}" for k, v in table.items()]

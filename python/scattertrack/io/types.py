@@ -22,7 +22,7 @@ from scattertrack.physics import SPEED_OF_LIGHT  # noqa: F401 - a public name of
 
 
 from scattertrack.io.errors import FormatError, InputWarning, warn_input  # noqa: F401 - the io contract's names
-from scattertrack.io.scene import Antenna, ChannelOffset, Reader, Region, Scene  # noqa: F401 - with its format
+from scattertrack.io.scene import Antenna, ChannelOffset, Reader, Reflector, Region, Scene  # noqa: F401 - with its format
 
 
 @dataclass

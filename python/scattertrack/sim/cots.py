@@ -68,8 +68,9 @@ from __future__ import annotations
 import numpy as np
 
 from scattertrack.io.hop_table import US_PLAN_HZ
+from scattertrack.io.scene import REFLECTOR_KEYS  # noqa: F401 - the scenario checks' name
 from scattertrack.io.types import Reads
-from scattertrack.physics import SPEED_OF_LIGHT
+from scattertrack.physics import SPEED_OF_LIGHT, round_trip_channel
 from scattertrack.sim.trajectory import positions_velocities
 
 US_CHANNELS_HZ = US_PLAN_HZ
@@ -142,8 +143,6 @@ READER_MODEL_DEFAULTS = {
 }
 """Every ``[reader_model]`` key with its default (units in the comments)."""
 
-REFLECTOR_KEYS = {"plane": ("point", "normal", "coefficient"), "point": ("position", "coefficient")}
-"""Keys of each reflector kind (all required)."""
 
 
 def resolve_noise(model: dict) -> dict:
@@ -244,47 +243,6 @@ def channel_index(time_s: np.ndarray, n_channels: int, dwell_s: float, clock_off
     if n_channels == 1:
         return np.zeros(len(time_s), dtype=np.int64)
     return (np.floor((time_s + clock_offset_s) / dwell_s).astype(np.int64)) % n_channels
-
-
-def round_trip_channel(
-    antenna_position: np.ndarray, tag_position: np.ndarray, frequency_hz: np.ndarray, reflectors: list[dict]
-) -> tuple[np.ndarray, np.ndarray]:
-    """Direct distance (m) and multipath round-trip phase excess (rad) and amplitude.
-
-    Returns ``(distance, excess_rad, amplitude)`` for rows of antenna and tag
-    positions (m, shape (n, 3)) and carriers (Hz, (n,)): ``amplitude = |h|``
-    (1/m^2) of the round-trip channel ``h = (sum_p a_p e^{-j 2 pi f d_p / c})^2``
-    and ``excess = -arg(h e^{+j 4 pi f d / c})`` (rad, 0 without reflectors).
-    """
-    offset = tag_position - antenna_position
-    distance = np.linalg.norm(offset, axis=1)
-    wavenumber = 2.0 * np.pi * frequency_hz / SPEED_OF_LIGHT  # rad/m
-    # One-way channel relative to the direct path's phase: the direct path
-    # contributes 1/d, each reflected path (c_p/d_p) e^{-j k (d_p - d)}.
-    relative = (1.0 / distance).astype(complex)
-    for reflector in reflectors:
-        coefficient = float(reflector["coefficient"])
-        if reflector["kind"] == "plane":
-            point = np.asarray(reflector["point"], float)
-            normal = np.asarray(reflector["normal"], float)
-            normal = normal / np.linalg.norm(normal)
-            antenna_side = (antenna_position - point) @ normal
-            tag_side = (tag_position - point) @ normal
-            image = antenna_position - 2.0 * antenna_side[:, None] * normal
-            length = np.linalg.norm(tag_position - image, axis=1)
-            # A mirror only reflects between points on the same side of it.
-            present = antenna_side * tag_side > 0.0
-        else:  # point scatterer
-            scatterer = np.asarray(reflector["position"], float)
-            length = np.linalg.norm(scatterer - antenna_position, axis=1) + np.linalg.norm(
-                tag_position - scatterer, axis=1
-            )
-            present = np.ones(len(distance), dtype=bool)
-        path = coefficient / length * np.exp(-1j * wavenumber * (length - distance))
-        relative += np.where(present, path, 0.0)
-    round_trip = relative**2
-    excess = -np.angle(round_trip)
-    return distance, excess, np.abs(round_trip)
 
 
 def ornstein_uhlenbeck(

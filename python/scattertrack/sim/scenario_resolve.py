@@ -33,7 +33,7 @@ TOP_LEVEL_DEFAULTS = {
     "truth_rate_hz": 200.0,  # Hz, ground-truth sampling rate
 }
 
-_SCENE_KEYS = ("name", "dimensions", "plane_z", "reader", "antennas", "region")
+_SCENE_KEYS = ("name", "dimensions", "plane_z", "reader", "antennas", "region", "reflectors")
 _READER_KEYS = ("phase_sign", "phase_period", "phase_noise_rad")
 _ANTENNA_KEYS = ("id", "position", "phase_offset_rad")
 _TAG_KEYS = ("epc", "trajectory", "phase_offset_rad")
@@ -100,6 +100,8 @@ def _resolve_scene(check: Checker, data: dict, helper: bool) -> dict:
     if "scene" not in data:
         check.fail("scene", "missing")
     scene = check.table(data["scene"], "scene")
+    if helper and "reflectors" in scene:
+        _no_declared_reflectors(check, "turbotrack")
     check.keys(scene, _HELPER_SCENE_KEYS if helper else _SCENE_KEYS, "scene")
     scene.setdefault("name", data["name"])
     check.string(scene["name"], "scene.name")
@@ -122,7 +124,27 @@ def _resolve_scene(check: Checker, data: dict, helper: bool) -> dict:
         check.choice(reader.setdefault("phase_period", "2pi"), "scene.reader.phase_period", ("2pi", "pi"))
         if "phase_noise_rad" in reader:
             reader["phase_noise_rad"] = check.number(reader["phase_noise_rad"], "scene.reader.phase_noise_rad", 0.0)
+        if "reflectors" in scene:
+            _resolve_declared_reflectors(check, scene["reflectors"])
     return scene
+
+
+def _resolve_declared_reflectors(check: Checker, reflectors) -> None:
+    """``[[scene.reflectors]]`` in place: the reflectors the user declares, copied to scene.toml as
+    ``[[reflectors]]`` (docs/formats.md section 1). They tell the tracker; they do not change the
+    simulated reads, which only ``[[reader_model.reflectors]]`` bend."""
+    check_reflectors(check, reflectors, "scene.")
+    for i, reflector in enumerate(reflectors):
+        check.number(reflector["coefficient"], f"scene.reflectors[{i}].coefficient", -1.0, maximum=1.0)
+
+
+def _no_declared_reflectors(check: Checker, pipeline: str) -> None:
+    """A scene of a pipeline other than glac declares reflectors: only cots scenes take them."""
+    check.fail(
+        "scene.reflectors",
+        f"only COTS-reader (glac) scenes declare reflectors for now; this is a {pipeline} scenario"
+        + (" (its multipath is [[helper_model.reflectors]])" if pipeline == "turbotrack" else ""),
+    )
 
 
 def _resolve_antennas(check: Checker, scene: dict, helper: bool) -> set:
@@ -210,6 +232,8 @@ def _resolve_marvel(check: Checker, data: dict) -> dict:
     data["truth_rate_hz"] = check.number(data["truth_rate_hz"], "truth_rate_hz", 100.0)
 
     scene = check.table(data.setdefault("scene", {}), "scene")
+    if "reflectors" in scene:
+        _no_declared_reflectors(check, "marvel")
     check.keys(scene, _MARVEL_SCENE_KEYS, "scene")
     scene.setdefault("name", data["name"])
     check.string(scene["name"], "scene.name")

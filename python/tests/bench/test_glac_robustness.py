@@ -111,6 +111,21 @@ def test_the_largest_gap_leaves_out_read_outages(robustness):
     assert robustness.largest_estimate_gap_s(silent, reads) == pytest.approx(0.63, abs=0.02)
 
 
+def test_the_wall_calibration_sweeps_a_reference_in_the_same_room(robustness):
+    calibration = robustness.wall_calibration
+    scenario = robustness.cell_scenario("bay", "multipath")
+    scenario["reader_model"]["dropout_windows"] = [[5.0, 15.0]]
+    sweep = calibration.calibration_scenario(scenario)
+    (wall,) = scenario["reader_model"]["reflectors"]
+    (declared,) = sweep["scene"]["reflectors"]
+    # Declared 4 cm nearer the antennas (along the normal), with a rough coefficient of the right sign.
+    assert np.allclose(np.asarray(declared["point"]) - np.asarray(wall["point"]), [-calibration.DECLARED_OFFSET_M, 0.0, 0.0])
+    assert declared["coefficient"] == calibration.DECLARED_COEFFICIENT * np.sign(wall["coefficient"])
+    assert sweep["reader_model"]["reflectors"] == scenario["reader_model"]["reflectors"] and "dropout_windows" not in sweep["reader_model"]
+    assert [t["trajectory"]["kind"] for t in sweep["tags"]] == ["random"] and sweep["duration_s"] == calibration.SWEEP_S
+    assert sweep["scene"]["antennas"] == scenario["scene"]["antennas"] and "reflectors" not in scenario["scene"]
+
+
 def test_the_block_runs_into_a_table_and_json(robustness, tmp_path, capsys):
     outside = tmp_path / "outside"
     sim = simulate(robustness.cell_scenario("workcell", "baseline", duration_s=4.0), seed=3)
@@ -120,17 +135,21 @@ def test_the_block_runs_into_a_table_and_json(robustness, tmp_path, capsys):
     scene = outside / "cots-broken" / "scene.toml"
     scene.write_text(scene.read_text().replace("dimensions = 3", "dimensions = 7"))
     out = tmp_path / "result.json"
-    args = ["--seeds", "2", "--layouts", "walls", "--conditions", "baseline,dropout-10s", "--duration", "16"]
+    args = ["--seeds", "2", "--layouts", "walls", "--conditions", "baseline,dropout-10s,multipath-calibrated", "--duration", "16"]
     assert robustness.main(args + ["--outside", str(outside), "--json", str(out)]) == 0
     text = capsys.readouterr().out
     assert "seeds 0..1 (2 per cell)" in text and f"scattertrack {robustness.scattertrack.__version__}" in text
-    assert "walls / baseline" in text and "walls / dropout-10s" in text and "realistic-3d-arm (defaults), 2 runs" in text
+    assert "walls / baseline" in text and "walls / dropout-10s" in text and "walls / multipath-calibrated" in text
+    assert "realistic-3d-arm (defaults, the wall unknown), 2 runs" in text
+    assert "realistic-3d-arm (defaults, the wall calibrated), 2 runs" in text and "walls kept 2 of 2" in text
+    assert "Layouts meeting every target of every condition run (multipath: the wall calibrated): " in text
     assert "cots-broken: rejected: " in text and "dimensions" in text
     assert "cots-simulated: median 3D" in text
     result = json.loads(out.read_text())
     assert [(c["layout"], c["condition"], c["runs"]) for c in result["cells"]] == [
         ("walls", "baseline", 2),
         ("walls", "dropout-10s", 2),
+        ("walls", "multipath-calibrated", 2),
     ]
     for cell in result["cells"]:
         assert 0.0 <= cell["candidate_wins_within_1s"] <= 1.0 and 0.0 <= cell["beyond_3_sigma"] <= 1.0
@@ -140,7 +159,9 @@ def test_the_block_runs_into_a_table_and_json(robustness, tmp_path, capsys):
     assert result["cells"][1]["meets"]["wins_within_1s"] is None
     assert "Baseline cells meeting every target: " in text
     assert result["cells"][0]["back_within_1s_of_resume"] is None  # only the stop and the dropout have one
-    assert result["realistic_3d_arm"]["runs"] == 2
+    assert result["realistic_3d_arm"]["runs"] == 2 and result["realistic_3d_arm"]["calibrated_wall"]["walls_kept"] == 2
+    low, high = result["cells"][2]["wall_x_range_m"]
+    assert 1.595 < low <= high < 1.605  # the calibrated wall, where the simulator put it
     simulated = next(c for c in result["outside"] if c["case"] == "cots-simulated")
     assert simulated["median_3d_mm"] > 0.0 and simulated["largest_gap_s"] > 0.0 and simulated["warnings"] >= 0
     assert "error" in next(c for c in result["outside"] if c["case"] == "cots-broken")

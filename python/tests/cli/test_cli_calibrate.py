@@ -58,3 +58,41 @@ def test_calibrate_refuses_what_it_cannot_use(capsys, recorded, tmp_path):
     code, _, err = run(capsys, *base, "--reference", "FFFF=1,1,1")
     assert code == 2 and "no read belongs to a reference tag" in err and "no reads of reference FFFF" in err
     assert not (tmp_path / "c.toml").exists()
+
+
+@pytest.fixture(scope="module")
+def walled_sweep(tmp_path_factory) -> Path:
+    """A reference swept through glac-3d-bay's region in front of a wall the scene declares 4 cm off."""
+    scenario = copy.deepcopy(load_scenario("glac-3d-bay"))
+    scenario["duration_s"] = 40.0
+    scenario["reader_model"]["reflectors"] = [{"kind": "plane", "point": [1.6, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0], "coefficient": 0.3}]
+    scenario["scene"]["reflectors"] = [{"kind": "plane", "point": [1.56, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0], "coefficient": 0.5}]
+    region = scenario["scene"]["region"]
+    scenario["tags"] = [{"epc": "CA11B000", "trajectory": {"kind": "random", "box_min": region["min"], "box_max": region["max"], "mean_speed": 0.2}}]
+    folder = tmp_path_factory.mktemp("walled")
+    write_simulation(simulate(scenario, seed=3), folder)
+    return folder
+
+
+def test_calibrate_refines_the_declared_wall_and_track_stops_warning(capsys, walled_sweep, tmp_path):
+    scene, reads = walled_sweep / "scene.toml", walled_sweep / "reads.csv"
+    code, out, err = run(capsys, "track", "--scene", scene, "--reads", reads, "--out", tmp_path / "t.csv")
+    assert code == 0 and "warning: the scene declares 1 reflector that scattertrack calibrate has not refined" in out + err
+    code, out, err = run(capsys, "check-scene", scene)
+    assert code == 0 and "has not refined" in out + err
+    code, out, err = run(capsys, "calibrate", "--scene", scene, "--reads", reads, "--truth", walled_sweep / "truth.csv", "--out", tmp_path / "c.toml")
+    assert code == 0, err
+    assert "reflector 0 (plane): moved -4.0 cm along its normal" in out and ": kept" in out, out
+    calibrated = read_scene(tmp_path / "c.toml")
+    assert abs(calibrated.reflectors[0].point[0] - 1.6) < 0.003
+    code, out, err = run(capsys, "track", "--scene", tmp_path / "c.toml", "--reads", reads, "--out", tmp_path / "t2.csv")
+    assert code == 0 and "has not refined" not in out + err
+
+
+def test_calibrate_checks_the_reflector_search(capsys, walled_sweep, tmp_path):
+    base = ["calibrate", "--scene", walled_sweep / "scene.toml", "--reads", walled_sweep / "reads.csv", "--truth", walled_sweep / "truth.csv", "--out", tmp_path / "c.toml"]
+    code, out, err = run(capsys, *base, "--reflector-search-m", "5")
+    assert code == 2 and "Traceback" not in err and "--reflector-search-m: must be between 0.01 and 2 m" in err.splitlines()[-1]
+    code, out, err = run(capsys, *base, "--reflector-search-m", "0.01")
+    assert code == 0 and "LEFT OUT" in out and "warning:" in err and "widen --reflector-search-m" in err, (out, err)
+    assert read_scene(tmp_path / "c.toml").reflectors == []

@@ -10,6 +10,7 @@ from scattertrack.io import (
     ChannelOffset,
     FormatError,
     Reader,
+    Reflector,
     Region,
     Scene,
     read_scene,
@@ -53,6 +54,13 @@ def assert_scenes_equal(a: Scene, b: Scene) -> None:
         np.testing.assert_array_equal(a.region.max, b.region.max)
     assert a.channel_offsets == b.channel_offsets
     assert a.extra == b.extra
+    assert len(a.reflectors) == len(b.reflectors)
+    for x, y in zip(a.reflectors, b.reflectors):
+        assert (x.kind, x.coefficient) == (y.kind, y.coefficient)
+        for key in ("point", "normal", "position"):
+            assert (getattr(x, key) is None) == (getattr(y, key) is None)
+            if getattr(x, key) is not None:
+                np.testing.assert_array_equal(getattr(x, key), getattr(y, key))
 
 
 def full_scene() -> Scene:
@@ -68,6 +76,10 @@ def full_scene() -> Scene:
         ],
         region=Region(np.array([-1.0, -1.0, 0.0]), np.array([2.0, 2.0, 2.0])),
         channel_offsets=[ChannelOffset(902.75e6, 1.234), ChannelOffset(927.25e6, -0.1)],
+        reflectors=[
+            Reflector("plane", -0.7, point=np.array([10.0, 0.0, 0.0]), normal=np.array([-0.6, -0.8, 0.0])),
+            Reflector("point", 1 / 3, position=np.array([0.5, 1e-7, 2.0])),
+        ],
         extra={
             "site": "bench 3",
             "temperatures": [20.5, 21],

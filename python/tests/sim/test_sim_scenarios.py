@@ -194,3 +194,86 @@ def test_2d_trajectory_must_stay_in_the_plane(tmp_path):
 
 def test_scenarios_dir_is_the_repository_folder():
     assert SCENARIOS_DIR.name == "scenarios" and (SCENARIOS_DIR / "glac-2d-10cms.toml").is_file()
+
+
+# --- reflectors: the scene declares them, the reader model simulates them ----------------
+
+SIMULATED_WALL = """
+[[reader_model.reflectors]]
+kind = "plane"
+point = [2.0, 0.0, 0.0]
+normal = [-1.0, 0.0, 0.0]
+coefficient = 0.4
+"""
+DECLARED = """
+[[scene.reflectors]]
+kind = "plane"
+point = [2.0, 0.0, 0.0]
+normal = [-3.0, 0.0, 4.0]
+coefficient = 0.4
+
+[[scene.reflectors]]
+kind = "point"
+position = [1.0, 1.0, 0.0]
+coefficient = -0.25
+"""
+
+
+def test_declared_reflectors_reach_scene_toml(tmp_path):
+    from scattertrack.io import read_scene
+
+    sim = simulate(load_scenario(write_toml(tmp_path, MINIMAL + DECLARED + SIMULATED_WALL)))
+    out = write_simulation(sim, tmp_path / "run")
+    scene = read_scene(out / "scene.toml")
+    plane, point = scene.reflectors
+    assert (plane.kind, plane.coefficient, point.kind, point.coefficient) == ("plane", 0.4, "point", -0.25)
+    np.testing.assert_array_equal(plane.point, [2.0, 0.0, 0.0])
+    np.testing.assert_allclose(plane.normal, [-0.6, 0.0, 0.8], rtol=0, atol=1e-15)  # written unit length
+    np.testing.assert_array_equal(point.position, [1.0, 1.0, 0.0])
+    assert "[[reflectors]]" in (out / "scene.toml").read_text()
+    # The declaration tells the tracker only: the reads are those of the simulated wall alone.
+    alone = simulate(load_scenario(write_toml(tmp_path, MINIMAL + SIMULATED_WALL)))
+    np.testing.assert_array_equal(alone.reads.phase_rad, sim.reads.phase_rad)
+
+
+def test_simulated_reflectors_stay_out_of_scene_toml(tmp_path):
+    from scattertrack.io import read_scene
+
+    sim = simulate(load_scenario(write_toml(tmp_path, MINIMAL + SIMULATED_WALL)))
+    assert sim.scenario["reader_model"]["reflectors"] and sim.scene.reflectors == []
+    out = write_simulation(sim, tmp_path / "run")
+    assert read_scene(out / "scene.toml").reflectors == []
+    assert "reflectors" not in (out / "scene.toml").read_text()
+
+
+@pytest.mark.parametrize(
+    "old, new, key",
+    [
+        ("coefficient = -0.25", "coefficient = -1.5", "scene.reflectors[1].coefficient"),
+        ("normal = [-3.0, 0.0, 4.0]", "normal = [0.0, 0.0, 0.0]", "scene.reflectors[0].normal"),
+        ('kind = "point"', 'kind = "wall"', "scene.reflectors[1].kind"),
+        ("position = [1.0, 1.0, 0.0]\n", "", "scene.reflectors[1].position"),
+        ("coefficient = 0.4\n", "coefficient = 0.4\ncolour = 1\n", "scene.reflectors[0].colour"),
+    ],
+)
+def test_invalid_declared_reflectors(tmp_path, old, new, key):
+    assert DECLARED.count(old) == 1
+    with pytest.raises(FormatError) as raised:
+        load_scenario(write_toml(tmp_path, MINIMAL + DECLARED.replace(old, new)))
+    assert raised.value.column == key
+
+
+def test_only_glac_scenarios_declare_reflectors(tmp_path):
+    text = """
+name = "helper"
+pipeline = "turbotrack"
+[scene]
+dimensions = 3
+[[scene.reflectors]]
+kind = "point"
+position = [1.0, 1.0, 0.0]
+coefficient = 0.5
+"""
+    with pytest.raises(FormatError, match="only COTS-reader") as raised:
+        load_scenario(write_toml(tmp_path, text))
+    assert raised.value.column == "scene.reflectors"

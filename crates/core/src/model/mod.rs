@@ -12,10 +12,12 @@
 //! every tracker shares one fixed-size 6×6 filter.
 
 mod motion;
+mod multipath;
 mod range;
 pub mod wideband;
 
 pub use motion::{MotionModel, Transition};
+pub use multipath::{apparent_range, reflected_paths, ReflectedPath};
 pub use range::range;
 
 /// State dimension: position and velocity in 3D.
