@@ -1,7 +1,7 @@
-"""GLAC (COTS) tracking robustness: five non-degenerate 3D layouts under one impairment at a time.
+"""GLAC (COTS) tracking robustness: six non-degenerate 3D layouts under one impairment at a time.
 
 Every cell is one antenna layout (``scenarios/glac-3d-raised``, ``-walls``,
-``-workcell``, ``-bay``, ``-overhead``: the ``glac-3d-arm`` pick-and-place
+``-workcell``, ``-bay``, ``-overhead``, ``-ceiling``: the ``glac-3d-arm`` pick-and-place
 path, no four antennas in a plane, a region that keeps the tag above the
 table) and one condition:
 the baseline (paper-like noise, 0.1 rad white, one channel) or one
@@ -66,6 +66,7 @@ LAYOUTS = {
     "workcell": "glac-3d-workcell",
     "bay": "glac-3d-bay",
     "overhead": "glac-3d-overhead",
+    "ceiling": "glac-3d-ceiling",
 }
 """Short name -> scenario file (scenarios/NAME.toml)."""
 
