@@ -8,25 +8,9 @@ import pytest
 from scattertrack.io import Antenna, FormatError, InputWarning, Reader, Reflector, Scene, read_scene, write_scene
 from scattertrack.io import types
 
-ANTENNAS = """\
-name = "walls"
-dimensions = 3
+from scene_texts import line_scene
 
-[reader]
-kind = "{kind}"
-
-[[antennas]]
-id = 1
-position = [0.0, 0.0, 0.0]
-
-[[antennas]]
-id = 2
-position = [0.0, 0.3, 0.0]
-
-[[antennas]]
-id = 3
-position = [0.0, 0.8, 0.0]
-"""
+ANTENNAS = line_scene("walls", "{kind}")
 # In GOOD, lines 19-23: a wall 2 m in front of the antennas (its normal written 2 long);
 # lines 25-28: a point scatterer.
 REFLECTORS = """
