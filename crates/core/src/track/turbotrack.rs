@@ -69,6 +69,12 @@ use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame}
 
 /// The registry's constructor of `turbotrack`: Algorithm 1 with the
 /// parameters as given (the §7.2 baselines: [`super::variants`]).
+/// Whether the lobe test runs: the mixture likelihood (the broad
+/// single-Gaussian baseline has no lobes) and a finite switch level.
+fn lobe_test(params: &TurboTrackParams) -> bool {
+    matches!(params.likelihood, WidebandLikelihood::Mixture) && params.lobe_switch_nats.is_finite()
+}
+
 pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
     Ok(Box::new(TurboTrack::new(scene.clone(), params.turbotrack.clone())?))
 }
@@ -377,8 +383,12 @@ fn log_gaussian3(r: &Vector3<f64>, inverse: &Matrix3<f64>, log_det: f64, dims: u
 }
 
 impl TurboTrack {
-    pub fn new(scene: Scene, params: TurboTrackParams) -> Result<Self> {
+    pub fn new(scene: Scene, mut params: TurboTrackParams) -> Result<Self> {
         params.validate(&scene)?;
+        // The residual coherence only serves the lobe tests (a multipath
+        // frame is kept out of them): about a microsecond a receiver saved
+        // on every frame when they are off.
+        params.candidates.measure_coherence &= lobe_test(&params);
         let geometry = HelperGeometry::new(&scene).expect("validated");
         let rng = StdRng::seed_from_u64(params.seed);
         Ok(Self {
@@ -970,10 +980,9 @@ impl TurboTrack {
         0.08
     }
 
-    /// Whether the lobe test runs: the mixture likelihood (the broad
-    /// single-Gaussian baseline has no lobes) and a finite switch level.
+    /// Whether the lobe test runs ([`lobe_test`]).
     fn lobe_test(&self) -> bool {
-        matches!(self.params.likelihood, WidebandLikelihood::Mixture) && self.params.lobe_switch_nats.is_finite()
+        lobe_test(&self.params)
     }
 
     /// The lobe test on an accepted frame (`lobes.rs`): the displacement
