@@ -1,7 +1,8 @@
 """``scattertrack calibrate``: offsets, sign, period, hop table, path loss and walls from reference tags.
 
     scattertrack calibrate --scene S --reads R --reference EPC=x,y,z [EPC=x,y,z ...]
-                           [--truth truth.csv] [--reflector-search-m 0.3] --out calibrated.toml
+                           [--truth truth.csv] [--reflector-search-m 0.3]
+                           [--find-walls [--wall-reach-m 2]] --out calibrated.toml
 
 Prints what it estimated and how well the calibrated model explains the
 references (docs/calibration.md says how to read it), writes the
@@ -45,6 +46,14 @@ def search_distance(text: str) -> float:
     return value
 
 
+def reach_distance(text: str) -> float:
+    """How far to look for walls: 0.1-5 m."""
+    value = ascii_float(text)
+    if not 0.1 <= value <= 5.0:
+        raise argparse.ArgumentTypeError(f"must be between 0.1 and 5 m, got {text}")
+    return value
+
+
 def add_parser(commands) -> None:
     calibrate = commands.add_parser(
         "calibrate",
@@ -53,7 +62,8 @@ def add_parser(commands) -> None:
         "known trajectory (--truth): per-antenna and per-channel phase offsets (identifiable only as sums), the "
         "phase sign, a mod-pi reader, the hop table when the reads carry channel indices and the scene has none, "
         "and per-antenna RSSI path loss; refines the reflectors the scene declares ([[reflectors]]: each plane's offset "
-        "along its normal and each coefficient) or leaves out those the references cannot pin down. Prints residuals "
+        "along its normal and each coefficient) or leaves out those the references cannot pin down, and with "
+        "--find-walls looks for walls nobody declared. Prints residuals "
         "and the phase coherence; writes the calibrated scene.",
     )
     calibrate.add_argument("--scene", required=True, help="scene.toml (positions are used; its offsets and sign are not)")
@@ -63,6 +73,14 @@ def add_parser(commands) -> None:
     calibrate.add_argument(
         "--reflector-search-m", type=search_distance, default=None, metavar="M",
         help="how far from where the scene declares a plane reflector its refined offset may be, m (default 0.3)",
+    )
+    calibrate.add_argument(
+        "--find-walls", action="store_true",
+        help="also look for walls nobody declared: planes parallel to the region's faces, beyond the region and the antennas",
+    )
+    calibrate.add_argument(
+        "--wall-reach-m", type=reach_distance, default=None, metavar="M",
+        help="with --find-walls, how far beyond the region and the antennas to look, m (default 2)",
     )
     calibrate.add_argument("--out", required=True, help="calibrated scene.toml to write")
     calibrate.set_defaults(run=command_calibrate)
@@ -85,11 +103,18 @@ def command_calibrate(args) -> int:
     missing = [epc for epc in references if not np.any(np.asarray(reads.epc).astype(str) == epc)]
     if missing:
         warnings.warn(io.InputWarning(args.reads, None, "epc", f"no reads of reference {', '.join(missing)}"), stacklevel=1)
-    from scattertrack.calibrate.reflectors import SEARCH_M
+    from scattertrack.calibrate.reflectors import DISCOVERY_REACH_M, SEARCH_M
 
+    if args.wall_reach_m is not None and not args.find_walls:
+        raise ValueError("--wall-reach-m goes with --find-walls")
+    if args.find_walls and scene.region is None:
+        raise ValueError(f"{args.scene}: --find-walls needs a [region]: walls are looked for beyond it")
     search = SEARCH_M if args.reflector_search_m is None else args.reflector_search_m
-    result = calibrate(scene, reads, references, truth, reflector_search_m=search)
+    reach = DISCOVERY_REACH_M if args.wall_reach_m is None else args.wall_reach_m
+    result = calibrate(scene, reads, references, truth, reflector_search_m=search, find_walls=args.find_walls, wall_reach_m=reach)
     report(result)
+    if args.find_walls and not any(f.discovered for f in result.reflectors):
+        say(f"  no wall found within {reach:g} m beyond the region and the antennas")
     for message in result.warnings:
         warnings.warn(io.InputWarning(args.reads, None, None, message), stacklevel=1)
     out = output_path(args.out)
@@ -113,6 +138,12 @@ def report(result) -> None:
         clear = sum(1 for v in result.hop_table_margin.values() if v > 0)
         say(f"  hop table: {len(result.hop_table_hz)} channel indices assigned to the US plan, {clear} clearly")
     for fit in result.reflectors:
+        if fit.discovered:
+            axis = int(np.argmax(np.abs(fit.reflector["normal"])))
+            plane = f"{'xyz'[axis]} = {fit.reflector['point'][axis]:.4f} m"
+            say(f"  wall found: the plane {plane} (within {100 * (fit.interval_m[1] - fit.interval_m[0]) / 2:.2f} cm), "
+                f"coefficient {fit.coefficient:+.2f}, explains the references by {fit.gain_nats:.0f} nats")
+            continue
         where = f"moved {100 * fit.shift_m:+.1f} cm along its normal (within {100 * fit.interval_m[0]:+.2f} to {100 * fit.interval_m[1]:+.2f} cm)" if fit.kind == "plane" else "position as declared"
         verdict = "kept" if fit.kept else "LEFT OUT"
         say(f"  reflector {fit.index} ({fit.kind}): {where}, coefficient {fit.coefficient:+.2f}, explains the references by {fit.gain_nats:.0f} nats: {verdict}")

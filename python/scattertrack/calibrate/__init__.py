@@ -39,7 +39,7 @@ import numpy as np
 from scattertrack.calibrate.hop_table import assign_carriers
 from scattertrack.calibrate.path_loss import PathLoss, fit_path_loss
 from scattertrack.calibrate.phase import chance_coherence, fit_offsets, looks_mod_pi, round_trip_phase
-from scattertrack.calibrate.reflectors import SEARCH_M, ReflectorFit, refine_reflectors
+from scattertrack.calibrate.reflectors import DISCOVERY_REACH_M, SEARCH_M, ReflectorFit, discover_walls, refine_reflectors
 from scattertrack.io.hop_table import US_PLAN_HZ
 from scattertrack.io.types import Reflector
 from scattertrack.physics import round_trip_channel
@@ -121,6 +121,7 @@ class Calibration:
                 {
                     "reflector": f.index,
                     "kept": f.kept,
+                    "discovered": f.discovered,
                     "shift_m": round(f.shift_m, 4),
                     "interval_m": [round(v, 4) for v in f.interval_m],
                     "coefficient": round(f.coefficient, 3),
@@ -177,12 +178,22 @@ def _indices(values: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def calibrate(
-    scene: Scene, reads: Reads, references: dict | None = None, truth: Truth | None = None, reflector_search_m: float = SEARCH_M
+    scene: Scene,
+    reads: Reads,
+    references: dict | None = None,
+    truth: Truth | None = None,
+    reflector_search_m: float = SEARCH_M,
+    find_walls: bool = False,
+    wall_reach_m: float = DISCOVERY_REACH_M,
 ) -> Calibration:
     """Calibrate ``scene`` from the reads of reference tags (see the module docstring).
 
     ``reflector_search_m``: how far (m) from where the scene declares a
-    plane reflector its refined offset may be.
+    plane reflector its refined offset may be. ``find_walls``: also look
+    for walls nobody declared, parallel to the region's faces and up to
+    ``wall_reach_m`` beyond the region and the antennas
+    (:func:`~scattertrack.calibrate.reflectors.discover_walls`; needs a
+    region).
 
     Raises ValueError when no read belongs to a reference, or the references
     were read by fewer than one antenna."""
@@ -238,6 +249,16 @@ def calibrate(
         reflector_fits = refine_reflectors(
             declared, phase, frequency, anchor, positions[ref], antenna, channel, tag, counts, sign, m, reflector_search_m
         )
+    if find_walls:
+        if scene.region is None:
+            raise ValueError("finding walls needs the scene's [region]: walls are looked for beyond it")
+        known = [f.reflector for f in reflector_fits if f.kept]
+        antenna_positions = np.array([a.position for a in scene.antennas], dtype=np.float64)
+        reflector_fits += discover_walls(
+            known, (scene.region.min, scene.region.max), antenna_positions, phase, frequency, anchor, positions[ref],
+            antenna, channel, tag, counts, sign, m, wall_reach_m, first_index=len(declared),
+        )
+    if reflector_fits:
         kept = [f.reflector for f in reflector_fits if f.kept]
         for f in reflector_fits:
             if not f.kept:

@@ -70,6 +70,14 @@ MAX_SEARCH_READS = 6000
 """Reads used by the searches (a seeded subsample beyond this; the final fit uses all)."""
 SEARCH_ITERATIONS = 12
 """Coordinate-ascent sweeps per candidate wall (the offsets settle in a few)."""
+DISCOVERY_REACH_M = 2.0
+"""How far beyond the region and the antennas :func:`discover_walls` looks, m (default)."""
+DISCOVERY_CLEARANCE_M = 0.05
+"""Discovered planes start this far beyond the region and every antenna, m."""
+DISCOVERY_NATS = 40.0
+"""Gain a discovered wall needs (a declared one needs SEEN_NATS): the search tries thousands of planes."""
+MAX_DISCOVERED = 3
+"""Walls :func:`discover_walls` finds at most."""
 
 
 @dataclass
@@ -90,6 +98,8 @@ class ReflectorFit:
     """The refined reflector (plain values: ``kind``, ``point``/``normal`` or ``position``, ``coefficient``)."""
     reason: str = ""
     """Why it was left out (empty when kept)."""
+    discovered: bool = False
+    """Found by :func:`discover_walls`, not declared by the scene."""
 
 
 def as_dict(reflector) -> dict:
@@ -142,6 +152,67 @@ def _shifted(reflector: dict, shift_m: float, coefficient: float) -> dict:
     return out
 
 
+def _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m) -> _Problem:
+    """The references' reads as :class:`_Problem`, subsampled (seeded) beyond MAX_SEARCH_READS."""
+    problem = _Problem(
+        np.asarray(phase, float), np.asarray(frequency_hz, float), np.asarray(anchor, float), np.asarray(position, float),
+        np.asarray(antenna), np.asarray(channel), np.asarray(tag), tuple(counts), int(sign), int(m),
+    )
+    if len(problem.phase) > MAX_SEARCH_READS:
+        rows = np.sort(np.random.default_rng(0).choice(len(problem.phase), MAX_SEARCH_READS, replace=False))
+        problem = problem.subset(rows)
+    return problem
+
+
+def _fit_one(problem: _Problem, others: list[dict], reflector: dict, offsets: np.ndarray, allowed: tuple[float, float],
+             index: int, beyond: str) -> ReflectorFit:
+    """One reflector searched over ``offsets`` along its normal (a plane; a point keeps its place),
+    with the ``others`` in the model, then checked: its best offset must lie within ``allowed``
+    (``beyond`` says what to do when it does not), the references must see it, and no alias may
+    come close (module doc)."""
+    n = len(problem.phase)
+    without = problem.fit(others)
+    plane = reflector["kind"] == "plane"
+    coarse = np.array([
+        [problem.fit(others + [_shifted(reflector, s, g)]).coherence for g in COARSE_COEFFICIENTS] for s in offsets
+    ])
+    i, j = np.unravel_index(np.argmax(coarse), coarse.shape)
+    best_s, best_g = float(offsets[i]), COARSE_COEFFICIENTS[j]
+    # Fine: offset at the best coefficient, then the coefficient at the best offset, twice.
+    fine_offsets = best_s + np.arange(-FINE_SPAN_M, FINE_SPAN_M + 1e-12, FINE_STEP_M) if plane else np.array([0.0])
+    coefficients = np.arange(-COEFFICIENT_LIMIT, COEFFICIENT_LIMIT + 1e-12, FINE_COEFFICIENT_STEP)
+    for _ in range(2):
+        r_s = np.array([problem.fit(others + [_shifted(reflector, s, best_g)]).coherence for s in fine_offsets])
+        best_s = float(fine_offsets[np.argmax(r_s)])
+        near = coefficients[np.abs(coefficients - best_g) <= 0.15]
+        r_g = np.array([problem.fit(others + [_shifted(reflector, best_s, g)]).coherence for g in near])
+        best_g = float(near[np.argmax(r_g)])
+    best = problem.fit(others + [_shifted(reflector, best_s, best_g)], iterations=30)
+    # Robust (median absolute residual): an outlier read would otherwise halve κ.
+    kappa = 1.0 / max((1.4826 * float(np.median(np.abs(best.residual)))) ** 2, 1e-6)
+    nats = lambda r: kappa * n * (best.coherence - r)  # noqa: E731 - Δℓ below the best
+    gain = kappa * n * (best.coherence - without.coherence)
+    r_s = np.array([problem.fit(others + [_shifted(reflector, s, best_g)]).coherence for s in fine_offsets])
+    inside = fine_offsets[nats(r_s) <= 2.0] if plane else np.zeros(1)
+    interval = (float(inside.min()), float(inside.max())) if inside.size else (best_s, best_s)
+    aliases = offsets[(np.abs(offsets - best_s) > ALIAS_M) & (nats(coarse.max(axis=1)) < ALIAS_NATS)] if plane else []
+    reason = ""
+    if not allowed[0] - FINE_STEP_M <= best_s <= allowed[1] + FINE_STEP_M:
+        reason = f"the references fit it best {100 * best_s:+.1f} cm along its normal from where the scene puts it, {beyond}"
+    elif gain < SEEN_NATS:
+        reason = f"the references do not see it (the wall explains their phases by {gain:.0f} nats, {SEEN_NATS:.0f} needed)"
+    elif len(aliases):
+        alias = float(aliases[np.argmin(nats(coarse.max(axis=1))[np.isin(offsets, aliases)])])
+        reason = (
+            f"the references cannot tell its offset {100 * best_s:+.1f} cm from {100 * alias:+.1f} cm "
+            f"(within {ALIAS_NATS:.0f} nats): add references nearer the wall or move one along it"
+        )
+    return ReflectorFit(
+        index=index, kind=reflector["kind"], kept=not reason, shift_m=best_s, interval_m=interval,
+        coefficient=best_g, gain_nats=float(gain), reflector=_shifted(reflector, best_s, best_g), reason=reason,
+    )
+
+
 def refine_reflectors(
     declared: list,
     phase: np.ndarray,
@@ -162,63 +233,63 @@ def refine_reflectors(
     ``channel``, ``tag`` into ``counts``; the calibrated ``sign`` and
     m = 2π/P). Returns one :class:`ReflectorFit` per declared reflector, in
     order; those with ``kept`` False failed a check (see the module doc)."""
-    problem = _Problem(
-        np.asarray(phase, float), np.asarray(frequency_hz, float), np.asarray(anchor, float), np.asarray(position, float),
-        np.asarray(antenna), np.asarray(channel), np.asarray(tag), tuple(counts), int(sign), int(m),
-    )
-    if len(problem.phase) > MAX_SEARCH_READS:
-        rows = np.sort(np.random.default_rng(0).choice(len(problem.phase), MAX_SEARCH_READS, replace=False))
-        problem = problem.subset(rows)
-    n = len(problem.phase)
-    current = [as_dict(r) for r in declared]
+    problem = _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m)
+    span = max(search_m, ALIAS_SPAN_M)
     fits: list[ReflectorFit] = []
-    for index, reflector in enumerate(current):
+    for index, reflector in enumerate(as_dict(r) for r in declared):
         # The walls refined so far (and kept); the later ones join as they are refined.
         others = [f.reflector for f in fits if f.kept]
-        without = problem.fit(others)
-        # κ of the residuals: set from the best fit below; the coherences are compared first.
-        plane = reflector["kind"] == "plane"
-        span = max(search_m, ALIAS_SPAN_M)
-        offsets = np.arange(-span, span + 1e-12, COARSE_STEP_M) if plane else np.zeros(1)
-        coarse = np.array([
-            [problem.fit(others + [_shifted(reflector, s, g)]).coherence for g in COARSE_COEFFICIENTS] for s in offsets
-        ])
-        i, j = np.unravel_index(np.argmax(coarse), coarse.shape)
-        best_s, best_g = float(offsets[i]), COARSE_COEFFICIENTS[j]
-        # Fine: offset at the best coefficient, then the coefficient at the best offset, twice.
-        fine_offsets = best_s + np.arange(-FINE_SPAN_M, FINE_SPAN_M + 1e-12, FINE_STEP_M) if plane else np.array([0.0])
-        coefficients = np.arange(-COEFFICIENT_LIMIT, COEFFICIENT_LIMIT + 1e-12, FINE_COEFFICIENT_STEP)
-        for _ in range(2):
-            r_s = np.array([problem.fit(others + [_shifted(reflector, s, best_g)]).coherence for s in fine_offsets])
-            best_s = float(fine_offsets[np.argmax(r_s)])
-            near = coefficients[np.abs(coefficients - best_g) <= 0.15]
-            r_g = np.array([problem.fit(others + [_shifted(reflector, best_s, g)]).coherence for g in near])
-            best_g = float(near[np.argmax(r_g)])
-        best = problem.fit(others + [_shifted(reflector, best_s, best_g)], iterations=30)
-        # Robust (median absolute residual): an outlier read would otherwise halve κ.
-        kappa = 1.0 / max((1.4826 * float(np.median(np.abs(best.residual)))) ** 2, 1e-6)
-        nats = lambda r: kappa * n * (best.coherence - r)  # noqa: E731 - Δℓ below the best
-        gain = kappa * n * (best.coherence - without.coherence)
-        r_s = np.array([problem.fit(others + [_shifted(reflector, s, best_g)]).coherence for s in fine_offsets])
-        inside = fine_offsets[nats(r_s) <= 2.0] if plane else np.zeros(1)
-        interval = (float(inside.min()), float(inside.max())) if inside.size else (best_s, best_s)
-        aliases = offsets[(np.abs(offsets - best_s) > ALIAS_M) & (nats(coarse.max(axis=1)) < ALIAS_NATS)] if plane else []
-        reason = ""
-        if abs(best_s) > search_m + FINE_STEP_M:
-            reason = (
-                f"the references fit it best {100 * best_s:+.1f} cm along its normal from where the scene puts it, "
-                f"beyond the search's {100 * search_m:.0f} cm: check the declared plane, or widen --reflector-search-m"
-            )
-        elif gain < SEEN_NATS:
-            reason = f"the references do not see it (the wall explains their phases by {gain:.0f} nats, {SEEN_NATS:.0f} needed)"
-        elif len(aliases):
-            alias = float(aliases[np.argmin(nats(coarse.max(axis=1))[np.isin(offsets, aliases)])])
-            reason = (
-                f"the references cannot tell its offset {100 * best_s:+.1f} cm from {100 * alias:+.1f} cm "
-                f"(within {ALIAS_NATS:.0f} nats): add references nearer the wall or move one along it"
-            )
-        fits.append(ReflectorFit(
-            index=index, kind=reflector["kind"], kept=not reason, shift_m=best_s, interval_m=interval,
-            coefficient=best_g, gain_nats=float(gain), reflector=_shifted(reflector, best_s, best_g), reason=reason,
-        ))
+        offsets = np.arange(-span, span + 1e-12, COARSE_STEP_M) if reflector["kind"] == "plane" else np.zeros(1)
+        beyond = f"beyond the search's {100 * search_m:.0f} cm: check the declared plane, or widen --reflector-search-m"
+        fits.append(_fit_one(problem, others, reflector, offsets, (-search_m, search_m), index, beyond))
     return fits
+
+
+def discover_walls(
+    known: list,
+    region: tuple[np.ndarray, np.ndarray],
+    antennas: np.ndarray,
+    phase: np.ndarray,
+    frequency_hz: np.ndarray,
+    anchor: np.ndarray,
+    position: np.ndarray,
+    antenna: np.ndarray,
+    channel: np.ndarray,
+    tag: np.ndarray,
+    counts: tuple,
+    sign: int,
+    m: int,
+    reach_m: float = DISCOVERY_REACH_M,
+    first_index: int = 0,
+) -> list[ReflectorFit]:
+    """Walls nobody declared: planes parallel to the region's faces, beyond the region and every
+    antenna (``region`` = (min, max), m; ``antennas`` (n, 3), m), up to ``reach_m`` further out.
+
+    Greedy: each round searches the six directions with the ``known`` reflectors and the walls
+    found so far in the model, and takes the one that explains the references best; it is kept
+    when it passes :func:`refine_reflectors`' checks and gains ``DISCOVERY_NATS`` (more than a
+    declared wall needs: the search tries thousands of planes). At most ``MAX_DISCOVERED``."""
+    problem = _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m)
+    low = np.minimum(np.asarray(region[0], float), np.asarray(antennas, float).min(axis=0)) - DISCOVERY_CLEARANCE_M
+    high = np.maximum(np.asarray(region[1], float), np.asarray(antennas, float).max(axis=0)) + DISCOVERY_CLEARANCE_M
+    # Shifts along each candidate's normal (which points into the room): negative moves it out.
+    offsets = -np.arange(0.0, reach_m + 1e-12, COARSE_STEP_M)
+    found: list[ReflectorFit] = []
+    for _ in range(MAX_DISCOVERED):
+        others = [as_dict(r) for r in known] + [f.reflector for f in found]
+        best = None
+        for axis in range(3):
+            for side, face in ((1.0, low), (-1.0, high)):
+                normal = np.zeros(3)
+                normal[axis] = side
+                point = np.zeros(3)
+                point[axis] = face[axis]
+                candidate = {"kind": "plane", "point": list(point), "normal": list(normal), "coefficient": 0.3}
+                fit = _fit_one(problem, others, candidate, offsets, (-reach_m, 0.0), first_index + len(found),
+                               f"beyond the {100 * reach_m:.0f} cm searched")
+                if best is None or fit.gain_nats > best.gain_nats:
+                    best = fit
+        if best is None or not best.kept or best.gain_nats < DISCOVERY_NATS:
+            break
+        found.append(dataclasses.replace(best, discovered=True))
+    return found

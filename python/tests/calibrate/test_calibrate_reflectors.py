@@ -79,3 +79,25 @@ def test_tracking_with_the_calibrated_wall_removes_its_bias(sweep):
     plain = compare(tagged.truth, track.run("glac", tagged.scene, tagged.reads)).overall
     walled = compare(tagged.truth, track.run("glac", dataclasses.replace(tagged.scene, reflectors=walls), tagged.reads)).overall
     assert walled.median_3d_m < 0.008 and walled.median_3d_m < 0.6 * plain.median_3d_m, (walled.median_3d_m, plain.median_3d_m)
+
+
+def test_a_wall_nobody_declared_is_found(sweep):
+    # Looked for up to 0.5 m beyond the region and the antennas (x = 1.3 m + 5 cm): the wall at 1.6 m.
+    result = calibrate(sweep.scene, sweep.reads, truth=sweep.truth, find_walls=True, wall_reach_m=0.5)
+    (fit,) = result.reflectors
+    assert fit.discovered and fit.kept and not result.warnings
+    np.testing.assert_allclose(fit.reflector["normal"], [-1.0, 0.0, 0.0])
+    assert abs(fit.reflector["point"][0] - 1.6) < 0.003 and abs(fit.coefficient - 0.3) < 0.06
+    assert result.table()["reflectors"][0]["discovered"] is True
+    assert abs(result.scene().reflectors[0].point[0] - 1.6) < 0.003
+
+
+def test_no_wall_is_found_where_there_is_none():
+    no_wall = simulate(room(seed=6, duration_s=40.0, wall=False), seed=6)
+    result = calibrate(no_wall.scene, no_wall.reads, truth=no_wall.truth, find_walls=True, wall_reach_m=0.5)
+    assert result.reflectors == [] and result.scene().reflectors == []
+
+
+def test_finding_walls_needs_a_region(sweep):
+    with pytest.raises(ValueError, match=r"needs the scene's \[region\]"):
+        calibrate(dataclasses.replace(sweep.scene, region=None), sweep.reads, truth=sweep.truth, find_walls=True)

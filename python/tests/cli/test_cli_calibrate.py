@@ -96,3 +96,18 @@ def test_calibrate_checks_the_reflector_search(capsys, walled_sweep, tmp_path):
     code, out, err = run(capsys, *base, "--reflector-search-m", "0.01")
     assert code == 0 and "LEFT OUT" in out and "warning:" in err and "widen --reflector-search-m" in err, (out, err)
     assert read_scene(tmp_path / "c.toml").reflectors == []
+
+
+def test_calibrate_finds_a_wall_nobody_declared(capsys, walled_sweep, tmp_path):
+    scene = read_scene(walled_sweep / "scene.toml")
+    scene.reflectors = []
+    scene.save(tmp_path / "bare.toml")
+    base = ["calibrate", "--scene", tmp_path / "bare.toml", "--reads", walled_sweep / "reads.csv", "--truth", walled_sweep / "truth.csv", "--out", tmp_path / "c.toml"]
+    code, out, err = run(capsys, *base, "--find-walls", "--wall-reach-m", "0.5")
+    assert code == 0, err
+    assert "wall found: the plane x = 1.60" in out, out
+    assert abs(read_scene(tmp_path / "c.toml").reflectors[0].point[0] - 1.6) < 0.003
+    code, out, err = run(capsys, *base, "--wall-reach-m", "0.5")
+    assert code == 2 and "--wall-reach-m goes with --find-walls" in err
+    code, out, err = run(capsys, *base, "--find-walls", "--wall-reach-m", "9")
+    assert code == 2 and "--wall-reach-m: must be between 0.1 and 5 m" in err
