@@ -39,7 +39,14 @@ import numpy as np
 from scattertrack.calibrate.hop_table import assign_carriers
 from scattertrack.calibrate.path_loss import PathLoss, fit_path_loss
 from scattertrack.calibrate.phase import chance_coherence, fit_offsets, looks_mod_pi, round_trip_phase
-from scattertrack.calibrate.reflectors import DISCOVERY_REACH_M, SEARCH_M, ReflectorFit, discover_walls, refine_reflectors
+from scattertrack.calibrate.reflectors import (
+    DISCOVERY_REACH_M,
+    SEARCH_M,
+    ReflectorFit,
+    discover_walls,
+    reference_reads,
+    refine_reflectors,
+)
 from scattertrack.io.hop_table import US_PLAN_HZ
 from scattertrack.io.types import Reflector
 from scattertrack.physics import round_trip_channel
@@ -245,18 +252,17 @@ def calibrate(
             )
     declared = list(getattr(scene, "reflectors", []) or [])
     reflector_fits = []
+    if declared or find_walls:
+        walls_from = reference_reads(phase, frequency, anchor, positions[ref], antenna, channel, tag, counts, sign, m)
     if declared:
-        reflector_fits = refine_reflectors(
-            declared, phase, frequency, anchor, positions[ref], antenna, channel, tag, counts, sign, m, reflector_search_m
-        )
+        reflector_fits = refine_reflectors(declared, walls_from, reflector_search_m)
     if find_walls:
         if scene.region is None:
             raise ValueError("finding walls needs the scene's [region]: walls are looked for beyond it")
         known = [f.reflector for f in reflector_fits if f.kept]
         antenna_positions = np.array([a.position for a in scene.antennas], dtype=np.float64)
         reflector_fits += discover_walls(
-            known, (scene.region.min, scene.region.max), antenna_positions, phase, frequency, anchor, positions[ref],
-            antenna, channel, tag, counts, sign, m, wall_reach_m, first_index=len(declared),
+            known, (scene.region.min, scene.region.max), antenna_positions, walls_from, wall_reach_m, first_index=len(declared)
         )
     if reflector_fits:
         kept = [f.reflector for f in reflector_fits if f.kept]

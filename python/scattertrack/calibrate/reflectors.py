@@ -117,8 +117,12 @@ def as_dict(reflector) -> dict:
 
 
 @dataclass
-class _Problem:
-    """The references' reads as the fits need them."""
+class ReferenceReads:
+    """The references' reads as the fits need them: per read the reported
+    ``phase`` (rad), its carrier (Hz), its antenna's position ``anchor`` and
+    the reference's ``position`` (m), and the offset fit's indices
+    ``antenna``, ``channel``, ``tag`` into ``counts``; the calibrated
+    ``sign`` and m = 2π/P. Build it with :func:`reference_reads`."""
 
     phase: np.ndarray
     frequency: np.ndarray
@@ -131,7 +135,7 @@ class _Problem:
     sign: int
     m: int
 
-    def subset(self, rows: np.ndarray) -> "_Problem":
+    def subset(self, rows: np.ndarray) -> "ReferenceReads":
         take = lambda a: a[rows]  # noqa: E731
         return dataclasses.replace(
             self, phase=take(self.phase), frequency=take(self.frequency), anchor=take(self.anchor),
@@ -152,9 +156,9 @@ def _shifted(reflector: dict, shift_m: float, coefficient: float) -> dict:
     return out
 
 
-def _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m) -> _Problem:
-    """The references' reads as :class:`_Problem`, subsampled (seeded) beyond MAX_SEARCH_READS."""
-    problem = _Problem(
+def reference_reads(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m) -> ReferenceReads:
+    """The references' reads as :class:`ReferenceReads`, subsampled (seeded) beyond MAX_SEARCH_READS."""
+    problem = ReferenceReads(
         np.asarray(phase, float), np.asarray(frequency_hz, float), np.asarray(anchor, float), np.asarray(position, float),
         np.asarray(antenna), np.asarray(channel), np.asarray(tag), tuple(counts), int(sign), int(m),
     )
@@ -164,7 +168,7 @@ def _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, count
     return problem
 
 
-def _fit_one(problem: _Problem, others: list[dict], reflector: dict, offsets: np.ndarray, allowed: tuple[float, float],
+def _fit_one(problem: ReferenceReads, others: list[dict], reflector: dict, offsets: np.ndarray, allowed: tuple[float, float],
              index: int, beyond: str) -> ReflectorFit:
     """One reflector searched over ``offsets`` along its normal (a plane; a point keeps its place),
     with the ``others`` in the model, then checked: its best offset must lie within ``allowed``
@@ -213,27 +217,10 @@ def _fit_one(problem: _Problem, others: list[dict], reflector: dict, offsets: np
     )
 
 
-def refine_reflectors(
-    declared: list,
-    phase: np.ndarray,
-    frequency_hz: np.ndarray,
-    anchor: np.ndarray,
-    position: np.ndarray,
-    antenna: np.ndarray,
-    channel: np.ndarray,
-    tag: np.ndarray,
-    counts: tuple,
-    sign: int,
-    m: int,
-    search_m: float = SEARCH_M,
-) -> list[ReflectorFit]:
-    """Refine every ``declared`` reflector against the reference reads (per
-    read: reported ``phase`` rad, carrier Hz, antenna position ``anchor`` m,
-    reference ``position`` m, and the offset fit's indices ``antenna``,
-    ``channel``, ``tag`` into ``counts``; the calibrated ``sign`` and
-    m = 2π/P). Returns one :class:`ReflectorFit` per declared reflector, in
-    order; those with ``kept`` False failed a check (see the module doc)."""
-    problem = _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m)
+def refine_reflectors(declared: list, problem: ReferenceReads, search_m: float = SEARCH_M) -> list[ReflectorFit]:
+    """Refine every ``declared`` reflector against the references' reads.
+    Returns one :class:`ReflectorFit` per declared reflector, in order;
+    those with ``kept`` False failed a check (see the module doc)."""
     span = max(search_m, ALIAS_SPAN_M)
     fits: list[ReflectorFit] = []
     for index, reflector in enumerate(as_dict(r) for r in declared):
@@ -249,16 +236,7 @@ def discover_walls(
     known: list,
     region: tuple[np.ndarray, np.ndarray],
     antennas: np.ndarray,
-    phase: np.ndarray,
-    frequency_hz: np.ndarray,
-    anchor: np.ndarray,
-    position: np.ndarray,
-    antenna: np.ndarray,
-    channel: np.ndarray,
-    tag: np.ndarray,
-    counts: tuple,
-    sign: int,
-    m: int,
+    problem: ReferenceReads,
     reach_m: float = DISCOVERY_REACH_M,
     first_index: int = 0,
 ) -> list[ReflectorFit]:
@@ -269,7 +247,6 @@ def discover_walls(
     found so far in the model, and takes the one that explains the references best; it is kept
     when it passes :func:`refine_reflectors`' checks and gains ``DISCOVERY_NATS`` (more than a
     declared wall needs: the search tries thousands of planes). At most ``MAX_DISCOVERED``."""
-    problem = _problem(phase, frequency_hz, anchor, position, antenna, channel, tag, counts, sign, m)
     low = np.minimum(np.asarray(region[0], float), np.asarray(antennas, float).min(axis=0)) - DISCOVERY_CLEARANCE_M
     high = np.maximum(np.asarray(region[1], float), np.asarray(antennas, float).max(axis=0)) + DISCOVERY_CLEARANCE_M
     # Shifts along each candidate's normal (which points into the room): negative moves it out.
