@@ -8,7 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from scattertrack.io import read_scene
+from scattertrack.eval import compare
+from scattertrack.io import read_scene, read_track
 from scattertrack.sim import load_scenario, simulate, write_simulation
 
 from cli_runs import run
@@ -111,3 +112,21 @@ def test_calibrate_finds_a_wall_nobody_declared(capsys, walled_sweep, tmp_path):
     assert code == 2 and "--wall-reach-m goes with --find-walls" in err
     code, out, err = run(capsys, *base, "--find-walls", "--wall-reach-m", "9")
     assert code == 2 and "--wall-reach-m: must be between 0.1 and 5 m" in err
+
+
+def test_the_wall_calibration_scenario_calibrates_the_realistic_arms_room(capsys, tmp_path):
+    # docs/calibration.md's walk-through, shortened: the sweep and the arm share seed 12 (the same offsets).
+    sweep = load_scenario("calibration-wall") | {"duration_s": 40.0}
+    write_simulation(simulate(sweep), tmp_path / "sweep")
+    arm = simulate(load_scenario("realistic-3d-arm") | {"duration_s": 12.0})
+    write_simulation(arm, tmp_path / "arm")
+    code, out, err = run(capsys, "calibrate", "--scene", tmp_path / "sweep" / "scene.toml", "--reads", tmp_path / "sweep" / "reads.csv",
+                         "--truth", tmp_path / "sweep" / "truth.csv", "--out", tmp_path / "calibrated.toml")
+    assert code == 0 and ": kept" in out, (out, err)
+    assert abs(read_scene(tmp_path / "calibrated.toml").reflectors[0].point[0] - 1.6) < 0.003
+    medians = []
+    for scene in (tmp_path / "arm" / "scene.toml", tmp_path / "calibrated.toml"):
+        code, out, err = run(capsys, "track", "--scene", scene, "--reads", tmp_path / "arm" / "reads.csv", "--out", tmp_path / "t.csv")
+        assert code == 0, err
+        medians.append(compare(arm.truth, read_track(tmp_path / "t.csv")).overall.median_3d_m)
+    assert medians[1] < 0.008 and medians[1] < medians[0], medians
