@@ -529,8 +529,8 @@ pub struct Glac {
     scene: Arc<Scene>,
     params: Arc<GlacParams>,
     /// Per antenna, the reflected paths of the scene's known reflectors
-    /// (empty without them).
-    reflected: Arc<Vec<Vec<ReflectedPath>>>,
+    /// (empty without them); a read's step shares its antenna's.
+    reflected: Vec<Arc<[ReflectedPath]>>,
     hypotheses: Hypotheses,
     /// Time of the hypotheses' states, seconds.
     time_s: f64,
@@ -722,7 +722,7 @@ impl Glac {
         let axes = scene.dimensions;
         let n_antennas = scene.antennas.len();
         let biases = n_antennas.min(MAX_BIASES);
-        let reflected = Arc::new(scene.antennas.iter().map(|a| reflected_paths(&a.position, &scene.reflectors)).collect());
+        let reflected = scene.antennas.iter().map(|a| Arc::from(reflected_paths(&a.position, &scene.reflectors))).collect();
         Self {
             scene,
             params,
@@ -1244,7 +1244,7 @@ impl Glac {
     /// The reading's reflected paths, when the scene has reflectors.
     fn multipath(&self, m: &PhaseRead) -> Option<Multipath> {
         let paths = &self.reflected[m.antenna];
-        (!paths.is_empty()).then(|| Multipath { wavenumber: 2.0 * std::f64::consts::PI * m.frequency_hz / SPEED_OF_LIGHT, paths: paths.clone() })
+        (!paths.is_empty()).then(|| Multipath { wavenumber: 2.0 * std::f64::consts::PI * m.frequency_hz / SPEED_OF_LIGHT, paths: Arc::clone(paths) })
     }
 
     /// Naive inference: every hypothesis branches into one child per
@@ -1267,10 +1267,7 @@ impl Glac {
         for i in 0..h.len() {
             let (mut x, mut p) = (h.items[i].x[0], h.items[i].p[0].unpack());
             predict(&mut x, &mut p, &transition);
-            let (d, jac) = match &multipath {
-                None => range(&x, &antenna, self.axes, true),
-                Some(m) => apparent_range(&x, &antenna, &m.paths, m.wavenumber, self.axes, true),
-            };
+            let (d, jac) = measured_range(&x, &antenna, multipath.as_ref(), self.axes, true);
             let jac = jac.unwrap();
             for n in n_lo..=n_hi {
                 let z = residue + n as f64 * spacing;
@@ -1757,18 +1754,25 @@ struct FastStep {
 /// A reading's reflected paths and its wavenumber k = 2π f / c (rad/m).
 struct Multipath {
     wavenumber: f64,
-    paths: Vec<ReflectedPath>,
+    paths: Arc<[ReflectedPath]>,
+}
+
+/// The range a reading from `antenna` measures (m) and, on request, its
+/// Jacobian: the apparent range under `multipath`'s reflected paths, else
+/// the direct one.
+#[inline]
+fn measured_range(x: &StateVector, antenna: &Vector3<f64>, multipath: Option<&Multipath>, axes: usize, jacobian: bool) -> (f64, Option<StateVector>) {
+    match multipath {
+        None => range(x, antenna, axes, jacobian),
+        Some(m) => apparent_range(x, antenna, &m.paths, m.wavenumber, axes, jacobian),
+    }
 }
 
 impl FastStep {
-    /// The range the reading measures (m) and, on request, its Jacobian:
-    /// the apparent range under the scene's reflectors, else the direct one.
+    /// The range the reading measures ([`measured_range`]).
     #[inline]
     fn range(&self, x: &StateVector, jacobian: bool) -> (f64, Option<StateVector>) {
-        match &self.multipath {
-            None => range(x, &self.antenna, self.axes, jacobian),
-            Some(m) => apparent_range(x, &self.antenna, &m.paths, m.wavenumber, self.axes, jacobian),
-        }
+        measured_range(x, &self.antenna, self.multipath.as_ref(), self.axes, jacobian)
     }
 
     /// Predicts hypothesis `i` to the reading's time (IMM: mixing first;

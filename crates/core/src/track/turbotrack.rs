@@ -67,14 +67,14 @@ use super::resting_average::{averaged_receivers, frame_covariance, ChannelAverag
 use super::lobes::{mixture_spread, multipath_frame, refine_on_teeth, LobeDecision, LobeEvidence, LobeFrame, LobeLevels};
 use super::{Estimate, Measurement, Params, Tracker, TrackerStats, WidebandFrame};
 
-/// The registry's constructor of `turbotrack`: Algorithm 1 with the
-/// parameters as given (the §7.2 baselines: [`super::variants`]).
 /// Whether the lobe test runs: the mixture likelihood (the broad
 /// single-Gaussian baseline has no lobes) and a finite switch level.
 fn lobe_test(params: &TurboTrackParams) -> bool {
     matches!(params.likelihood, WidebandLikelihood::Mixture) && params.lobe_switch_nats.is_finite()
 }
 
+/// The registry's constructor of `turbotrack`: Algorithm 1 with the
+/// parameters as given (the §7.2 baselines: [`super::variants`]).
 pub fn build(scene: &Scene, params: &Params) -> Result<Box<dyn Tracker>> {
     Ok(Box::new(TurboTrack::new(scene.clone(), params.turbotrack.clone())?))
 }
