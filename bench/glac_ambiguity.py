@@ -370,7 +370,7 @@ def main(argv=None) -> int:
         if reflectors is not None:
             # The tracker is told of the same walls as the fits: its excursions are then those of a
             # tracker that models them.
-            scene = dataclasses.replace(scene, reflectors=[Reflector(**r) for r in reflectors])
+            scene = dataclasses.replace(scene, reflectors=[Reflector.from_dict(r) for r in reflectors])
         track = st_track.run("glac", scene, sim.reads)
         wins_s = bench_run.score(sim, track)["candidate_wins_s"]
         is_late = not (np.isfinite(wins_s) and wins_s <= args.within_s)

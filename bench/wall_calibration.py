@@ -74,12 +74,7 @@ def calibrated_walls(scenario: dict, seed: int):
     """(the reflectors calibrate kept, its ReflectorFit list) for ``scenario``'s room, sweep seed ``seed + SEED_OFFSET``."""
     sim = simulate(calibration_scenario(scenario), seed=seed + SEED_OFFSET)
     result = calibrate(sim.scene, sim.reads, truth=sim.truth)
-    kept = [
-        Reflector(kind=f.reflector["kind"], coefficient=f.reflector["coefficient"], point=np.asarray(f.reflector["point"]),
-                  normal=np.asarray(f.reflector["normal"]))
-        for f in result.reflectors
-        if f.kept
-    ]
+    kept = [Reflector.from_dict(f.reflector) for f in result.reflectors if f.kept]
     return kept, result.reflectors
 
 

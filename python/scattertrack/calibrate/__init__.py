@@ -106,7 +106,7 @@ class Calibration:
         hop_table = {int(i): float(f) for i, f in sorted(self.hop_table_hz.items())} if self.hop_table_hz else dict(base.hop_table)
         changes = dict(reader=reader, antennas=antennas, channel_offsets=channels, extra=extra, hop_table=hop_table)
         if self.reflectors:
-            changes["reflectors"] = [reflector_of(f.reflector) for f in self.reflectors if f.kept]
+            changes["reflectors"] = [Reflector.from_dict(f.reflector) for f in self.reflectors if f.kept]
         return dataclasses.replace(base, **changes)
 
     def table(self) -> dict:
@@ -142,14 +142,6 @@ class Calibration:
                 for a, p in sorted(self.path_loss.items())
             ]
         return table
-
-
-def reflector_of(values: dict) -> Reflector:
-    """The scene's :class:`~scattertrack.io.scene.Reflector` of a refined reflector's plain values."""
-    array = lambda key: None if key not in values else np.asarray(values[key], dtype=np.float64)  # noqa: E731
-    return Reflector(
-        kind=values["kind"], coefficient=float(values["coefficient"]), point=array("point"), normal=array("normal"), position=array("position")
-    )
 
 
 def reference_positions(reads: Reads, references: dict | None, truth: Truth | None) -> tuple[np.ndarray, np.ndarray]:
@@ -250,7 +242,7 @@ def calibrate(
                 f"the references cannot tell {len(unclear)} of {len(margins)} channel indices from a neighbouring carrier "
                 f"(e.g. index {unclear[0]}): spread the reference tags over a few metres of range, or move one along a known path"
             )
-    declared = list(getattr(scene, "reflectors", []) or [])
+    declared = list(scene.reflectors)
     reflector_fits = []
     if declared or find_walls:
         walls_from = reference_reads(phase, frequency, anchor, positions[ref], antenna, channel, tag, counts, sign, m)

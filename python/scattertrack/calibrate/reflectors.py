@@ -46,6 +46,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from scattertrack.calibrate.phase import fit_offsets, round_trip_phase
+from scattertrack.io.types import Reflector
 from scattertrack.physics import round_trip_channel
 
 COARSE_STEP_M = 0.005
@@ -100,20 +101,6 @@ class ReflectorFit:
     """Why it was left out (empty when kept)."""
     discovered: bool = False
     """Found by :func:`discover_walls`, not declared by the scene."""
-
-
-def as_dict(reflector) -> dict:
-    """A reflector (``scattertrack.io.Reflector`` or a dict) as a plain dict of lists."""
-    get = (lambda k: reflector.get(k)) if isinstance(reflector, dict) else (lambda k: getattr(reflector, k, None))
-    out = {"kind": str(get("kind")), "coefficient": float(get("coefficient"))}
-    for key in ("point", "normal", "position"):
-        value = get(key)
-        if value is not None:
-            out[key] = [float(v) for v in np.asarray(value, dtype=float)]
-    if out["kind"] == "plane":
-        normal = np.asarray(out["normal"], dtype=float)
-        out["normal"] = list(normal / np.linalg.norm(normal))
-    return out
 
 
 @dataclass
@@ -217,13 +204,14 @@ def _fit_one(problem: ReferenceReads, others: list[dict], reflector: dict, offse
     )
 
 
-def refine_reflectors(declared: list, problem: ReferenceReads, search_m: float = SEARCH_M) -> list[ReflectorFit]:
-    """Refine every ``declared`` reflector against the references' reads.
+def refine_reflectors(declared: list[Reflector], problem: ReferenceReads, search_m: float = SEARCH_M) -> list[ReflectorFit]:
+    """Refine every ``declared`` reflector (the scene's) against the references' reads.
     Returns one :class:`ReflectorFit` per declared reflector, in order;
     those with ``kept`` False failed a check (see the module doc)."""
     span = max(search_m, ALIAS_SPAN_M)
     fits: list[ReflectorFit] = []
-    for index, reflector in enumerate(as_dict(r) for r in declared):
+    # Plain values, a plane's normal made unit (Reflector.from_dict): the searches move planes along it.
+    for index, reflector in enumerate(Reflector.from_dict(r.as_dict()).as_dict() for r in declared):
         # The walls refined so far (and kept); the later ones join as they are refined.
         others = [f.reflector for f in fits if f.kept]
         offsets = np.arange(-span, span + 1e-12, COARSE_STEP_M) if reflector["kind"] == "plane" else np.zeros(1)
@@ -233,7 +221,7 @@ def refine_reflectors(declared: list, problem: ReferenceReads, search_m: float =
 
 
 def discover_walls(
-    known: list,
+    known: list[dict],
     region: tuple[np.ndarray, np.ndarray],
     antennas: np.ndarray,
     problem: ReferenceReads,
@@ -243,7 +231,8 @@ def discover_walls(
     """Walls nobody declared: planes parallel to the region's faces, beyond the region and every
     antenna (``region`` = (min, max), m; ``antennas`` (n, 3), m), up to ``reach_m`` further out.
 
-    Greedy: each round searches the six directions with the ``known`` reflectors and the walls
+    Greedy: each round searches the six directions with the ``known`` reflectors (plain values,
+    as :class:`ReflectorFit` keeps them) and the walls
     found so far in the model, and takes the one that explains the references best; it is kept
     when it passes :func:`refine_reflectors`' checks and gains ``DISCOVERY_NATS`` (more than a
     declared wall needs: the search tries thousands of planes). At most ``MAX_DISCOVERED``."""
@@ -253,7 +242,7 @@ def discover_walls(
     offsets = -np.arange(0.0, reach_m + 1e-12, COARSE_STEP_M)
     found: list[ReflectorFit] = []
     for _ in range(MAX_DISCOVERED):
-        others = [as_dict(r) for r in known] + [f.reflector for f in found]
+        others = list(known) + [f.reflector for f in found]
         best = None
         for axis in range(3):
             for side, face in ((1.0, low), (-1.0, high)):

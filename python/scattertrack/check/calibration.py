@@ -50,7 +50,7 @@ def reflector_warnings(scene: Scene) -> list[str]:
     gave medians of 20 cm where no wall at all gave 2 cm
     (docs/glac.md, "Known reflectors"). ``calibrate`` refines each declared
     reflector against reference tags, or leaves it out."""
-    reflectors = list(getattr(scene, "reflectors", []) or [])
+    reflectors = scene.reflectors
     if not reflectors:
         return []
     table = scene.extra.get("calibration") if isinstance(scene.extra.get("calibration"), dict) else {}

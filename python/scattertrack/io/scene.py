@@ -52,6 +52,8 @@ PERIODS = ("2pi", "pi")
 REFLECTOR_KEYS = {"plane": ("point", "normal", "coefficient"), "point": ("position", "coefficient")}
 """Keys of each reflector kind besides ``kind`` (all required); the simulator's
 ``[[reader_model.reflectors]]`` take the same."""
+REFLECTOR_VECTORS = ("point", "normal", "position")
+"""The vector keys (3 numbers each) of the reflector kinds."""
 REFLECTOR_READER_KINDS = ("cots",)
 """Reader kinds whose scenes may declare ``[[reflectors]]`` (the monostatic multipath model)."""
 ON_PLANE_M = 1e-3
@@ -129,6 +131,17 @@ class ChannelOffset:
     phase_offset_rad: float
 
 
+def unit_normal(normal: np.ndarray) -> np.ndarray:
+    """A non-zero ``normal`` at unit length: scaled by its largest component first (huge or
+    tiny components neither overflow nor underflow); one already unit within 4 ulp is left as
+    it is, so that writing and reading a scene leaves nothing drifting."""
+    normal = np.asarray(normal, dtype=np.float64)
+    if not 1e-150 < np.linalg.norm(normal) < math.inf:
+        normal = normal / np.abs(normal).max()
+    length = float(np.linalg.norm(normal))
+    return normal if abs(length - 1.0) <= 4.0 * np.finfo(np.float64).eps else normal / length
+
+
 @dataclass
 class Reflector:
     """A known reflector (``[[reflectors]]``): a wall or a point scatterer, docs/formats.md section 1."""
@@ -146,10 +159,25 @@ class Reflector:
 
     def __post_init__(self):
         self.coefficient = float(self.coefficient)
-        for name in ("point", "normal", "position"):
+        for name in REFLECTOR_VECTORS:
             value = getattr(self, name)
             if value is not None:
                 setattr(self, name, np.asarray(value, dtype=np.float64))
+
+    @classmethod
+    def from_dict(cls, values: dict) -> "Reflector":
+        """From plain values (a scenario's ``[[scene.reflectors]]``, a calibration's fit): the
+        keys of its kind (:data:`REFLECTOR_KEYS`), a plane's normal made unit (:func:`unit_normal`)."""
+        vectors = {key: np.asarray(values[key], dtype=np.float64) for key in REFLECTOR_KEYS[values["kind"]] if key != "coefficient"}
+        if "normal" in vectors:
+            vectors["normal"] = unit_normal(vectors["normal"])
+        return cls(kind=values["kind"], coefficient=float(values["coefficient"]), **vectors)
+
+    def as_dict(self) -> dict:
+        """Plain values (lists of floats), as :func:`scattertrack.physics.round_trip_channel` takes them."""
+        out = {"kind": self.kind, "coefficient": self.coefficient}
+        out.update({key: [float(v) for v in getattr(self, key)] for key in REFLECTOR_VECTORS if getattr(self, key) is not None})
+        return out
 
 
 @dataclass
@@ -599,15 +627,9 @@ class _SceneChecker:
                 raise self.fail(f"{where}.coefficient", "expected an amplitude reflection coefficient in [-1, 1], "
                                                         f"found {table['coefficient']!r}")
             if reflector_kind == "plane":
-                normal = vectors["normal"]
-                if not normal.any():
+                if not vectors["normal"].any():
                     raise self.fail(f"{where}.normal", f"expected a non-zero vector, found {table['normal']!r}")
-                if not 1e-150 < np.linalg.norm(normal) < math.inf:  # huge or tiny components: scale first
-                    normal = normal / np.abs(normal).max()
-                length = float(np.linalg.norm(normal))
-                if abs(length - 1.0) > 4.0 * np.finfo(np.float64).eps:  # unit already: left as is, so nothing drifts
-                    normal = normal / length
-                vectors["normal"] = normal
+                vectors["normal"] = unit_normal(vectors["normal"])
                 self.plane_sides(where, vectors["point"], vectors["normal"], antennas)
             reflectors.append(Reflector(kind=reflector_kind, coefficient=coefficient, **vectors))
         return reflectors

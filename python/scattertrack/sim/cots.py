@@ -68,7 +68,6 @@ from __future__ import annotations
 import numpy as np
 
 from scattertrack.io.hop_table import US_PLAN_HZ
-from scattertrack.io.scene import REFLECTOR_KEYS  # noqa: F401 - the scenario checks' name
 from scattertrack.io.types import Reads
 from scattertrack.physics import SPEED_OF_LIGHT, round_trip_channel
 from scattertrack.sim.trajectory import positions_velocities

@@ -225,7 +225,7 @@ def simulate(scenario: dict, seed: int | None = None) -> Simulation:
         region=Region(np.array(region["min"], float), np.array(region["max"], float)) if region else None,
         channel_offsets=written_channels,
         # What the user declares ([[scene.reflectors]]), never the simulated [[reader_model.reflectors]].
-        reflectors=_declared_reflectors(scene_spec.get("reflectors", [])),
+        reflectors=[Reflector.from_dict(table) for table in scene_spec.get("reflectors", [])],
     )
     details = {
         "true_antenna_phase_offsets_rad": {int(i): float(o) for i, o in zip(antenna_ids, antenna_true)},
@@ -262,19 +262,6 @@ def _simulate_helper(data: dict) -> Simulation:
     frames, details = wideband.frames_from_trajectories(scene, epcs, trajectories, data["duration_s"], model, rngs)
     truth = _truth(epcs, trajectories, data["duration_s"], data["truth_rate_hz"])
     return Simulation(scene=scene, reads=None, truth=truth, scenario=data, seed=seed, details=details, frames=frames)
-
-
-def _declared_reflectors(tables: list[dict]) -> list[Reflector]:
-    """The resolved ``[[scene.reflectors]]`` as the scene's reflectors (a plane's normal unit length)."""
-    reflectors = []
-    for table in tables:
-        keys = [key for key in cots.REFLECTOR_KEYS[table["kind"]] if key != "coefficient"]
-        vectors = {key: np.array(table[key], dtype=float) for key in keys}
-        if "normal" in vectors:
-            normal = vectors["normal"] / np.abs(vectors["normal"]).max()  # scaled first: no overflow
-            vectors["normal"] = normal / np.linalg.norm(normal)
-        reflectors.append(Reflector(kind=table["kind"], coefficient=float(table["coefficient"]), **vectors))
-    return reflectors
 
 
 def _tag_trajectories(tags: list[dict], rng) -> tuple[list[str], list[dict]]:

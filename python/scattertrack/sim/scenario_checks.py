@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
+from scattertrack.io.scene import REFLECTOR_KEYS
 from scattertrack.io.types import FormatError
-from scattertrack.sim import cots, trajectory
+from scattertrack.sim import trajectory
 
 
 class Checker:
@@ -107,9 +108,9 @@ def check_reflectors(check: Checker, reflectors, key: str) -> None:
     for i, reflector in enumerate(reflectors):
         where = f"{key}reflectors[{i}]"
         check.table(reflector, where)
-        kind = check.choice(reflector.get("kind"), where + ".kind", tuple(cots.REFLECTOR_KEYS))
-        check.keys(reflector, ("kind", *cots.REFLECTOR_KEYS[kind]), where)
-        for name in cots.REFLECTOR_KEYS[kind]:
+        kind = check.choice(reflector.get("kind"), where + ".kind", tuple(REFLECTOR_KEYS))
+        check.keys(reflector, ("kind", *REFLECTOR_KEYS[kind]), where)
+        for name in REFLECTOR_KEYS[kind]:
             if name not in reflector:
                 check.fail(f"{where}.{name}", "missing")
         reflector["coefficient"] = check.number(reflector["coefficient"], where + ".coefficient")
