@@ -90,10 +90,19 @@ class MarvelParams:
     """1-sigma of a yaw when the features give none, rad."""
     use_yaw: bool = parameter(True, "any", "", "yaw factors from the features' yaw column")
 
-    correlation_distance_m: float = parameter(0.5, ">= 0", "m", "distance travelled over which the features' multipath errors decorrelate; 0: every row independent")
+    correlation_distance_m: float = parameter(1.0, ">= 0", "m", "distance travelled, as the IMU predicts it, over which the features' multipath errors decorrelate; 0: every row independent")
     """Distance travelled over which the features' multipath errors
-    decorrelate, m (a few wavelengths at 915 MHz); 0: treat every row as
-    independent. See ``correlation_time_s`` and ``multipath``."""
+    decorrelate, m (a few wavelengths at 915 MHz), measured along the
+    IMU-predicted displacements; 0: treat every row as independent. See
+    ``correlation_time_s`` and ``multipath``.
+
+    Twice the 0.5 m at which our simulator decorrelates them, because the
+    travel the estimator sees is longer than the drone's: each epoch's
+    displacement comes from the previous posterior's velocity, whose error
+    adds length in every direction (measured on a lift-off: 2.2 m seen
+    against 1.4 m flown in the climb, 0.3 m per second of hover). With 0.5 m
+    the lift-off flights' sigmas were too small (rows beyond 3 sigma 4-6 %
+    on dev seeds, 57 % on the worst); docs/marvel.md section 9."""
     correlation_time_s: float = parameter(5.0, "> 0", "s", "time over which they decorrelate at rest (people, doors)")
     """Time over which they decorrelate at rest (people, doors), s. Rows
     closer together than one decorrelation carry one measurement's worth of

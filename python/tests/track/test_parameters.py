@@ -39,7 +39,8 @@ PREVIOUS_DEFAULTS = {
         "gyro_noise_density": 8.7e-05, "accel_bias_random_walk": 0.0001, "gyro_bias_random_walk": 2e-05,
         "accel_bias_sigma": 0.02, "gyro_bias_sigma": 0.002, "integration_sigma": 0.0001, "imu_noise_scale": 1.0,
         "range_sigma_m": 0.5, "angle_sigma_rad": 0.05, "yaw_sigma_rad": 0.15, "use_yaw": True,
-        "correlation_distance_m": 0.5, "correlation_time_s": 5.0, "multipath": "states", "white_floor_range_m": 0.02,
+        # correlation_distance_m: 0.5 until issue 16 (lift-off sigmas; see MarvelParams).
+        "correlation_distance_m": 1.0, "correlation_time_s": 5.0, "multipath": "states", "white_floor_range_m": 0.02,
         "white_floor_angle_rad": 0.002, "range_bias_sigma_m": 0.5, "multipath_white_fraction": 0.5,
         "use_ground": True, "rest_gyro_threshold_rad_s": 0.05, "rest_accel_threshold_m_s2": 0.3,
         "ground_position_sigma_m": 0.02, "ground_velocity_sigma_m_s": 0.01, "ground_rotation_sigma_rad": 0.0001,
