@@ -12,6 +12,11 @@
 3. ``locate`` on 40 static tags of the glac-3d-walls layout, hopping and
    calibrated, 120 s and 40 s: median, rows beyond 3 sigma, tags/s; on one
    fixed channel: the candidates listed.
+4. ``locate`` beside a reflecting wall (the glac-3d-bay antennas, the
+   robustness bench's multipath wall at x = 1.6 m, coefficient 0.3; 12
+   static tags, hopping, 30 s): the wall unknown to the scene, and as
+   ``calibrate`` placed it from a 60 s reference sweep in the same room
+   (declared 4 cm off; ``bench/wall_calibration.py``).
 
     .venv/bin/python bench/calibration.py [--seeds 3]
 """
@@ -36,6 +41,13 @@ from scattertrack.eval import compare
 from scattertrack.locate import locate
 from scattertrack.sim import load_scenario, simulate
 from scattertrack.sim.rooms import static_tags
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import bench_modules  # noqa: E402
+
+wall_calibration = bench_modules.load("wall_calibration")
+WALL = {"kind": "plane", "point": [1.6, 0.0, 0.0], "normal": [-1.0, 0.0, 0.0], "coefficient": 0.3}
+"""The robustness bench's multipath wall (bench/glac_robustness.py)."""
 
 ARM = {"epc": "E2000A01", "trajectory": {"kind": "pick-and-place", "peak_speed": 0.25, "pause_s": 0.3, "waypoints": [
     [0.60, 0.60, 0.45], [0.60, 0.60, 0.75], [0.85, 0.85, 0.88], [1.00, 1.00, 0.75], [1.00, 1.00, 0.45], [1.00, 1.00, 0.75], [0.75, 0.70, 0.85], [0.60, 0.60, 0.75]]}}
@@ -93,6 +105,38 @@ def locate_block(count: int, duration_s: float, seed: int, hopping: bool = True)
             f"p90 {np.percentile(errors, 90) * 1e3:.1f} mm, beyond 3 sigma {np.mean(beyond) * 100:.0f} %, candidates {np.mean(candidates):.1f} a tag, {count / wall_s:.0f} tags/s")
 
 
+def wall_locate_block(seeds, count: int = 12, duration_s: float = 30.0) -> list[str]:
+    """``locate`` beside :data:`WALL` (module docs, block 4): per case, every seed's tags pooled."""
+    cases = {"wall unknown": [], "wall calibrated": []}
+    kept_walls, wall_x = 0, []
+    for seed in seeds:
+        sim, truth = static_tags("glac-3d-bay", count, duration_s, seed, reflectors=[WALL])
+        room = copy.deepcopy(load_scenario("glac-3d-bay"))
+        room["reader_model"] |= {"hopping": True, "reflectors": [dict(WALL)]}
+        room["reader_model"].pop("frequency_hz", None)
+        walls, _ = wall_calibration.calibrated_walls(room, seed)
+        kept_walls += len(walls)
+        wall_x += [float(w.point[0]) for w in walls]
+        for case, scene in (("wall unknown", sim.scene), ("wall calibrated", wall_calibration.with_walls(sim.scene, walls))):
+            start = time.perf_counter()
+            locations = locate(scene, sim.reads)
+            wall_s = time.perf_counter() - start
+            for location in locations:
+                best = location.candidates[0]
+                error = best.position - truth[location.epc]
+                beyond = bool(np.any(np.abs(error) > 3 * np.sqrt(np.diag(best.covariance))))
+                cases[case].append((float(np.linalg.norm(error)), beyond, len(location.candidates), wall_s / len(locations)))
+    lines = [f"  walls kept by calibrate: {kept_walls} of {len(seeds)}" + (f", at x = {min(wall_x):.4f}-{max(wall_x):.4f} m (true 1.6)" if wall_x else "")]
+    for case, rows in cases.items():
+        errors = np.array([r[0] for r in rows])
+        lines.append(
+            f"  {case}: {len(rows)} tags ({len(seeds)} rooms), median {np.median(errors) * 1e3:.1f} mm, p90 {np.percentile(errors, 90) * 1e3:.1f} mm, "
+            f"beyond 3 sigma {100 * np.mean([r[1] for r in rows]):.0f} %, candidates {np.mean([r[2] for r in rows]):.1f} a tag, "
+            f"{1e3 * np.mean([r[3] for r in rows]):.0f} ms a tag"
+        )
+    return lines
+
+
 def cli_block(copies: int, duration_s: float, seed: int) -> str:
     """``scattertrack locate`` end to end (parse reads.csv, locate, write
     positions.csv) on ``copies`` × 40 static tags: the 40-tag room's reads
@@ -118,6 +162,7 @@ def cli_block(copies: int, duration_s: float, seed: int) -> str:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, default=3)
+    parser.add_argument("--wall-seeds", type=int, default=8, help="rooms of block 4 (seeds 0..N-1)")
     args = parser.parse_args()
     print("calibration-room: calibrate from 6 references (120 s, uncalibrated scene, channel indices only)")
     for seed in range(21, 21 + args.seeds):
@@ -135,6 +180,9 @@ def main() -> int:
     print(locate_block(40, 40.0, 2))
     print(locate_block(3, 30.0, 3, hopping=False))
     print(cli_block(25, 40.0, 2))
+    print(f"locate beside a wall: glac-3d-bay antennas, wall x = 1.6 m (coefficient 0.3), 12 static tags, hopping, 30 s, seeds 0-{args.wall_seeds - 1}")
+    for line in wall_locate_block(range(args.wall_seeds)):
+        print(line)
     return 0
 
 

@@ -405,10 +405,14 @@ def locate_batch(
     hopping_spread_hz: float,
     max_points: int = 100_000,
     threads: int = 0,
+    scene: object | None = None,
+    phase_multiplier: float = 1.0,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Every tag's phase candidates, tag t in rows ``bounds[t]:bounds[t+1]`` searched in
     ``low[t]..high[t]`` (``antenna`` indexes ``anchors``; ``k`` = m s 4 pi f / c, rad/m), on
-    ``threads`` threads (0: every core). Returns positions (c, 3) m, covariances (c, 3, 3) m²,
+    ``threads`` threads (0: every core). ``scene``: an object with ``reflectors`` (a
+    ``scattertrack.io.Scene``), whose known reflectors enter the phase model (apparent ranges),
+    with ``phase_multiplier`` the m of ``k``. Returns positions (c, 3) m, covariances (c, 3, 3) m²,
     weights (c,), coherences (c,) and candidate_bounds (tags + 1,): tag t's candidates, best
     first, are rows ``candidate_bounds[t]:candidate_bounds[t+1]``."""
 

@@ -38,6 +38,12 @@ def command_locate(args) -> int:
         raise ValueError(f"locate locates tags of monostatic reader scenes ([reader] kind = \"cots\"), not {scene.reader.kind!r}")
     if "calibration" not in scene.extra:
         say("  the scene has no [calibration] table: its offsets are taken as they are and RSSI is not used (see scattertrack calibrate)")
+    from scattertrack.check.calibration import reflector_warnings
+
+    for line in reflector_warnings(scene):
+        say(line)
+    if scene.reflectors:
+        say(f"  the phase model includes the scene's {plural(len(scene.reflectors), 'reflector')} (each read's apparent range)")
     reads = io.read_reads(args.reads, scene)
     start = time.perf_counter()
     locations = locate(scene, reads)

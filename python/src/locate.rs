@@ -6,8 +6,11 @@ use nalgebra::{Complex, Vector3};
 use numpy::{IntoPyArray, PyArray1, PyArray2, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 
-use scattertrack_core::locate::{self, batch::TagBatch, Settings};
+use scattertrack_core::locate::{self, batch::TagBatch, Paths, Settings};
+use scattertrack_core::model::reflected_paths;
+use scattertrack_core::scene::checked_reflectors;
 
+use crate::scene::reflectors;
 use crate::value_error;
 
 fn phasors(re: &PyReadonlyArray1<f64>, im: &PyReadonlyArray1<f64>) -> PyResult<Vec<Complex<f64>>> {
@@ -32,8 +35,10 @@ fn points(array: &PyReadonlyArray2<f64>, what: &str) -> PyResult<Vec<Vector3<f64
 /// arrays over all candidates — positions (c, 3) m, covariances (c, 3, 3)
 /// m², weights (c,), coherences (c,) — and `candidate_bounds` (tags + 1,):
 /// tag t's candidates, best first, are rows `candidate_bounds[t]..[t+1]`.
+/// `scene`: an object whose `reflectors` (a `scattertrack.io.Scene`'s)
+/// enter the phase model, with `phase_multiplier` m of k = m s 4π f / c.
 #[pyfunction]
-#[pyo3(signature = (z_re, z_im, k, time_s, antenna, anchors, bounds, low, high, axes, *, temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points=100_000, threads=0))]
+#[pyo3(signature = (z_re, z_im, k, time_s, antenna, anchors, bounds, low, high, axes, *, temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points=100_000, threads=0, scene=None, phase_multiplier=1.0))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn locate_batch<'py>(
     py: Python<'py>,
@@ -55,6 +60,8 @@ fn locate_batch<'py>(
     hopping_spread_hz: f64,
     max_points: usize,
     threads: usize,
+    scene: Option<Bound<'py, PyAny>>,
+    phase_multiplier: f64,
 ) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, numpy::PyArray3<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<f64>>, Bound<'py, PyArray1<i64>>)> {
     let z = phasors(&z_re, &z_im)?;
     let (k, time_s) = (k.as_slice()?, time_s.as_slice()?);
@@ -75,10 +82,18 @@ fn locate_batch<'py>(
     if !(axes == 2 || axes == 3) {
         return Err(value_error("axes must be 2 or 3"));
     }
+    let known = match &scene {
+        Some(scene) => checked_reflectors(reflectors(scene)?).map_err(value_error)?,
+        None => Vec::new(),
+    };
+    if !(phase_multiplier == 1.0 || phase_multiplier == 2.0) {
+        return Err(value_error("phase_multiplier must be 1 (mod 2π) or 2 (mod π)"));
+    }
+    let per_anchor: Vec<_> = anchor_points.iter().map(|a| reflected_paths(a, &known)).collect();
     let settings = Settings { temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points };
     let threads = if threads == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { threads };
     let found = py.detach(|| {
-        let batch = TagBatch { z: &z, k, time_s, antenna: &antenna, anchors: &anchor_points, bounds: &bounds, low: &low, high: &high };
+        let batch = TagBatch { z: &z, k, time_s, antenna: &antenna, anchors: &anchor_points, bounds: &bounds, low: &low, high: &high, paths: (!known.is_empty()).then_some(Paths { per_anchor: &per_anchor, phase_multiplier }) };
         locate::locate_batch(&batch, axes, &settings, threads)
     });
     let all: Vec<&locate::Candidate> = found.iter().flatten().collect();

@@ -98,7 +98,7 @@ pub fn core_scene(scene: &Bound<'_, PyAny>) -> PyResult<CoreScene> {
 }
 
 /// The scene's `reflectors` (none when it has no such attribute).
-fn reflectors(scene: &Bound<'_, PyAny>) -> PyResult<Vec<Reflector>> {
+pub(crate) fn reflectors(scene: &Bound<'_, PyAny>) -> PyResult<Vec<Reflector>> {
     let mut out = Vec::new();
     if !scene.hasattr("reflectors")? {
         return Ok(out);

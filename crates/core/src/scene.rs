@@ -189,32 +189,9 @@ impl Scene {
     }
 
     /// The scene with known `reflectors` (normals made unit). Fails on a
-    /// non-finite value, a zero normal or |Γ| > 1.
+    /// non-finite value, a zero normal or |Γ| > 1 ([`checked_reflectors`]).
     pub fn with_reflectors(mut self, reflectors: Vec<Reflector>) -> Result<Self> {
-        let bad = |m: String| Err(Error::Scene(m));
-        let finite = |v: &Vector3<f64>| v.iter().all(|c| c.is_finite());
-        self.reflectors = Vec::with_capacity(reflectors.len());
-        for (i, r) in reflectors.into_iter().enumerate() {
-            let (coefficient, r) = match r {
-                Reflector::Plane { point, normal, coefficient } => {
-                    let length = normal.norm();
-                    if !finite(&point) || !finite(&normal) || !(length > 1e-12) {
-                        return bad(format!("reflector {i}: plane needs a finite point and a nonzero normal"));
-                    }
-                    (coefficient, Reflector::Plane { point, normal: normal / length, coefficient })
-                }
-                Reflector::Point { position, coefficient } => {
-                    if !finite(&position) {
-                        return bad(format!("reflector {i}: non-finite position"));
-                    }
-                    (coefficient, r)
-                }
-            };
-            if !(coefficient.abs() <= 1.0) {
-                return bad(format!("reflector {i}: coefficient must be in [-1, 1]"));
-            }
-            self.reflectors.push(r);
-        }
+        self.reflectors = checked_reflectors(reflectors)?;
         Ok(self)
     }
 
@@ -285,6 +262,36 @@ impl Scene {
         let offset = self.antennas[antenna].phase_offset_rad + self.channel_offset(frequency_hz);
         wrap(self.phase_sign * 4.0 * std::f64::consts::PI * distance / lambda + offset, self.phase_period)
     }
+}
+
+/// `reflectors` with their normals made unit. Fails on a non-finite value,
+/// a zero normal or |Γ| > 1.
+pub fn checked_reflectors(reflectors: Vec<Reflector>) -> Result<Vec<Reflector>> {
+    let bad = |m: String| Err(Error::Scene(m));
+    let finite = |v: &Vector3<f64>| v.iter().all(|c| c.is_finite());
+    let mut out = Vec::with_capacity(reflectors.len());
+    for (i, r) in reflectors.into_iter().enumerate() {
+        let (coefficient, r) = match r {
+            Reflector::Plane { point, normal, coefficient } => {
+                let length = normal.norm();
+                if !finite(&point) || !finite(&normal) || !(length > 1e-12) {
+                    return bad(format!("reflector {i}: plane needs a finite point and a nonzero normal"));
+                }
+                (coefficient, Reflector::Plane { point, normal: normal / length, coefficient })
+            }
+            Reflector::Point { position, coefficient } => {
+                if !finite(&position) {
+                    return bad(format!("reflector {i}: non-finite position"));
+                }
+                (coefficient, r)
+            }
+        };
+        if !(coefficient.abs() <= 1.0) {
+            return bad(format!("reflector {i}: coefficient must be in [-1, 1]"));
+        }
+        out.push(r);
+    }
+    Ok(out)
 }
 
 #[cfg(test)]

@@ -28,7 +28,11 @@ sign) and θ_tag the tag's own, unknown offset; a position p explains the
 reads as well as their coherence R(p) = |Σ_k z_k exp(−j k_k d_k(p))| / n
 says, θ_tag profiled out. The search over p, the weights and covariances
 run in the Rust core (``scattertrack_core::locate``, one threaded call for
-every tag); this module adds RSSI, the fallbacks and the rows.
+every tag); this module adds RSSI, the fallbacks and the rows. The scene's
+known reflectors (``[[reflectors]]``, placed by ``scattertrack calibrate``)
+enter the model there: d_k(p) is then each read's apparent range, because
+a wall's excess phase turns across the band and would otherwise move the
+hop ranges by decimetres onto a wrong lattice point (docs/calibration.md).
 
 Sigmas: the phase fit's Fisher covariance at the read-to-read noise the
 fit shows, scaled for the reads' correlation (the error of real readers
@@ -140,6 +144,8 @@ class _Phasors:
     anchors: np.ndarray
     z: np.ndarray
     k: np.ndarray
+    multiplier: int
+    """m of k = m s 4π f / c: 2 for a mod-π reader."""
 
     @classmethod
     def of(cls, scene: Scene, reads: Reads) -> _Phasors:
@@ -154,7 +160,7 @@ class _Phasors:
         frequency = np.asarray(reads.frequency_hz, dtype=np.float64)
         offsets = (antenna_offsets[anchor] if len(ids) else 0.0) + _channel_offsets(scene, frequency)
         z = np.exp(1j * m * (np.asarray(reads.phase_rad, dtype=np.float64) - offsets))
-        return cls(known, anchor, anchors, z, m * scene.reader.phase_sign * FOUR_PI_OVER_C * frequency)
+        return cls(known, anchor, anchors, z, m * scene.reader.phase_sign * FOUR_PI_OVER_C * frequency, m)
 
 
 def _locate_tags(scene: Scene, reads: Reads, tags: list[tuple[str, np.ndarray]]) -> list[Location]:
@@ -182,7 +188,7 @@ def _locate_tags(scene: Scene, reads: Reads, tags: list[tuple[str, np.ndarray]])
         else:
             searched.append(len(work))
         work.append((location, rows, low, high))
-    found = _phase_search(phasors, time_all, scene.dimensions, [work[i] for i in searched])
+    found = _phase_search(phasors, time_all, scene.dimensions, [work[i] for i in searched], scene)
     candidates_of = dict(zip(searched, found))
     locations = []
     for i, (location, rows, low, high) in enumerate(work):
@@ -198,9 +204,10 @@ def _locate_tags(scene: Scene, reads: Reads, tags: list[tuple[str, np.ndarray]])
     return locations
 
 
-def _phase_search(phasors: _Phasors, time_s: np.ndarray, axes: int, work: list) -> list[list[Candidate]]:
+def _phase_search(phasors: _Phasors, time_s: np.ndarray, axes: int, work: list, scene: Scene) -> list[list[Candidate]]:
     """The phase candidates of every tag in ``work``: one call to the Rust
-    core (``scattertrack_core::locate``, threaded over tags)."""
+    core (``scattertrack_core::locate``, threaded over tags), with the
+    scene's known reflectors in the phase model."""
     if not work:
         return []
     rows = np.concatenate([w[1] for w in work])
@@ -212,6 +219,7 @@ def _phase_search(phasors: _Phasors, time_s: np.ndarray, axes: int, work: list) 
         bounds, np.array([w[2] for w in work], dtype=np.float64).reshape(-1, 3), np.array([w[3] for w in work], dtype=np.float64).reshape(-1, 3), axes,
         temperature=TEMPERATURE, bias_sigma_rad=BIAS_SIGMA_RAD, correlation_s=CORRELATION_S, max_candidates=MAX_CANDIDATES,
         min_weight=MIN_WEIGHT, hopping_spread_hz=HOPPING_SPREAD_HZ,
+        scene=scene if scene.reflectors else None, phase_multiplier=float(phasors.multiplier),
     )
     return [
         [Candidate(positions[c], covariances[c], float(weights[c]), "phase", float(coherences[c])) for c in range(candidate_bounds[t], candidate_bounds[t + 1])]

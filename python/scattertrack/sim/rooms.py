@@ -14,13 +14,20 @@ import numpy as np
 from scattertrack.sim.scenario import Simulation, load_scenario, simulate
 
 
-def static_tags(layout: str, count: int, duration_s: float, seed: int, hopping: bool = True, extra_tags: dict | None = None) -> tuple[Simulation, dict]:
+def static_tags(
+    layout: str, count: int, duration_s: float, seed: int, hopping: bool = True, extra_tags: dict | None = None,
+    reflectors: list[dict] | None = None,
+) -> tuple[Simulation, dict]:
     """``count`` static tags (EPCs ``E200D000``…) in ``layout``'s antennas and region,
     read for ``duration_s``, 50-channel hopping unless ``hopping`` is False;
-    ``extra_tags`` (EPC -> position) join them. Returns the simulation and
-    every tag's position (m)."""
+    ``extra_tags`` (EPC -> position) join them; ``reflectors`` (the
+    ``[[reader_model.reflectors]]`` form) are the room's walls, which the
+    simulated reads carry and the scene does not declare. Returns the
+    simulation and every tag's position (m)."""
     scenario = copy.deepcopy(load_scenario(layout))
     scenario["duration_s"] = float(duration_s)
+    if reflectors:
+        scenario["reader_model"]["reflectors"] = copy.deepcopy(list(reflectors))
     if hopping:
         scenario["reader_model"]["hopping"] = True
         scenario["reader_model"].pop("frequency_hz", None)

@@ -81,6 +81,8 @@ def test_calibrate_refines_the_declared_wall_and_track_stops_warning(capsys, wal
     assert code == 0 and "warning: the scene declares 1 reflector that scattertrack calibrate has not refined" in out + err
     code, out, err = run(capsys, "check-scene", scene)
     assert code == 0 and "has not refined" in out + err
+    code, out, err = run(capsys, "locate", "--scene", scene, "--reads", reads, "--out", tmp_path / "p.csv")
+    assert code == 0 and "has not refined" in out + err and "the phase model includes the scene's 1 reflector" in out + err
     code, out, err = run(capsys, "calibrate", "--scene", scene, "--reads", reads, "--truth", walled_sweep / "truth.csv", "--out", tmp_path / "c.toml")
     assert code == 0, err
     assert "reflector 0 (plane): moved -4.0 cm along its normal" in out and ": kept" in out, out
@@ -88,6 +90,8 @@ def test_calibrate_refines_the_declared_wall_and_track_stops_warning(capsys, wal
     assert abs(calibrated.reflectors[0].point[0] - 1.6) < 0.003
     code, out, err = run(capsys, "track", "--scene", tmp_path / "c.toml", "--reads", reads, "--out", tmp_path / "t2.csv")
     assert code == 0 and "has not refined" not in out + err
+    code, out, err = run(capsys, "locate", "--scene", tmp_path / "c.toml", "--reads", reads, "--out", tmp_path / "p2.csv")
+    assert code == 0 and "has not refined" not in out + err and "the phase model includes" in out + err
 
 
 def test_calibrate_checks_the_reflector_search(capsys, walled_sweep, tmp_path):

@@ -5,7 +5,7 @@ use std::sync::Mutex;
 
 use nalgebra::{Complex, Vector3};
 
-use super::{phase_candidates, Candidate, PhaseReads, Settings};
+use super::{phase_candidates, Candidate, Paths, PhaseReads, Settings};
 
 /// Every tag's reads, concatenated: tag t owns rows `bounds[t]..bounds[t + 1]`.
 pub struct TagBatch<'a> {
@@ -19,6 +19,8 @@ pub struct TagBatch<'a> {
     /// Each tag's search box, m.
     pub low: &'a [Vector3<f64>],
     pub high: &'a [Vector3<f64>],
+    /// Known reflectors (`None`: the direct path alone).
+    pub paths: Option<Paths<'a>>,
 }
 
 /// [`phase_candidates`] for every tag of `batch`, on `threads` threads
@@ -35,7 +37,10 @@ pub fn locate_batch(batch: &TagBatch, axes: usize, settings: &Settings, threads:
             break;
         }
         let rows = batch.bounds[t]..batch.bounds[t + 1];
-        let reads = PhaseReads::new(&batch.z[rows.clone()], &batch.k[rows.clone()], &batch.antenna[rows.clone()], batch.anchors);
+        let mut reads = PhaseReads::new(&batch.z[rows.clone()], &batch.k[rows.clone()], &batch.antenna[rows.clone()], batch.anchors);
+        if let Some(paths) = batch.paths {
+            reads = reads.with_paths(paths);
+        }
         let found = phase_candidates(&reads, &batch.time_s[rows], batch.low[t], batch.high[t], axes, settings);
         *results[t].lock().unwrap_or_else(|poisoned| poisoned.into_inner()) = found;
     };
@@ -71,7 +76,7 @@ mod tests {
         }
         let time: Vec<f64> = (0..z.len()).map(|i| (i % 200) as f64 * 0.03).collect();
         let (low, high) = (vec![Vector3::zeros(); 3], vec![Vector3::repeat(1.5); 3]);
-        let batch = TagBatch { z: &z, k: &k, time_s: &time, antenna: &antenna, anchors: &anchors, bounds: &bounds, low: &low, high: &high };
+        let batch = TagBatch { z: &z, k: &k, time_s: &time, antenna: &antenna, anchors: &anchors, bounds: &bounds, low: &low, high: &high, paths: None };
         let settings = Settings { temperature: 1.0, bias_sigma_rad: 0.07, correlation_s: 0.5, max_candidates: 5, min_weight: 1e-3, hopping_spread_hz: 2e6, max_points: 100_000 };
         let one = locate_batch(&batch, 3, &settings, 1);
         let two = locate_batch(&batch, 3, &settings, 2);

@@ -64,7 +64,7 @@ pub fn phase_candidates(single: &PhaseReads, time_s: &[f64], low: Vector3<f64>, 
     }
     let independent = independent_reads(single, time_s, settings.correlation_s);
     let grouped = single.grouped();
-    let reads = &grouped.reads(single.anchors);
+    let reads = &grouped.reads(single);
     let n = reads.total();
     let mean_k = (0..reads.z.len()).map(|i| reads.count(i) * reads.k[i].abs()).sum::<f64>() / n;
     let spacing = 2.0 * std::f64::consts::PI / mean_k;
@@ -126,12 +126,7 @@ fn independent_reads(reads: &PhaseReads, time_s: &[f64], correlation_s: f64) -> 
 
 /// σ² (J̃ᵀJ̃)⁻¹, J̃ᵢ = kᵢ uᵢ centred over the reads (candidates' docs).
 fn fisher_covariance(reads: &PhaseReads, p: &Vector3<f64>, sigma_rad: f64, axes: usize) -> Matrix3<f64> {
-    let rows: Vec<Vector3<f64>> = (0..reads.z.len())
-        .map(|i| {
-            let offset = p - reads.anchors[reads.antenna[i]];
-            offset * (reads.k[i] / offset.norm())
-        })
-        .collect();
+    let rows: Vec<Vector3<f64>> = (0..reads.z.len()).map(|i| reads.distance_gradient(i, p).1 * reads.k[i]).collect();
     let mean: Vector3<f64> = rows.iter().enumerate().map(|(i, j)| j * reads.count(i)).sum::<Vector3<f64>>() / reads.total();
     let information: Matrix3<f64> =
         rows.iter().enumerate().map(|(i, j)| reads.count(i) * (j - mean) * (j - mean).transpose()).sum::<Matrix3<f64>>() / (sigma_rad * sigma_rad);
@@ -182,6 +177,25 @@ mod tests {
         let reads = PhaseReads::new(&z, &k, &antenna, &anchors);
         let found = phase_candidates(&reads, &time, Vector3::zeros(), Vector3::repeat(1.2), 3, &settings());
         assert!(found.len() > 1, "{}", found.len());
+    }
+
+    #[test]
+    fn a_declared_wall_puts_the_best_candidate_back_on_the_truth() {
+        use super::super::fixtures::{reads_under, wall_paths};
+        use super::super::Paths;
+        let anchors = layout();
+        let truth = Vector3::new(0.9, 0.6, 0.7);
+        let paths = wall_paths(&anchors, 0.5);
+        let (z, k, antenna) = reads_under(truth, &anchors, &paths, &us_band());
+        let time: Vec<f64> = (0..z.len()).map(|i| i as f64 * 0.03).collect();
+        let single = PhaseReads::new(&z, &k, &antenna, &anchors);
+        let blind = phase_candidates(&single, &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
+        let told = phase_candidates(&single.with_paths(Paths { per_anchor: &paths, phase_multiplier: 1.0 }), &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
+        // Without the wall the single-path fit lands off the truth ...
+        assert!((blind[0].position - truth).norm() > 2e-3, "{:?}", blind[0].position - truth);
+        // ... with it, on the truth, and alone.
+        assert!((told[0].position - truth).norm() < 1e-5, "{:?}", told[0].position - truth);
+        assert!(told[0].weight > 0.99 && told[0].coherence > 0.999999, "{:?}", told[0]);
     }
 
     #[test]

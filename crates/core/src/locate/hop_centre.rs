@@ -3,6 +3,7 @@
 use nalgebra::{Complex, Matrix3, Vector3};
 
 use super::{hop_range, PhaseReads};
+use crate::model::ReflectedPath;
 
 /// Position and covariance (m, m²; in 2D the z row and column are zero)
 /// from each antenna's hop range ([`hop_range`], weighted by 1/σ², σ at
@@ -34,7 +35,49 @@ pub fn hop_centre(reads: &PhaseReads, low: &Vector3<f64>, high: &Vector3<f64>, a
     if ranges.len() < axes {
         return None;
     }
-    weighted_multilateration(&anchors, &ranges, &weights, 0.5 * (low + high), axes)
+    let (centre, covariance) = weighted_multilateration(&anchors, &ranges, &weights, 0.5 * (low + high), axes)?;
+    let Some(paths) = reads.paths else { return Some((centre, covariance)) };
+    // Known reflectors bend each hop range by up to their excess phase's
+    // slope against k (`slope_bias_bound`); that bound joins each range's
+    // variance, so the box spans the lattice points the reflectors can
+    // have moved the ranges over.
+    let used: Vec<usize> = reads.used_anchors();
+    let mut widened = weights.clone();
+    let mut index = 0;
+    for a in used {
+        if index < anchors.len() && anchors[index] == reads.anchors[a] {
+            let own = paths.per_anchor.get(a).map_or(&[][..], |p| p.as_slice());
+            let bias = slope_bias_bound(own, &reads.anchors[a], &centre);
+            widened[index] = 1.0 / (1.0 / weights[index] + bias * bias);
+            index += 1;
+        }
+    }
+    weighted_multilateration(&anchors, &ranges, &widened, centre, axes)
+}
+
+/// The most that reflected paths can move an antenna's hop range at tag
+/// position p, m. The hop range is the slope of the phase k d_app against
+/// k, d − ∂arg S/∂k with S = 1 + Σ t_p, t_p = Γ_p (d/L_p) e^{−jk(L_p − d)}
+/// ([`crate::model::apparent_range`]); |∂arg S/∂k| ≤ Σ |t_p| (L_p − d) /
+/// (1 − Σ |t_p|).
+fn slope_bias_bound(paths: &[ReflectedPath], anchor: &Vector3<f64>, p: &Vector3<f64>) -> f64 {
+    let d = (p - anchor).norm().max(1e-9);
+    let (mut turning, mut magnitude) = (0.0, 0.0);
+    for path in paths {
+        if let Some((q, n, side)) = path.plane {
+            if (p - q).dot(&n) * side <= 0.0 {
+                continue;
+            }
+        }
+        let length = path.lead_m + (p - path.source).norm().max(1e-9);
+        let t = path.coefficient.abs() * d / length;
+        turning += t * (length - d).abs();
+        magnitude += t;
+    }
+    if magnitude >= 1.0 {
+        return f64::INFINITY;
+    }
+    turning / (1.0 - magnitude)
 }
 
 /// Minimises Σ wᵢ (|p − aᵢ| − dᵢ)² by Gauss–Newton (20 steps at most);

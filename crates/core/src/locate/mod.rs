@@ -24,6 +24,14 @@
 //!    covariance of a per-antenna phase bias.
 //!
 //! [`batch`] runs step 4 for many tags on every core, results in tag order.
+//!
+//! **Known reflectors** ([`Paths`]): a wall adds to each read the excess
+//! phase of its reflected path, which changes across the band and bends
+//! the hop ranges by decimetres (docs/calibration.md). With the scene's
+//! reflectors, d_k(p) above is the *apparent* range
+//! ([`crate::model::apparent_range`]) and the grid evaluates R directly:
+//! the excess depends on where p is, not on its range alone, so the
+//! per-antenna envelope tables do not apply.
 
 pub mod batch;
 pub mod candidates;
@@ -43,6 +51,20 @@ pub use search::search;
 
 use nalgebra::{Complex, Vector3};
 
+use crate::model::{apparent_range, ReflectedPath};
+use crate::model::StateVector;
+
+/// The scene's known reflectors as each antenna sees them.
+#[derive(Clone, Copy)]
+pub struct Paths<'a> {
+    /// Per anchor (indexed as `anchors`): its reflected paths
+    /// ([`crate::model::reflected_paths`]); empty for none.
+    pub per_anchor: &'a [Vec<ReflectedPath>],
+    /// m in k = m s 4π f / c (2 for a mod-π reader): the carrier's
+    /// wavenumber 2π f / c is |k| / (2 m).
+    pub phase_multiplier: f64,
+}
+
 /// One tag's reads for the phase search, one entry a read or a group of
 /// reads on one antenna and channel ([`PhaseReads::grouped`]).
 pub struct PhaseReads<'a> {
@@ -56,6 +78,8 @@ pub struct PhaseReads<'a> {
     pub anchors: &'a [Vector3<f64>],
     /// Reads in each entry (`None`: one each).
     pub count: Option<&'a [f64]>,
+    /// Known reflectors (`None`: the direct path alone).
+    pub paths: Option<Paths<'a>>,
 }
 
 /// Reads summed per antenna and channel: R(p) and every sum over reads
@@ -69,15 +93,27 @@ pub struct Grouped {
 }
 
 impl Grouped {
-    pub fn reads<'a>(&'a self, anchors: &'a [Vector3<f64>]) -> PhaseReads<'a> {
-        PhaseReads { z: &self.z, k: &self.k, antenna: &self.antenna, anchors, count: Some(&self.count) }
+    /// The groups as reads, with the anchors and reflectors of `like`.
+    pub fn reads<'a>(&'a self, like: &PhaseReads<'a>) -> PhaseReads<'a> {
+        PhaseReads { z: &self.z, k: &self.k, antenna: &self.antenna, anchors: like.anchors, count: Some(&self.count), paths: like.paths }
     }
 }
 
 impl<'a> PhaseReads<'a> {
     /// Single reads (a count of one each).
     pub fn new(z: &'a [Complex<f64>], k: &'a [f64], antenna: &'a [usize], anchors: &'a [Vector3<f64>]) -> Self {
-        PhaseReads { z, k, antenna, anchors, count: None }
+        PhaseReads { z, k, antenna, anchors, count: None, paths: None }
+    }
+
+    /// The same reads under known reflectors (none of them: unchanged).
+    pub fn with_paths(self, paths: Paths<'a>) -> Self {
+        let any = paths.per_anchor.iter().any(|p| !p.is_empty());
+        PhaseReads { paths: any.then_some(paths), ..self }
+    }
+
+    /// Whether any antenna has a reflected path.
+    pub fn has_reflectors(&self) -> bool {
+        self.paths.is_some()
     }
 
     /// The entries summed per (antenna, k).
@@ -110,8 +146,39 @@ impl<'a> PhaseReads<'a> {
         self.count.map_or(self.z.len() as f64, |c| c.iter().sum())
     }
 
+    /// The range entry i's phase reports from p, m: the distance, or the
+    /// apparent range under known reflectors.
     fn distance(&self, i: usize, p: &Vector3<f64>) -> f64 {
-        (p - self.anchors[self.antenna[i]]).norm()
+        match self.reflected(i) {
+            Some((paths, wavenumber)) => apparent_range(&state_at(p), &self.anchors[self.antenna[i]], paths, wavenumber, 3, false).0,
+            None => (p - self.anchors[self.antenna[i]]).norm(),
+        }
+    }
+
+    /// That range and its gradient with respect to p (the unit vector from
+    /// the antenna without reflectors).
+    fn distance_gradient(&self, i: usize, p: &Vector3<f64>) -> (f64, Vector3<f64>) {
+        let anchor = &self.anchors[self.antenna[i]];
+        match self.reflected(i) {
+            Some((paths, wavenumber)) => {
+                let (d, h) = apparent_range(&state_at(p), anchor, paths, wavenumber, 3, true);
+                let h = h.expect("asked for the Jacobian");
+                (d, Vector3::new(h[0], h[1], h[2]))
+            }
+            None => {
+                let offset = p - anchor;
+                let d = offset.norm();
+                (d, offset / d.max(1e-9))
+            }
+        }
+    }
+
+    /// Entry i's antenna's reflected paths and the carrier's wavenumber
+    /// (rad/m), when it has any.
+    fn reflected(&self, i: usize) -> Option<(&'a [ReflectedPath], f64)> {
+        let paths = self.paths?;
+        let own = paths.per_anchor.get(self.antenna[i]).filter(|p| !p.is_empty())?;
+        Some((own.as_slice(), self.k[i].abs() / (2.0 * paths.phase_multiplier)))
     }
 
     /// The anchors that have reads, in index order.
@@ -122,6 +189,15 @@ impl<'a> PhaseReads<'a> {
         }
         (0..self.anchors.len()).filter(|&a| used[a]).collect()
     }
+}
+
+/// A state at position p (the apparent range reads only the position).
+fn state_at(p: &Vector3<f64>) -> StateVector {
+    let mut x = StateVector::zeros();
+    x[0] = p.x;
+    x[1] = p.y;
+    x[2] = p.z;
+    x
 }
 
 /// e^{−jφ}: the phasor that removes a phase φ.
@@ -157,5 +233,69 @@ pub(crate) mod fixtures {
 
     pub fn us_band() -> Vec<f64> {
         (0..50).map(|i| 902.75e6 + 0.5e6 * i as f64).collect()
+    }
+
+    /// A wall at x = 1.6 m facing the antennas (Γ = `coefficient`), as each
+    /// of `anchors` sees it.
+    pub fn wall_paths(anchors: &[Vector3<f64>], coefficient: f64) -> Vec<Vec<crate::model::ReflectedPath>> {
+        let wall = [crate::scene::Reflector::Plane { point: Vector3::new(1.6, 0.0, 0.0), normal: Vector3::new(-1.0, 0.0, 0.0), coefficient }];
+        anchors.iter().map(|a| crate::model::reflected_paths(a, &wall)).collect()
+    }
+
+    /// Noise-free reads of a tag at `truth` whose phases carry the paths'
+    /// excess: the apparent range in place of the distance (mod 2π, sign +1).
+    pub fn reads_under(truth: Vector3<f64>, anchors: &[Vector3<f64>], paths: &[Vec<crate::model::ReflectedPath>], frequencies: &[f64]) -> (Vec<Complex<f64>>, Vec<f64>, Vec<usize>) {
+        let mut x = crate::model::StateVector::zeros();
+        x[0] = truth.x;
+        x[1] = truth.y;
+        x[2] = truth.z;
+        let (mut z, mut k, mut antenna) = (Vec::new(), Vec::new(), Vec::new());
+        for (a, anchor) in anchors.iter().enumerate() {
+            for f in frequencies {
+                let kk = 4.0 * std::f64::consts::PI * f / C;
+                let (apparent, _) = crate::model::apparent_range(&x, anchor, &paths[a], kk / 2.0, 3, false);
+                let phase = kk * apparent + 0.7;
+                z.push(Complex::new(phase.cos(), phase.sin()));
+                k.push(kk);
+                antenna.push(a);
+            }
+        }
+        (z, k, antenna)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::fixtures::{layout, reads_at, us_band, wall_paths};
+    use super::*;
+
+    #[test]
+    fn the_range_gradient_matches_finite_differences_under_a_wall() {
+        let anchors = layout();
+        let paths = wall_paths(&anchors, 0.4);
+        let (z, k, antenna) = reads_at(Vector3::new(0.5, 0.6, 0.7), &anchors, &us_band());
+        let reads = PhaseReads::new(&z, &k, &antenna, &anchors).with_paths(Paths { per_anchor: &paths, phase_multiplier: 1.0 });
+        let p = Vector3::new(0.47, 0.63, 0.71);
+        let h = 1e-7;
+        for i in [0, 17, 60, 133, 199] {
+            let (d, gradient) = reads.distance_gradient(i, &p);
+            assert!((d - reads.distance(i, &p)).abs() < 1e-15);
+            for axis in 0..3 {
+                let step = Vector3::from_fn(|r, _| if r == axis { h } else { 0.0 });
+                let numeric = (reads.distance(i, &(p + step)) - reads.distance(i, &(p - step))) / (2.0 * h);
+                assert!((numeric - gradient[axis]).abs() < 1e-6, "read {i} axis {axis}: {numeric} vs {}", gradient[axis]);
+            }
+            // The wall moves the range by millimetres, not by nothing.
+            assert!((d - (p - anchors[antenna[i]]).norm()).abs() > 1e-5);
+        }
+    }
+
+    #[test]
+    fn no_reflected_path_leaves_the_reads_on_the_direct_model() {
+        let anchors = layout();
+        let none: Vec<Vec<crate::model::ReflectedPath>> = vec![Vec::new(); anchors.len()];
+        let (z, k, antenna) = reads_at(Vector3::new(0.5, 0.6, 0.7), &anchors, &us_band());
+        let reads = PhaseReads::new(&z, &k, &antenna, &anchors).with_paths(Paths { per_anchor: &none, phase_multiplier: 1.0 });
+        assert!(!reads.has_reflectors());
     }
 }

@@ -8,6 +8,7 @@ use super::{coherence, rotation, PhaseReads};
 /// The local maximum of R near `start`: Gauss–Newton on
 /// r_k = arg(z_k e^{−j k_k d_k} e^{−jθ}), θ re-profiled each step, the
 /// Jacobian centred over reads (θ is a nuisance). `axes` = 2 keeps z.
+/// Under known reflectors d_k is the apparent range and its gradient.
 /// A group's residual is its summed phasor's, weighted by its reads.
 /// Returns the position and its coherence.
 pub fn refine(reads: &PhaseReads, start: Vector3<f64>, axes: usize, iterations: usize) -> (Vector3<f64>, f64) {
@@ -18,11 +19,10 @@ pub fn refine(reads: &PhaseReads, start: Vector3<f64>, axes: usize, iterations: 
     for _ in 0..iterations {
         let mut sum = Complex::new(0.0, 0.0);
         for i in 0..n {
-            let offset = p - reads.anchors[reads.antenna[i]];
-            let d = offset.norm();
+            let (d, gradient) = reads.distance_gradient(i, &p);
             rotated[i] = reads.z[i] * rotation(reads.k[i] * d);
             sum += rotated[i];
-            jacobian[i] = offset * (reads.k[i] / d.max(1e-9));
+            jacobian[i] = gradient * reads.k[i];
         }
         let theta = Complex::new(0.0, -sum.arg()).exp();
         let mean: Vector3<f64> = (0..n).map(|i| jacobian[i] * reads.count(i)).sum::<Vector3<f64>>() / reads.total();

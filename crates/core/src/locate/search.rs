@@ -4,7 +4,7 @@ use nalgebra::Vector3;
 
 use super::coherence::Envelopes;
 use super::refine::refine_on_envelopes;
-use super::{refine, PhaseReads};
+use super::{coherence, refine, PhaseReads};
 
 /// Gauss–Newton steps per seed on the envelope tables, then on the reads.
 const ENVELOPE_ITERATIONS: usize = 8;
@@ -13,6 +13,13 @@ const REFINE_ITERATIONS: usize = 8;
 const MARGIN_M: f64 = 0.05;
 /// Refined points closer than this (m) are one candidate.
 const MERGE_M: f64 = 0.005;
+/// Under known reflectors, this many times the seeds climb. A grid point a
+/// quarter step from a lattice peak reads far below it, so the best grid
+/// points need not lie at the best peaks; the tables' cheap climb ranks the
+/// seeds well enough, the direct refinement is the only climb there, and
+/// it costs a few hundred range evaluations a seed against the grid's
+/// hundred thousand.
+const REFLECTED_SEED_FACTOR: usize = 20;
 
 /// The candidates of one tag: positions with their coherence, best first.
 ///
@@ -44,13 +51,17 @@ pub fn search(
         step *= 1.25;
     }
     let size = sizes(step);
-    let envelopes = Envelopes::new(reads, &low, &high);
+    // Under known reflectors R is evaluated directly: the excess phase
+    // depends on p itself, not on its range alone (module docs of `locate`).
+    let envelopes = (!reads.has_reflectors()).then(|| Envelopes::new(reads, &low, &high));
+    let max_seeds = if envelopes.is_some() { max_seeds } else { max_seeds * REFLECTED_SEED_FACTOR };
+    let value = |p: &Vector3<f64>| envelopes.as_ref().map_or_else(|| coherence(reads, p), |e| e.coherence(p));
     let mut points = Vec::with_capacity(size.iter().product());
     for ix in 0..size[0] {
         for iy in 0..size[1] {
             for iz in 0..size[2] {
                 let p = low + Vector3::new(ix as f64, iy as f64, iz as f64) * step;
-                points.push((p, envelopes.coherence(&p)));
+                points.push((p, value(&p)));
             }
         }
     }
@@ -67,9 +78,12 @@ pub fn search(
     }
     let mut climbed: Vec<(Vector3<f64>, f64)> = seeds
         .into_iter()
-        .map(|seed| {
-            let p = refine_on_envelopes(&envelopes, seed, axes, ENVELOPE_ITERATIONS);
-            (p, envelopes.coherence(&p))
+        .map(|seed| match &envelopes {
+            Some(envelopes) => {
+                let p = refine_on_envelopes(envelopes, seed, axes, ENVELOPE_ITERATIONS);
+                (p, envelopes.coherence(&p))
+            }
+            None => refine(reads, seed, axes, ENVELOPE_ITERATIONS),
         })
         .collect();
     climbed.sort_by(|a, b| b.1.total_cmp(&a.1));
