@@ -186,16 +186,19 @@ mod tests {
         let anchors = layout();
         let truth = Vector3::new(0.9, 0.6, 0.7);
         let paths = wall_paths(&anchors, 0.5);
-        let (z, k, antenna) = reads_under(truth, &anchors, &paths, &us_band());
-        let time: Vec<f64> = (0..z.len()).map(|i| i as f64 * 0.03).collect();
-        let single = PhaseReads::new(&z, &k, &antenna, &anchors);
-        let blind = phase_candidates(&single, &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
-        let told = phase_candidates(&single.with_paths(Paths { per_anchor: &paths, phase_multiplier: 1.0 }), &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
-        // Without the wall the single-path fit lands off the truth ...
-        assert!((blind[0].position - truth).norm() > 2e-3, "{:?}", blind[0].position - truth);
-        // ... with it, on the truth, and alone.
-        assert!((told[0].position - truth).norm() < 1e-5, "{:?}", told[0].position - truth);
-        assert!(told[0].weight > 0.99 && told[0].coherence > 0.999999, "{:?}", told[0]);
+        // A mod-2π and a mod-π reader (the latter's lattice is twice as dense).
+        for multiplier in [1.0, 2.0] {
+            let (z, k, antenna) = reads_under(truth, &anchors, &paths, &us_band(), multiplier);
+            let time: Vec<f64> = (0..z.len()).map(|i| i as f64 * 0.03).collect();
+            let single = PhaseReads::new(&z, &k, &antenna, &anchors);
+            let blind = phase_candidates(&single, &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
+            let told = phase_candidates(&single.with_paths(Paths { per_anchor: &paths, phase_multiplier: multiplier }), &time, Vector3::zeros(), Vector3::repeat(1.5), 3, &settings());
+            // Without the wall the single-path fit lands off the truth ...
+            assert!((blind[0].position - truth).norm() > 2e-3, "{multiplier}: {:?}", blind[0].position - truth);
+            // ... with it, on the truth, and alone.
+            assert!((told[0].position - truth).norm() < 1e-5, "{multiplier}: {:?}", told[0].position - truth);
+            assert!(told[0].weight > 0.99 && told[0].coherence > 0.999999, "{multiplier}: {:?}", told[0]);
+        }
     }
 
     #[test]

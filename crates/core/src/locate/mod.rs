@@ -243,8 +243,9 @@ pub(crate) mod fixtures {
     }
 
     /// Noise-free reads of a tag at `truth` whose phases carry the paths'
-    /// excess: the apparent range in place of the distance (mod 2π, sign +1).
-    pub fn reads_under(truth: Vector3<f64>, anchors: &[Vector3<f64>], paths: &[Vec<crate::model::ReflectedPath>], frequencies: &[f64]) -> (Vec<Complex<f64>>, Vec<f64>, Vec<usize>) {
+    /// excess: the apparent range in place of the distance (sign +1;
+    /// `multiplier` 1 for mod 2π, 2 for a mod-π reader's doubled phases).
+    pub fn reads_under(truth: Vector3<f64>, anchors: &[Vector3<f64>], paths: &[Vec<crate::model::ReflectedPath>], frequencies: &[f64], multiplier: f64) -> (Vec<Complex<f64>>, Vec<f64>, Vec<usize>) {
         let mut x = crate::model::StateVector::zeros();
         x[0] = truth.x;
         x[1] = truth.y;
@@ -252,8 +253,8 @@ pub(crate) mod fixtures {
         let (mut z, mut k, mut antenna) = (Vec::new(), Vec::new(), Vec::new());
         for (a, anchor) in anchors.iter().enumerate() {
             for f in frequencies {
-                let kk = 4.0 * std::f64::consts::PI * f / C;
-                let (apparent, _) = crate::model::apparent_range(&x, anchor, &paths[a], kk / 2.0, 3, false);
+                let kk = multiplier * 4.0 * std::f64::consts::PI * f / C;
+                let (apparent, _) = crate::model::apparent_range(&x, anchor, &paths[a], kk / (2.0 * multiplier), 3, false);
                 let phase = kk * apparent + 0.7;
                 z.push(Complex::new(phase.cos(), phase.sin()));
                 k.push(kk);

@@ -13,13 +13,16 @@ const REFINE_ITERATIONS: usize = 8;
 const MARGIN_M: f64 = 0.05;
 /// Refined points closer than this (m) are one candidate.
 const MERGE_M: f64 = 0.005;
-/// Under known reflectors, this many times the seeds climb. A grid point a
-/// quarter step from a lattice peak reads far below it, so the best grid
-/// points need not lie at the best peaks; the tables' cheap climb ranks the
-/// seeds well enough, the direct refinement is the only climb there, and
-/// it costs a few hundred range evaluations a seed against the grid's
-/// hundred thousand.
+/// Under known reflectors every lattice cell of the box gets a seed, and at
+/// least this many times the usual number climb. A grid point a quarter
+/// step from a lattice peak reads far below it, so the best grid points
+/// need not lie at the best peaks; without reflectors the tables' cheap
+/// climb ranks the seeds, with them the direct refinement is the only
+/// climb, at a few thousand range evaluations a seed.
 const REFLECTED_SEED_FACTOR: usize = 20;
+/// ... and at most this many seeds (a box of 20 000 lattice cells: 1.3 m
+/// on a side at the mod-π lattice step of 8 cm).
+const REFLECTED_MAX_SEEDS: usize = 20_000;
 
 /// The candidates of one tag: positions with their coherence, best first.
 ///
@@ -54,7 +57,12 @@ pub fn search(
     // Under known reflectors R is evaluated directly: the excess phase
     // depends on p itself, not on its range alone (module docs of `locate`).
     let envelopes = (!reads.has_reflectors()).then(|| Envelopes::new(reads, &low, &high));
-    let max_seeds = if envelopes.is_some() { max_seeds } else { max_seeds * REFLECTED_SEED_FACTOR };
+    let max_seeds = if envelopes.is_some() {
+        max_seeds
+    } else {
+        let cells: f64 = (0..3).map(|a| if high[a] > low[a] { (high[a] - low[a]) / spacing + 1.0 } else { 1.0 }).product();
+        (max_seeds * REFLECTED_SEED_FACTOR).max(cells.ceil().min(REFLECTED_MAX_SEEDS as f64) as usize)
+    };
     let value = |p: &Vector3<f64>| envelopes.as_ref().map_or_else(|| coherence(reads, p), |e| e.coherence(p));
     let mut points = Vec::with_capacity(size.iter().product());
     for ix in 0..size[0] {
