@@ -84,5 +84,6 @@ def with_walls(scene, walls: list):
     scene.reflectors = list(walls)
     table = dict(scene.extra.get("calibration") or {})
     table["calibrated"] = sorted(set(table.get("calibrated", [])) | {"reflectors"})
+    table["reflectors"] = [{"reflector": i, "kept": True} for i in range(len(walls))]
     scene.extra["calibration"] = table
     return scene

@@ -45,7 +45,7 @@ def round_trip_channel(
     ``[[reflectors]]``): the simulator draws reads with it, ``calibrate``
     fits walls with it, and the Rust trackers' apparent range
     (``scattertrack_core::model::apparent_range``) is its range form,
-    ``d - excess / (2 k)``. ``reflectors``: dicts with ``kind`` ("plane":
+    ``d + excess / (2 k)``. ``reflectors``: dicts with ``kind`` ("plane":
     ``point``, ``normal``; "point": ``position``) and ``coefficient``.
 
     Returns ``(distance, excess_rad, amplitude)`` for rows of antenna and tag

@@ -181,6 +181,7 @@ def track_reads(args, scene, params: dict) -> int:
     reads = io.read_reads(args.reads, scene)
     say_reads_loaded(len(reads), len(reads.epcs()), args.reads, reads.reordered)
     warn_about_geometry(scene, reads)
+    warn_unmodelled_reflectors(args.method, scene)
     ros2_out = bool(args.mcap or args.ros2_bag)
     transform = outputs_command.ros2_transform(args)
     result, wall_s = run_tracker(args.method, scene, reads, params, show_progress(args), covariance=ros2_out)
@@ -212,6 +213,7 @@ def track_streamed(args, scene, params: dict) -> bool:
     reads = result.reads
     say_reads_loaded(len(reads), len(reads.tags), args.reads, reads.reordered)
     warn_about_geometry(scene, reads)
+    warn_unmodelled_reflectors(args.method, scene)
     say_tracked(args.method, result, Path(args.out), tags=result.tracked_tags)
     say_if_no_estimates(result)
     print_tracker_summary(result, reads, result.wall_s)
@@ -228,6 +230,19 @@ def say_if_no_estimates(result) -> None:
     """Why a reads track came out empty."""
     if not len(result):
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
+
+
+REFLECTOR_METHODS = ("glac", "glac-no-velocity", "glac-naive")
+"""COTS methods whose measurement model takes the scene's ``[[reflectors]]`` (the apparent range, docs/glac.md)."""
+
+
+def warn_unmodelled_reflectors(method: str, scene) -> None:
+    """A ``warning:`` line when the scene declares reflectors that ``method`` does not model."""
+    if scene.reader.kind == "cots" and scene.reflectors and method not in REFLECTOR_METHODS:
+        say(
+            f"warning: {method} does not model the scene's {plural(len(scene.reflectors), 'reflector')} (its ranges are direct); "
+            f"{', '.join(REFLECTOR_METHODS)} do"
+        )
 
 
 def warn_about_geometry(scene, reads) -> None:

@@ -48,6 +48,7 @@ from scattertrack.calibrate.reflectors import (
     refine_reflectors,
 )
 from scattertrack.io.hop_table import US_PLAN_HZ
+from scattertrack.io.scene import plane_side_problems
 from scattertrack.io.types import Reflector
 from scattertrack.physics import round_trip_channel
 from scattertrack.io.types import ChannelOffset, Reads, Scene, Truth
@@ -261,6 +262,10 @@ def calibrate(
         for f in reflector_fits:
             if not f.kept:
                 warnings.append(f"reflector {f.index} ({f.kind}) left out of the calibrated scene: {f.reason}")
+            elif f.kind == "plane":
+                # A refined plane can have moved across an antenna: say so now, not when the scene is read back.
+                for problem in plane_side_problems(f.reflector["point"], f.reflector["normal"], scene.antennas):
+                    warnings.append(f"reflector {f.index} (plane) as refined: {problem}")
         if kept:
             _, excess, _ = round_trip_channel(anchor, positions[ref], frequency, kept)
             geometric = round_trip_phase(frequency, distance) + excess

@@ -50,7 +50,7 @@ from scattertrack.io.types import Reflector
 from scattertrack.physics import round_trip_channel
 
 COARSE_STEP_M = 0.005
-"""Offset step of the coarse search, m (a tenth of the ripple's λ/4 period along the normal)."""
+"""Offset step of the coarse search, m (a sixteenth of λ/4 ≈ 8 cm, the shift after which the ripple repeats with the coefficient's sign flipped)."""
 COARSE_COEFFICIENTS = (-0.6, -0.3, 0.3, 0.6)
 """Coefficients of the coarse search (signed: a conductor flips the phase)."""
 FINE_STEP_M = 0.0005

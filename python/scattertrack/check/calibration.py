@@ -54,9 +54,16 @@ def reflector_warnings(scene: Scene) -> list[str]:
     if not reflectors:
         return []
     table = scene.extra.get("calibration") if isinstance(scene.extra.get("calibration"), dict) else {}
+    unrefined = len(reflectors)
     if "reflectors" in (table.get("calibrated") or []):
-        return []
-    count = f"{len(reflectors)} reflector" + ("s" if len(reflectors) > 1 else "")
+        # The calibration lists every reflector it fitted; the scene keeps the kept ones.
+        # More reflectors than it kept were added afterwards.
+        fits = table.get("reflectors") or []
+        kept = sum(1 for f in fits if isinstance(f, dict) and f.get("kept"))
+        unrefined = len(reflectors) - kept
+        if unrefined <= 0:
+            return []
+    count = f"{unrefined} reflector" + ("s" if unrefined > 1 else "")
     return [
         f"warning: the scene declares {count} that scattertrack calibrate has not refined: a wall stated even 5 cm "
         "from where it is makes the tracks worse than no wall at all; run scattertrack calibrate with reference tags "

@@ -131,6 +131,26 @@ class ChannelOffset:
     phase_offset_rad: float
 
 
+def plane_side_problems(point, normal, antennas) -> list[str]:
+    """What is odd about a plane reflector (``point`` m, unit ``normal``) for
+    these antennas: one (nearly) on it, or antennas on both sides of it."""
+    point, normal = np.asarray(point, dtype=float), np.asarray(normal, dtype=float)
+    sides = {int(a.id): float((np.asarray(a.position, dtype=float) - point) @ normal) for a in antennas}
+    problems = []
+    on = [i for i, side in sides.items() if abs(side) <= ON_PLANE_M]
+    if on:
+        problems.append(f"antenna{'s' if len(on) > 1 else ''} {', '.join(map(str, on))} within "
+                        f"{ON_PLANE_M * 1e3:g} mm of this plane reflector: a mirror reflects only between points "
+                        "on the same side of it, so its path is unreliable there (check point and normal)")
+    front = [i for i, side in sides.items() if side > ON_PLANE_M]
+    back = [i for i, side in sides.items() if side < -ON_PLANE_M]
+    if front and back:
+        problems.append(f"antennas on both sides of this plane reflector (in front: {', '.join(map(str, front))}; "
+                        f"behind: {', '.join(map(str, back))}): a wall between antennas is unusual "
+                        "(check point and normal)")
+    return problems
+
+
 def unit_normal(normal: np.ndarray) -> np.ndarray:
     """A non-zero ``normal`` at unit length: scaled by its largest component first (huge or
     tiny components neither overflow nor underflow); one already unit within 4 ulp is left as
@@ -636,15 +656,5 @@ class _SceneChecker:
 
     def plane_sides(self, where: str, point: np.ndarray, normal: np.ndarray, antennas: list[Antenna]) -> None:
         """Warn about a plane with an antenna (nearly) on it, or with antennas on both sides of it."""
-        sides = {int(a.id): float((a.position - point) @ normal) for a in antennas}
-        on = [i for i, side in sides.items() if abs(side) <= ON_PLANE_M]
-        if on:
-            self.warn(where, f"antenna{'s' if len(on) > 1 else ''} {', '.join(map(str, on))} within "
-                             f"{ON_PLANE_M * 1e3:g} mm of this plane reflector: a mirror reflects only between points "
-                             "on the same side of it, so its path is unreliable there (check point and normal)")
-        front = [i for i, side in sides.items() if side > ON_PLANE_M]
-        back = [i for i, side in sides.items() if side < -ON_PLANE_M]
-        if front and back:
-            self.warn(where, f"antennas on both sides of this plane reflector (in front: {', '.join(map(str, front))}; "
-                             f"behind: {', '.join(map(str, back))}): a wall between antennas is unusual "
-                             "(check point and normal)")
+        for message in plane_side_problems(point, normal, antennas):
+            self.warn(where, message)

@@ -52,6 +52,10 @@ def test_a_declared_wall_is_moved_to_where_the_references_put_it(sweep):
     assert len(calibrated.reflectors) == 1 and abs(calibrated.reflectors[0].point[0] - 1.6) < 0.003
     assert "reflectors" in calibrated.extra["calibration"]["calibrated"]
     assert reflector_warnings(scene) and not reflector_warnings(calibrated)
+    # A wall added by hand after the calibration is not refined, and is said.
+    added = dataclasses.replace(calibrated, reflectors=calibrated.reflectors + [Reflector.from_dict(dict(WALL, point=[-0.5, 0.0, 0.0], normal=[1.0, 0.0, 0.0]))])
+    (line,) = reflector_warnings(added)
+    assert "declares 1 reflector that scattertrack calibrate has not refined" in line
 
 
 def test_a_wall_the_references_do_not_see_is_left_out_and_said(sweep):

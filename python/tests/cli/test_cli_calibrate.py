@@ -89,7 +89,9 @@ def test_calibrate_refines_the_declared_wall_and_track_stops_warning(capsys, wal
     calibrated = read_scene(tmp_path / "c.toml")
     assert abs(calibrated.reflectors[0].point[0] - 1.6) < 0.003
     code, out, err = run(capsys, "track", "--scene", tmp_path / "c.toml", "--reads", reads, "--out", tmp_path / "t2.csv")
-    assert code == 0 and "has not refined" not in out + err
+    assert code == 0 and "has not refined" not in out + err and "does not model" not in out + err
+    code, out, err = run(capsys, "track", "--method", "trilateration-ekf", "--scene", tmp_path / "c.toml", "--reads", reads, "--out", tmp_path / "t3.csv")
+    assert code == 0 and "warning: trilateration-ekf does not model the scene's 1 reflector" in out + err
     code, out, err = run(capsys, "locate", "--scene", tmp_path / "c.toml", "--reads", reads, "--out", tmp_path / "p2.csv")
     assert code == 0 and "has not refined" not in out + err and "the phase model includes" in out + err
 

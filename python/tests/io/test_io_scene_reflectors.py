@@ -215,3 +215,14 @@ def test_antennas_on_both_sides_of_a_plane_are_warned(write_file):
 def test_point_scatterers_are_not_side_checked(write_file):
     text = GOOD.replace("position = [1, 1, 0]", "position = [0.0, 0.0, 0.0]")  # on antenna 1: no wall, no sides
     assert scene_warnings(write_file("scene.toml", text)) == []
+
+
+def test_plane_side_problems_is_the_readers_check_as_a_function():
+    from scattertrack.io.scene import plane_side_problems
+
+    antennas = [Antenna(id=1, position=np.array([0.0, 0.0, 0.0])), Antenna(id=2, position=np.array([2.0, 0.0, 0.0]))]
+    assert plane_side_problems([3.0, 0.0, 0.0], [-1.0, 0.0, 0.0], antennas) == []
+    (between,) = plane_side_problems([1.0, 0.0, 0.0], [-1.0, 0.0, 0.0], antennas)
+    assert "both sides" in between and "in front: 1" in between and "behind: 2" in between
+    on = plane_side_problems([2.0005, 0.0, 0.0], [-1.0, 0.0, 0.0], antennas)
+    assert any("antenna 2 within 1 mm" in p for p in on)

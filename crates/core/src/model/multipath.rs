@@ -11,15 +11,19 @@
 //!
 //! and the phase is `s · 2k (d − arg S / k)`: the reading reports the
 //! **apparent range** `d_app = d − arg(S) / k` (m). A wall with Γ = 0.3
-//! behind the work area moves it by up to about 8 mm at 915 MHz, a ripple
+//! behind the work area moves it by up to asin(Γ d / L) / k, 8–15 mm at
+//! 915 MHz, a ripple
 //! that changes with position on a scale of λ/2 and with the carrier:
 //! invisible to a single-path model, which follows it as a bias of about a
 //! centimetre (docs/glac.md, "Known reflectors").
 //!
-//! `arg S` is taken continuously (|Σ Γ d / L| < 1 keeps Re S > 0 for
-//! planes, whose image is always farther than the antenna), so that the
-//! apparent range has no 2π jumps; a jump would in any case be a multiple
-//! of the candidate spacing.
+//! With one reflector `arg S` has no 2π jump: |Γ d / L| < 1 keeps Re S > 0
+//! (a plane's image is always farther than the antenna). Several strong
+//! reflectors can turn Re S negative, and the apparent range then jumps by
+//! a wavelength where arg S crosses π: a multiple of the candidate
+//! spacing, which candidate selection tolerates. Where the paths cancel
+//! (S ≈ 0: a reflector of Γ = −1 at the antenna) the phase is undefined,
+//! and the direct range is returned instead of NaN.
 
 use nalgebra::Vector3;
 
@@ -110,6 +114,14 @@ pub fn apparent_range(
             d_re += alpha * tr - beta * ti;
             d_im += beta * tr + alpha * ti;
         }
+    }
+    if re * re + im * im < 1e-12 {
+        // The paths cancel: no phase to speak of (module docs).
+        let mut h = StateVector::zeros();
+        for i in 0..axes {
+            h[i] = u[i];
+        }
+        return (d, jacobian.then_some(h));
     }
     let apparent = d - im.atan2(re) / wavenumber;
     if !jacobian {
@@ -216,5 +228,18 @@ mod tests {
         let (d, _) = apparent_range(&x, &a, &paths, k(), 3, false);
         let excess = (d - Vector3::<f64>::new(1.2, 0.2, 0.3).norm()).abs();
         assert!(excess > 1e-4 && excess < 0.02, "{excess}");
+    }
+
+    /// A Γ = −1 scatterer at the antenna cancels the direct path for every
+    /// tag: the range stays finite (the direct one) instead of NaN.
+    #[test]
+    fn paths_that_cancel_give_the_direct_range_not_nan() {
+        let a = Vector3::new(0.2, 0.1, 0.0);
+        let paths = reflected_paths(&a, &[Reflector::Point { position: a, coefficient: -1.0 }]);
+        let x = StateVector::from_iterator([0.9, 0.6, 0.7, 0.0, 0.0, 0.0]);
+        let (d, h) = apparent_range(&x, &a, &paths, k(), 3, true);
+        let (r, hr) = super::super::range(&x, &a, 3, true);
+        assert!((d - r).abs() < 1e-12, "{d} {r}");
+        assert!((h.unwrap() - hr.unwrap()).norm() < 1e-12);
     }
 }
