@@ -29,9 +29,12 @@
 //! phase of its reflected path, which changes across the band and bends
 //! the hop ranges by decimetres (docs/calibration.md). With the scene's
 //! reflectors, d_k(p) above is the *apparent* range
-//! ([`crate::model::apparent_range`]) and the grid evaluates R directly:
-//! the excess depends on where p is, not on its range alone, so the
-//! per-antenna envelope tables do not apply.
+//! ([`crate::model::apparent_range`]). The excess depends on where p is,
+//! not on its range alone, so the per-antenna envelope tables hold the
+//! direct model only: they still rank the grid (the excess moves a peak
+//! by millimetres), but every lattice cell of the box gets a seed, the
+//! seeds climb on the full model, and the hop ranges that bound the box
+//! carry the reflectors' largest bias ([`hop_centre`]).
 
 pub mod batch;
 pub mod candidates;

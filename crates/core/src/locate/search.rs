@@ -4,7 +4,7 @@ use nalgebra::Vector3;
 
 use super::coherence::Envelopes;
 use super::refine::refine_on_envelopes;
-use super::{coherence, refine, PhaseReads};
+use super::{refine, PhaseReads};
 
 /// Gauss–Newton steps per seed on the envelope tables, then on the reads.
 const ENVELOPE_ITERATIONS: usize = 8;
@@ -14,11 +14,10 @@ const MARGIN_M: f64 = 0.05;
 /// Refined points closer than this (m) are one candidate.
 const MERGE_M: f64 = 0.005;
 /// Under known reflectors every lattice cell of the box gets a seed, and at
-/// least this many times the usual number climb. A grid point a quarter
-/// step from a lattice peak reads far below it, so the best grid points
-/// need not lie at the best peaks; without reflectors the tables' cheap
-/// climb ranks the seeds, with them the direct refinement is the only
-/// climb, at a few thousand range evaluations a seed.
+/// least this many times the usual number climb. The tables rank the grid
+/// on the direct model, whose best peaks the reflectors' excess can
+/// reorder; so many seeds climb on the full model (the direct refinement,
+/// a few thousand range evaluations a seed), not on the tables.
 const REFLECTED_SEED_FACTOR: usize = 20;
 /// ... and at most this many seeds (a box of 20 000 lattice cells: 1.3 m
 /// on a side at the mod-π lattice step of 8 cm).
@@ -54,22 +53,24 @@ pub fn search(
         step *= 1.25;
     }
     let size = sizes(step);
-    // Under known reflectors R is evaluated directly: the excess phase
-    // depends on p itself, not on its range alone (module docs of `locate`).
-    let envelopes = (!reads.has_reflectors()).then(|| Envelopes::new(reads, &low, &high));
-    let max_seeds = if envelopes.is_some() {
+    // The grid is ranked on the direct model's envelope tables, also under
+    // known reflectors: their excess moves the peaks by millimetres, every
+    // lattice cell of the box gets a seed there, and the seeds then climb
+    // on the full model.
+    let reflected = reads.has_reflectors();
+    let envelopes = Envelopes::new(reads, &low, &high);
+    let max_seeds = if !reflected {
         max_seeds
     } else {
         let cells: f64 = (0..3).map(|a| if high[a] > low[a] { (high[a] - low[a]) / spacing + 1.0 } else { 1.0 }).product();
         (max_seeds * REFLECTED_SEED_FACTOR).max(cells.ceil().min(REFLECTED_MAX_SEEDS as f64) as usize)
     };
-    let value = |p: &Vector3<f64>| envelopes.as_ref().map_or_else(|| coherence(reads, p), |e| e.coherence(p));
     let mut points = Vec::with_capacity(size.iter().product());
     for ix in 0..size[0] {
         for iy in 0..size[1] {
             for iz in 0..size[2] {
                 let p = low + Vector3::new(ix as f64, iy as f64, iz as f64) * step;
-                points.push((p, value(&p)));
+                points.push((p, envelopes.coherence(&p)));
             }
         }
     }
@@ -86,12 +87,13 @@ pub fn search(
     }
     let mut climbed: Vec<(Vector3<f64>, f64)> = seeds
         .into_iter()
-        .map(|seed| match &envelopes {
-            Some(envelopes) => {
-                let p = refine_on_envelopes(envelopes, seed, axes, ENVELOPE_ITERATIONS);
+        .map(|seed| {
+            if reflected {
+                refine(reads, seed, axes, ENVELOPE_ITERATIONS)
+            } else {
+                let p = refine_on_envelopes(&envelopes, seed, axes, ENVELOPE_ITERATIONS);
                 (p, envelopes.coherence(&p))
             }
-            None => refine(reads, seed, axes, ENVELOPE_ITERATIONS),
         })
         .collect();
     climbed.sort_by(|a, b| b.1.total_cmp(&a.1));
