@@ -131,6 +131,24 @@ class ChannelOffset:
     phase_offset_rad: float
 
 
+NEAR_FIELD_M = 0.16
+"""A point scatterer closer than this to an antenna (half a wavelength at 915 MHz) is in its near field."""
+
+
+def point_near_antennas(position, antennas) -> list[str]:
+    """What is odd about a point scatterer at ``position`` (m) for these
+    antennas: one within :data:`NEAR_FIELD_M`, where the ray model of a
+    reflected path (amplitude Γ / L) does not describe the coupling, and a
+    strong one can cancel the direct path outright."""
+    position = np.asarray(position, dtype=float)
+    near = [int(a.id) for a in antennas if float(np.linalg.norm(np.asarray(a.position, dtype=float) - position)) < NEAR_FIELD_M]
+    if not near:
+        return []
+    return [f"point scatterer within {NEAR_FIELD_M * 100:g} cm (half a wavelength) of antenna{'s' if len(near) > 1 else ''} "
+            f"{', '.join(map(str, near))}: in the near field the reflected-path model does not hold "
+            "(check its position; a mount or cable belongs in the antenna's calibration, not here)"]
+
+
 def plane_side_problems(point, normal, antennas) -> list[str]:
     """What is odd about a plane reflector (``point`` m, unit ``normal``) for
     these antennas: one (nearly) on it, or antennas on both sides of it."""
@@ -651,6 +669,9 @@ class _SceneChecker:
                     raise self.fail(f"{where}.normal", f"expected a non-zero vector, found {table['normal']!r}")
                 vectors["normal"] = unit_normal(vectors["normal"])
                 self.plane_sides(where, vectors["point"], vectors["normal"], antennas)
+            else:
+                for message in point_near_antennas(vectors["position"], antennas):
+                    self.warn(where, message)
             reflectors.append(Reflector(kind=reflector_kind, coefficient=coefficient, **vectors))
         return reflectors
 

@@ -212,9 +212,10 @@ def test_antennas_on_both_sides_of_a_plane_are_warned(write_file):
     np.testing.assert_array_equal(scene.reflectors[0].normal, [0.0, 1.0, 0.0])
 
 
-def test_point_scatterers_are_not_side_checked(write_file):
-    text = GOOD.replace("position = [1, 1, 0]", "position = [0.0, 0.0, 0.0]")  # on antenna 1: no wall, no sides
-    assert scene_warnings(write_file("scene.toml", text)) == []
+def test_a_point_scatterer_in_an_antennas_near_field_is_warned(write_file):
+    text = GOOD.replace("position = [1, 1, 0]", "position = [0.0, 0.0, 0.0]")  # on antenna 1
+    (warning,) = scene_warnings(write_file("scene.toml", text))
+    assert warning.column == "reflectors[1]" and "point scatterer within 16 cm (half a wavelength) of antenna 1" in warning.message
 
 
 def test_plane_side_problems_is_the_readers_check_as_a_function():
