@@ -232,7 +232,7 @@ def say_if_no_estimates(result) -> None:
         say("  no estimates: no tag got past initialisation (it needs a few reads on at least 3 antennas)")
 
 
-REFLECTOR_METHODS = ("glac", "glac-no-velocity", "glac-naive")
+REFLECTOR_METHODS = ("glac", "glac-no-velocity", "glac-naive", "glac-sync", "glac-sync-no-velocity")
 """COTS methods whose measurement model takes the scene's ``[[reflectors]]`` (the apparent range, docs/glac.md)."""
 
 

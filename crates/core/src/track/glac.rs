@@ -1310,7 +1310,9 @@ impl Glac {
     /// simultaneous readings at the last read's time. Each hypothesis picks
     /// per antenna the candidate nearest its predicted range, trilaterates
     /// them into a position z with covariance σ_d² (JᵀJ)⁻¹, and updates with
-    /// H = [I 0]; the likelihood is Πᵢ p(zᵢ* | θ).
+    /// H = [I 0]; the likelihood is Πᵢ p(zᵢ* | θ). Under known reflectors
+    /// the candidates are apparent ranges, each less the excess predicted
+    /// at the hypothesis's predicted position.
     fn step_synchronous(&mut self, m: &PhaseRead) {
         if let Some(prev) = self.group.iter().position(|g| g.antenna == m.antenna) {
             // A second read of one antenna before the group is complete:
@@ -1352,7 +1354,18 @@ impl Glac {
             predict(x, p, &transition);
             let predicted = Vector3::new(x[0], x[1], x[2]);
             for (k, a) in anchors.iter().enumerate() {
-                distances[k] = nearest_candidate(residues[k].0, residues[k].1, (predicted - a).norm());
+                // Under known reflectors the phase measures the apparent
+                // range: the candidate nearest the predicted apparent range,
+                // less the excess there, is the direct range trilaterated.
+                let direct = (predicted - a).norm();
+                let paths = &self.reflected[group[k].antenna];
+                let excess = if paths.is_empty() {
+                    0.0
+                } else {
+                    let wavenumber = 2.0 * std::f64::consts::PI * group[k].frequency_hz / crate::scene::SPEED_OF_LIGHT;
+                    apparent_range(x, a, paths, wavenumber, self.axes, false).0 - direct
+                };
+                distances[k] = nearest_candidate(residues[k].0, residues[k].1, direct + excess) - excess;
             }
             let fix = multilaterate(&anchors, &distances, predicted, self.axes, 5);
             let mut log_l = -0.5 * (gate2 + group.len() as f64 * (2.0 * std::f64::consts::PI * r).ln());
@@ -2759,6 +2772,22 @@ pub(crate) mod tests {
         let (with, without) = (rms(&walled), rms(&plain));
         assert!(with < 0.003, "told of the wall: {with} m RMS");
         assert!(without > 2.0 * with, "not told: {without} m RMS against {with}");
+        // The synchronous scheme trilaterates the candidates less the excess.
+        let synchronous = |scene: &Scene| {
+            let params = GlacParams { inference: Inference::Synchronous, ..GlacParams::default() };
+            let mut tracker = Glac::new(scene.clone(), params).unwrap();
+            let errors: Vec<f64> = reads
+                .iter()
+                .filter_map(|m| tracker.step(&Measurement::Phase(*m)).map(|e| (m.time_s, e)))
+                .filter(|(t, _)| *t > 10.0)
+                .map(|(t, e)| (Vector3::new(e.position[0], e.position[1], e.position[2]) - truth(t)).norm_squared())
+                .collect();
+            assert!(errors.len() > 50, "{}", errors.len());
+            (errors.iter().sum::<f64>() / errors.len() as f64).sqrt()
+        };
+        let (with, without) = (synchronous(&walled), synchronous(&plain));
+        assert!(with < 0.02, "synchronous, told of the wall: {with} m RMS");
+        assert!(without > 1.5 * with, "synchronous, not told: {without} m RMS against {with}");
     }
 
     #[test]
