@@ -2758,34 +2758,26 @@ pub(crate) mod tests {
                 PhaseRead { time_s: t, antenna: a, frequency_hz: frequency, phase_rad: walled.ideal_phase(a, frequency, d) + noise }
             })
             .collect();
-        let rms = |scene: &Scene| {
-            let mut tracker = Glac::new(scene.clone(), GlacParams::default()).unwrap();
+        // RMS error after 10 s, and the number of estimates it rests on.
+        let rms = |scene: &Scene, inference: Inference| {
+            let mut tracker = Glac::new(scene.clone(), GlacParams { inference, ..GlacParams::default() }).unwrap();
             let errors: Vec<f64> = reads
                 .iter()
                 .filter_map(|m| tracker.step(&Measurement::Phase(*m)).map(|e| (m.time_s, e)))
                 .filter(|(t, _)| *t > 10.0)
                 .map(|(t, e)| (Vector3::new(e.position[0], e.position[1], e.position[2]) - truth(t)).norm_squared())
                 .collect();
-            assert!(errors.len() > 100);
-            (errors.iter().sum::<f64>() / errors.len() as f64).sqrt()
+            ((errors.iter().sum::<f64>() / errors.len().max(1) as f64).sqrt(), errors.len())
         };
-        let (with, without) = (rms(&walled), rms(&plain));
+        let fast = GlacParams::default().inference;
+        let ((with, n_with), (without, n_without)) = (rms(&walled, fast), rms(&plain, fast));
+        assert!(n_with > 100 && n_without > 100, "{n_with} {n_without}");
         assert!(with < 0.003, "told of the wall: {with} m RMS");
         assert!(without > 2.0 * with, "not told: {without} m RMS against {with}");
-        // The synchronous scheme trilaterates the candidates less the excess.
-        let synchronous = |scene: &Scene| {
-            let params = GlacParams { inference: Inference::Synchronous, ..GlacParams::default() };
-            let mut tracker = Glac::new(scene.clone(), params).unwrap();
-            let errors: Vec<f64> = reads
-                .iter()
-                .filter_map(|m| tracker.step(&Measurement::Phase(*m)).map(|e| (m.time_s, e)))
-                .filter(|(t, _)| *t > 10.0)
-                .map(|(t, e)| (Vector3::new(e.position[0], e.position[1], e.position[2]) - truth(t)).norm_squared())
-                .collect();
-            assert!(errors.len() > 50, "{}", errors.len());
-            (errors.iter().sum::<f64>() / errors.len() as f64).sqrt()
-        };
-        let (with, without) = (synchronous(&walled), synchronous(&plain));
+        // The synchronous scheme (one estimate per group of four reads)
+        // trilaterates the candidates less the excess.
+        let ((with, n_with), (without, n_without)) = (rms(&walled, Inference::Synchronous), rms(&plain, Inference::Synchronous));
+        assert!(n_with > 50 && n_without > 50, "{n_with} {n_without}");
         assert!(with < 0.02, "synchronous, told of the wall: {with} m RMS");
         assert!(without > 1.5 * with, "synchronous, not told: {without} m RMS against {with}");
     }
