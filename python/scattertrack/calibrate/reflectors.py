@@ -36,6 +36,8 @@ Per declared plane, holding the others at their current estimates:
    left out of the calibrated scene, with a ``warning:`` line.
 
 A point scatterer keeps its position; only its coefficient is refined.
+With several reflectors, each is refined twice: first with those before
+it, then with every other one as refined so far.
 """
 
 from __future__ import annotations
@@ -209,14 +211,27 @@ def refine_reflectors(declared: list[Reflector], problem: ReferenceReads, search
     Returns one :class:`ReflectorFit` per declared reflector, in order;
     those with ``kept`` False failed a check (see the module doc)."""
     span = max(search_m, ALIAS_SPAN_M)
-    fits: list[ReflectorFit] = []
     # Plain values, a plane's normal made unit (Reflector.from_dict): the searches move planes along it.
-    for index, reflector in enumerate(Reflector.from_dict(r.as_dict()).as_dict() for r in declared):
-        # The walls refined so far (and kept); the later ones join as they are refined.
-        others = [f.reflector for f in fits if f.kept]
+    plain = [Reflector.from_dict(r.as_dict()).as_dict() for r in declared]
+    beyond = f"beyond the search's {100 * search_m:.0f} cm: check the declared plane, or widen --reflector-search-m"
+
+    def fit(index: int, others: list[dict]) -> ReflectorFit:
+        reflector = plain[index]
         offsets = np.arange(-span, span + 1e-12, COARSE_STEP_M) if reflector["kind"] == "plane" else np.zeros(1)
-        beyond = f"beyond the search's {100 * search_m:.0f} cm: check the declared plane, or widen --reflector-search-m"
-        fits.append(_fit_one(problem, others, reflector, offsets, (-search_m, search_m), index, beyond))
+        return _fit_one(problem, others, reflector, offsets, (-search_m, search_m), index, beyond)
+
+    # First pass: each reflector with the ones refined before it (and kept).
+    fits: list[ReflectorFit] = []
+    for index in range(len(plain)):
+        fits.append(fit(index, [f.reflector for f in fits if f.kept]))
+    if len(plain) < 2:
+        return fits
+    # Second pass: each again, with every other one as refined so far. In
+    # the first pass a wall fitted before a stronger one had that wall's
+    # ripple in its residuals (dev: a wall of 0.3 refined before a floor of
+    # -0.4 was left out, or placed 6 mm off; after it, within 1 mm).
+    for index in range(len(plain)):
+        fits[index] = fit(index, [f.reflector for j, f in enumerate(fits) if j != index and f.kept])
     return fits
 
 

@@ -105,3 +105,18 @@ def test_no_wall_is_found_where_there_is_none():
 def test_finding_walls_needs_a_region(sweep):
     with pytest.raises(ValueError, match=r"needs the scene's \[region\]"):
         calibrate(dataclasses.replace(sweep.scene, region=None), sweep.reads, truth=sweep.truth, find_walls=True)
+
+
+def test_two_walls_are_refined_whatever_order_the_scene_gives_them():
+    # The wall (0.3) declared before a stronger floor (-0.4): in one pass the
+    # wall is fitted with the floor's ripple unmodelled; the second pass has it.
+    floor = {"kind": "plane", "point": [0.0, 0.0, -0.2], "normal": [0.0, 0.0, 1.0], "coefficient": -0.4}
+    scenario = room(seed=1000, duration_s=60.0)
+    scenario["reader_model"]["reflectors"] = [dict(WALL), dict(floor)]
+    sim = simulate(scenario, seed=1000)
+    stated_floor = Reflector(kind="plane", coefficient=-0.5, point=np.array([0.0, 0.0, -0.17]), normal=np.array([0.0, 0.0, 1.0]))
+    for order in ([declared(0.03), stated_floor], [stated_floor, declared(0.03)]):
+        fits = calibrate(dataclasses.replace(sim.scene, reflectors=order), sim.reads, truth=sim.truth).reflectors
+        assert all(f.kept for f in fits), [f.reason for f in fits]
+        wall, ground = sorted(fits, key=lambda f: abs(f.reflector["normal"][2]))
+        assert abs(wall.reflector["point"][0] - 1.6) < 0.003 and abs(ground.reflector["point"][2] + 0.2) < 0.003
