@@ -89,11 +89,12 @@ fn locate_batch<'py>(
     if !(phase_multiplier == 1.0 || phase_multiplier == 2.0) {
         return Err(value_error("phase_multiplier must be 1 (mod 2π) or 2 (mod π)"));
     }
+    // Antennas without a path (or no reflectors at all) keep the direct model (`PhaseReads::with_paths`).
     let per_anchor: Vec<_> = anchor_points.iter().map(|a| reflected_paths(a, &known)).collect();
     let settings = Settings { temperature, bias_sigma_rad, correlation_s, max_candidates, min_weight, hopping_spread_hz, max_points };
     let threads = if threads == 0 { std::thread::available_parallelism().map_or(1, |n| n.get()) } else { threads };
     let found = py.detach(|| {
-        let batch = TagBatch { z: &z, k, time_s, antenna: &antenna, anchors: &anchor_points, bounds: &bounds, low: &low, high: &high, paths: (!known.is_empty()).then_some(Paths { per_anchor: &per_anchor, phase_multiplier }) };
+        let batch = TagBatch { z: &z, k, time_s, antenna: &antenna, anchors: &anchor_points, bounds: &bounds, low: &low, high: &high, paths: Some(Paths { per_anchor: &per_anchor, phase_multiplier }) };
         locate::locate_batch(&batch, axes, &settings, threads)
     });
     let all: Vec<&locate::Candidate> = found.iter().flatten().collect();

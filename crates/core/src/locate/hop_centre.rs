@@ -18,7 +18,7 @@ pub fn hop_centre(reads: &PhaseReads, low: &Vector3<f64>, high: &Vector3<f64>, a
         .flat_map(|&a| [(low - reads.anchors[a]).norm(), (high - reads.anchors[a]).norm()])
         .fold(0.0, f64::max)
         + 1.0;
-    let (mut anchors, mut ranges, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut anchors, mut ranges, mut weights, mut owners) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for a in used {
         let rows: Vec<usize> = (0..reads.z.len()).filter(|&i| reads.antenna[i] == a).collect();
         let z: Vec<Complex<f64>> = rows.iter().map(|&i| reads.z[i]).collect();
@@ -27,6 +27,7 @@ pub fn hop_centre(reads: &PhaseReads, low: &Vector3<f64>, high: &Vector3<f64>, a
         if let Some((d, sigma)) = hop_range(&z, &k, Some(&count), max_range) {
             if d.is_finite() && sigma.is_finite() {
                 anchors.push(reads.anchors[a]);
+                owners.push(a);
                 ranges.push(d);
                 weights.push(1.0 / sigma.max(1e-3).powi(2));
             }
@@ -41,17 +42,15 @@ pub fn hop_centre(reads: &PhaseReads, low: &Vector3<f64>, high: &Vector3<f64>, a
     // slope against k (`slope_bias_bound`); that bound joins each range's
     // variance, so the box spans the lattice points the reflectors can
     // have moved the ranges over.
-    let used: Vec<usize> = reads.used_anchors();
-    let mut widened = weights.clone();
-    let mut index = 0;
-    for a in used {
-        if index < anchors.len() && anchors[index] == reads.anchors[a] {
+    let widened: Vec<f64> = owners
+        .iter()
+        .zip(&weights)
+        .map(|(&a, &w)| {
             let own = paths.per_anchor.get(a).map_or(&[][..], |p| p.as_slice());
             let bias = slope_bias_bound(own, &reads.anchors[a], &centre);
-            widened[index] = 1.0 / (1.0 / weights[index] + bias * bias);
-            index += 1;
-        }
-    }
+            1.0 / (1.0 / w + bias * bias)
+        })
+        .collect();
     weighted_multilateration(&anchors, &ranges, &widened, centre, axes)
 }
 

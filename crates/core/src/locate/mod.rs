@@ -54,8 +54,7 @@ pub use search::search;
 
 use nalgebra::{Complex, Vector3};
 
-use crate::model::{apparent_range, ReflectedPath};
-use crate::model::StateVector;
+use crate::model::{apparent_range_at, ReflectedPath};
 
 /// The scene's known reflectors as each antenna sees them.
 #[derive(Clone, Copy)]
@@ -153,7 +152,7 @@ impl<'a> PhaseReads<'a> {
     /// apparent range under known reflectors.
     fn distance(&self, i: usize, p: &Vector3<f64>) -> f64 {
         match self.reflected(i) {
-            Some((paths, wavenumber)) => apparent_range(&state_at(p), &self.anchors[self.antenna[i]], paths, wavenumber, 3, false).0,
+            Some((paths, wavenumber)) => apparent_range_at(p, &self.anchors[self.antenna[i]], paths, wavenumber, false).0,
             None => (p - self.anchors[self.antenna[i]]).norm(),
         }
     }
@@ -164,9 +163,8 @@ impl<'a> PhaseReads<'a> {
         let anchor = &self.anchors[self.antenna[i]];
         match self.reflected(i) {
             Some((paths, wavenumber)) => {
-                let (d, h) = apparent_range(&state_at(p), anchor, paths, wavenumber, 3, true);
-                let h = h.expect("asked for the Jacobian");
-                (d, Vector3::new(h[0], h[1], h[2]))
+                let (d, gradient) = apparent_range_at(p, anchor, paths, wavenumber, true);
+                (d, gradient.expect("asked for the gradient"))
             }
             None => {
                 let offset = p - anchor;
@@ -192,15 +190,6 @@ impl<'a> PhaseReads<'a> {
         }
         (0..self.anchors.len()).filter(|&a| used[a]).collect()
     }
-}
-
-/// A state at position p (the apparent range reads only the position).
-fn state_at(p: &Vector3<f64>) -> StateVector {
-    let mut x = StateVector::zeros();
-    x[0] = p.x;
-    x[1] = p.y;
-    x[2] = p.z;
-    x
 }
 
 /// e^{−jφ}: the phasor that removes a phase φ.
@@ -249,15 +238,11 @@ pub(crate) mod fixtures {
     /// excess: the apparent range in place of the distance (sign +1;
     /// `multiplier` 1 for mod 2π, 2 for a mod-π reader's doubled phases).
     pub fn reads_under(truth: Vector3<f64>, anchors: &[Vector3<f64>], paths: &[Vec<crate::model::ReflectedPath>], frequencies: &[f64], multiplier: f64) -> (Vec<Complex<f64>>, Vec<f64>, Vec<usize>) {
-        let mut x = crate::model::StateVector::zeros();
-        x[0] = truth.x;
-        x[1] = truth.y;
-        x[2] = truth.z;
         let (mut z, mut k, mut antenna) = (Vec::new(), Vec::new(), Vec::new());
         for (a, anchor) in anchors.iter().enumerate() {
             for f in frequencies {
                 let kk = multiplier * 4.0 * std::f64::consts::PI * f / C;
-                let (apparent, _) = crate::model::apparent_range(&x, anchor, &paths[a], kk / (2.0 * multiplier), 3, false);
+                let (apparent, _) = crate::model::apparent_range_at(&truth, anchor, &paths[a], kk / (2.0 * multiplier), false);
                 let phase = kk * apparent + 0.7;
                 z.push(Complex::new(phase.cos(), phase.sin()));
                 k.push(kk);

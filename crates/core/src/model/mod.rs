@@ -17,7 +17,7 @@ mod range;
 pub mod wideband;
 
 pub use motion::{MotionModel, Transition};
-pub use multipath::{apparent_range, reflected_paths, ReflectedPath};
+pub use multipath::{apparent_range, apparent_range_at, reflected_paths, ReflectedPath};
 pub use range::range;
 
 /// State dimension: position and velocity in 3D.

@@ -70,23 +70,20 @@ pub fn reflected_paths(a: &Vector3<f64>, reflectors: &[Reflector]) -> Vec<Reflec
 }
 
 /// Apparent range `d_app = d − arg(S)/k` (m) from antenna `a` (m) to the
-/// tag of state `x` under `paths`, at wavenumber `k = 2π f / c` (rad/m).
-///
-/// With `jacobian`, also H = ∂d_app/∂x = [(u − ∂arg S/∂p / k)ᵀ, 0, 0, 0]:
+/// tag at position `p` (m) under `paths`, at wavenumber `k = 2π f / c`
+/// (rad/m), and with `gradient` its gradient ∂d_app/∂p = u − ∂arg S/∂p / k:
 /// for each path t = Γ (d/L) e^{−jk(L−d)},
 /// ∂t/∂p = t · [(u/d − w/L) + j k (u − w)], u and w the unit vectors from
 /// the antenna and from the path's source to the tag, and
-/// ∂arg S = (Re S ∂Im S − Im S ∂Re S) / |S|². `axes == 2` zeroes the z
-/// entry, as [`super::range`] does. Without paths this is `range`.
-pub fn apparent_range(
-    x: &StateVector,
+/// ∂arg S = (Re S ∂Im S − Im S ∂Re S) / |S|². Without paths this is the
+/// distance and u. For `locate`, which has positions, not states.
+pub fn apparent_range_at(
+    p: &Vector3<f64>,
     a: &Vector3<f64>,
     paths: &[ReflectedPath],
     wavenumber: f64,
-    axes: usize,
-    jacobian: bool,
-) -> (f64, Option<StateVector>) {
-    let p = Vector3::new(x[0], x[1], x[2]);
+    gradient: bool,
+) -> (f64, Option<Vector3<f64>>) {
     let direct = p - a;
     let d = direct.norm().max(1e-9);
     let u = direct / d;
@@ -107,7 +104,7 @@ pub fn apparent_range(
         let (tr, ti) = (magnitude * cos, magnitude * sin);
         re += tr;
         im += ti;
-        if jacobian {
+        if gradient {
             let w = leg / leg_length;
             let alpha = u / d - w / length;
             let beta = (u - w) * wavenumber;
@@ -117,23 +114,36 @@ pub fn apparent_range(
     }
     if re * re + im * im < 1e-12 {
         // The paths cancel: no phase to speak of (module docs).
-        let mut h = StateVector::zeros();
-        for i in 0..axes {
-            h[i] = u[i];
-        }
-        return (d, jacobian.then_some(h));
+        return (d, gradient.then_some(u));
     }
     let apparent = d - im.atan2(re) / wavenumber;
-    if !jacobian {
+    if !gradient {
         return (apparent, None);
     }
     let d_arg = (d_im * re - d_re * im) / (re * re + im * im);
-    let gradient = u - d_arg / wavenumber;
-    let mut h = StateVector::zeros();
-    for i in 0..axes {
-        h[i] = gradient[i];
-    }
-    (apparent, Some(h))
+    (apparent, Some(u - d_arg / wavenumber))
+}
+
+/// [`apparent_range_at`] for the tag of state `x`; with `jacobian`, also
+/// H = ∂d_app/∂x = [(∂d_app/∂p)ᵀ, 0, 0, 0]. `axes == 2` zeroes the z
+/// entry, as [`super::range`] does. Without paths this is `range`.
+pub fn apparent_range(
+    x: &StateVector,
+    a: &Vector3<f64>,
+    paths: &[ReflectedPath],
+    wavenumber: f64,
+    axes: usize,
+    jacobian: bool,
+) -> (f64, Option<StateVector>) {
+    let (apparent, gradient) = apparent_range_at(&Vector3::new(x[0], x[1], x[2]), a, paths, wavenumber, jacobian);
+    let h = gradient.map(|g| {
+        let mut h = StateVector::zeros();
+        for i in 0..axes {
+            h[i] = g[i];
+        }
+        h
+    });
+    (apparent, h)
 }
 
 #[cfg(test)]

@@ -1343,6 +1343,8 @@ impl Glac {
             .iter()
             .map(|g| (self.scene.distance_residue(g.antenna, g.frequency_hz, g.phase_rad), self.scene.candidate_spacing(g.frequency_hz)))
             .collect();
+        // Each read's known reflectors (once per group, not per hypothesis).
+        let multipaths: Vec<Option<Multipath>> = group.iter().map(|g| self.multipath(g)).collect();
         let r = self.range_variance(m.frequency_hz);
         let gate2 = self.params.gate_sigmas * self.params.gate_sigmas * self.axes as f64;
         let mut distances = vec![0.0; group.len()];
@@ -1358,13 +1360,7 @@ impl Glac {
                 // range: the candidate nearest the predicted apparent range,
                 // less the excess there, is the direct range trilaterated.
                 let direct = (predicted - a).norm();
-                let paths = &self.reflected[group[k].antenna];
-                let excess = if paths.is_empty() {
-                    0.0
-                } else {
-                    let wavenumber = 2.0 * std::f64::consts::PI * group[k].frequency_hz / crate::scene::SPEED_OF_LIGHT;
-                    apparent_range(x, a, paths, wavenumber, self.axes, false).0 - direct
-                };
+                let excess = multipaths[k].as_ref().map_or(0.0, |mp| measured_range(x, a, Some(mp), self.axes, false).0 - direct);
                 distances[k] = nearest_candidate(residues[k].0, residues[k].1, direct + excess) - excess;
             }
             let fix = multilaterate(&anchors, &distances, predicted, self.axes, 5);
